@@ -1,0 +1,207 @@
+"""Input checks shared by every module (after scikit-learn's ``utils/validation.py``).
+
+Each function takes caller input and returns a clean array, or raises ``ValueError`` (or
+``TypeError`` for a wrong kind of object) whose message starts with the argument's name and says
+what was expected and what was received. Modules call these instead of ``np.asarray``.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from polar_sim.errors import NotUpdatedError
+
+__all__ = [
+    "as_points",
+    "as_pose",
+    "as_pose2d",
+    "as_image",
+    "as_depth",
+    "as_ranges",
+    "as_angles",
+    "as_intrinsics",
+    "as_positive_float",
+    "as_int",
+    "as_rng",
+    "check_choice",
+    "check_same_length",
+    "check_updated",
+]
+
+
+def _as_float_array(x, name):
+    if x is None:
+        raise TypeError(f"{name}: expected an array, got None")
+    try:
+        return np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected a numeric array, got {type(x).__name__}") from exc
+
+
+def as_points(x, dim, name, *, allow_empty=False):
+    """Return ``x`` as a finite float64 array of shape (n, dim)."""
+    a = _as_float_array(x, name)
+    if a.ndim != 2 or a.shape[1] != dim:
+        raise ValueError(f"{name}: expected shape (n, {dim}), got {a.shape}")
+    if a.shape[0] == 0 and not allow_empty:
+        raise ValueError(f"{name}: expected at least one point, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    return a
+
+
+def as_pose(T, name):
+    """Return ``T`` as a float64 4x4 rigid transform, checking that it is a proper SE(3) element.
+
+    The rotation block must be orthonormal with determinant +1 to within 1e-6 and the last row
+    must be (0, 0, 0, 1).
+    """
+    a = _as_float_array(T, name)
+    if a.shape != (4, 4):
+        raise ValueError(f"{name}: expected a 4x4 homogeneous transform, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    R = a[:3, :3]
+    if not np.allclose(a[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"{name}: last row must be (0, 0, 0, 1), got {a[3].tolist()}")
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise ValueError(f"{name}: rotation block is not a proper rotation (R^T R != I or det < 0)")
+    return a.copy()
+
+
+def as_pose2d(p, name):
+    """Return a planar pose ``(x, y, theta)`` as a finite float64 array of shape (3,)."""
+    a = _as_float_array(p, name)
+    if a.shape != (3,):
+        raise ValueError(f"{name}: expected (x, y, theta) of shape (3,), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    return a.copy()
+
+
+def as_image(img, name, *, channels=3, dtype=np.uint8, shape=None):
+    """Check an image: ndarray of ``dtype`` with shape (H, W, channels) (or (H, W) if channels is None).
+
+    Returns the array itself (no copy): images are large and the modules only read them.
+    """
+    if not isinstance(img, np.ndarray):
+        raise TypeError(f"{name}: expected a numpy array, got {type(img).__name__}")
+    want = (2,) if channels is None else (3,)
+    if img.ndim != want[0] or (channels is not None and img.shape[2] != channels):
+        exp = "(H, W)" if channels is None else f"(H, W, {channels})"
+        raise ValueError(f"{name}: expected shape {exp}, got {img.shape}")
+    if img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"{name}: image is empty, shape {img.shape}")
+    if dtype is not None and img.dtype != dtype:
+        raise ValueError(f"{name}: expected dtype {np.dtype(dtype).name}, got {img.dtype}")
+    if shape is not None and tuple(img.shape[:2]) != tuple(shape):
+        raise ValueError(f"{name}: expected image size {tuple(shape)}, got {tuple(img.shape[:2])}")
+    return img
+
+
+def as_depth(depth, name, *, shape=None):
+    """Return a metric depth image (H, W) as float64; NaN/inf/0 mean "no return"; negatives raise."""
+    if not isinstance(depth, np.ndarray):
+        raise TypeError(f"{name}: expected a numpy array, got {type(depth).__name__}")
+    if depth.ndim != 2:
+        raise ValueError(f"{name}: expected shape (H, W), got {depth.shape}")
+    if shape is not None and tuple(depth.shape) != tuple(shape):
+        raise ValueError(f"{name}: expected shape {tuple(shape)}, got {depth.shape}")
+    d = np.asarray(depth, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        if (d < 0).any():
+            raise ValueError(f"{name}: contains negative depths (use 0, NaN or inf for no return)")
+    return d
+
+
+def as_ranges(r, name, *, n=None):
+    """Return ranges (n,) as float64. NaN and inf mean "no return" and are kept; negatives raise."""
+    a = _as_float_array(r, name)
+    if a.ndim != 1:
+        raise ValueError(f"{name}: expected shape (n,), got {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise ValueError(f"{name}: expected {n} values to match the angles, got {a.shape[0]}")
+    with np.errstate(invalid="ignore"):
+        if (a < 0).any():
+            raise ValueError(f"{name}: contains negative ranges (use inf or NaN for no return)")
+    return a
+
+
+def as_angles(a, name):
+    """Return beam angles (n,) in radians as a finite float64 array."""
+    x = _as_float_array(a, name)
+    if x.ndim != 1:
+        raise ValueError(f"{name}: expected shape (n,), got {x.shape}")
+    if not np.isfinite(x).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    return x
+
+
+def as_intrinsics(K, name="K"):
+    """Return a 3x3 pinhole intrinsics matrix with positive focal lengths as float64."""
+    a = _as_float_array(K, name)
+    if a.shape != (3, 3):
+        raise ValueError(f"{name}: expected a 3x3 intrinsics matrix, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    if not (a[0, 0] > 0 and a[1, 1] > 0):
+        raise ValueError(f"{name}: focal lengths must be positive, got fx={a[0, 0]}, fy={a[1, 1]}")
+    if not np.allclose(a[2], [0.0, 0.0, 1.0]):
+        raise ValueError(f"{name}: last row must be (0, 0, 1), got {a[2].tolist()}")
+    return a.copy()
+
+
+def as_positive_float(x, name, *, allow_zero=False):
+    """Return ``x`` as a finite float > 0 (or >= 0 when ``allow_zero``)."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        raise TypeError(f"{name}: expected a real number, got {type(x).__name__}")
+    v = float(x)
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        cmp = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name}: expected a finite number {cmp}, got {x!r}")
+    return v
+
+
+def as_int(x, name, *, minimum=None):
+    """Return ``x`` as an int, optionally at least ``minimum``."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Integral):
+        raise TypeError(f"{name}: expected an integer, got {type(x).__name__}")
+    v = int(x)
+    if minimum is not None and v < minimum:
+        raise ValueError(f"{name}: expected an integer >= {minimum}, got {v}")
+    return v
+
+
+def as_rng(seed, name="seed"):
+    """Return a ``numpy.random.Generator`` from None, an int seed or a Generator."""
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if seed is None or (isinstance(seed, numbers.Integral) and not isinstance(seed, bool)):
+        return np.random.default_rng(seed)
+    raise TypeError(f"{name}: expected None, an int or a numpy.random.Generator, got {type(seed).__name__}")
+
+
+def check_choice(value, choices, name):
+    """Raise ``ValueError`` listing the valid choices if ``value`` is not one of them."""
+    if value not in choices:
+        valid = ", ".join(repr(c) for c in choices)
+        raise ValueError(f"{name}: unknown value {value!r}; expected one of {valid}")
+    return value
+
+
+def check_same_length(**arrays):
+    """Raise ``ValueError`` if the named arrays do not share their first dimension."""
+    lengths = {k: len(v) for k, v in arrays.items()}
+    if len(set(lengths.values())) > 1:
+        desc = ", ".join(f"{k} has {n}" for k, n in lengths.items())
+        raise ValueError(f"expected equal lengths: {desc}")
+
+
+def check_updated(obj, attr):
+    """Raise ``NotUpdatedError`` if ``obj`` has no fitted attribute ``attr`` yet."""
+    if not hasattr(obj, attr):
+        raise NotUpdatedError(
+            f"{type(obj).__name__} has no data yet: call update()/process() before querying"
+        )

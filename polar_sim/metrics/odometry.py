@@ -1,0 +1,3 @@
+"""odometry metrics."""
+
+__all__ = []

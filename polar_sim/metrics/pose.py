@@ -1,0 +1,3 @@
+"""pose metrics."""
+
+__all__ = []

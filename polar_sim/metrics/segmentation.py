@@ -1,0 +1,3 @@
+"""segmentation metrics."""
+
+__all__ = []

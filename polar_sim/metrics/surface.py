@@ -1,0 +1,3 @@
+"""surface metrics."""
+
+__all__ = []
