@@ -1,1 +1,13 @@
-"""polar_sim.ground"""
+"""Self-supervised ground segmentation and monocular visual odometry with scale from the ground.
+
+Reimplements B. Lee, K. Daniilidis, D. D. Lee, *Online Self-Supervised Monocular Visual Odometry for
+Ground Vehicles* (ICRA 2015) from the spec ``shared/specs/ground.md``; numpy/OpenCV/numba only.
+
+>>> from polar_sim.ground import GroundVO
+>>> vo = GroundVO(K, camera_height, model="6param", sampling="weighted")   # doctest: +SKIP
+>>> e = vo.process(rgb, t)                                                  # doctest: +SKIP
+"""
+
+from polar_sim.ground.vo import STATUSES, GroundEstimate, GroundVO
+
+__all__ = ["GroundVO", "GroundEstimate", "STATUSES"]

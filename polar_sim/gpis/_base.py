@@ -1,0 +1,302 @@
+"""The shared GPIS mapping pipeline (spec §0): re-evaluate, add, retrain, query.
+
+Subclasses (:class:`GPISMap2D`, :class:`GPISMap3D`) provide the sensor model: how a scan becomes
+an observation GP, sensor-frame points and the occupancy test ``oc`` (spec §3), and the
+dimension-specific constants. Everything else (fusion, tree updates, training, query, I/O) is here.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from polar_sim._validation import as_points, check_updated
+from polar_sim.gpis import _io
+from polar_sim.gpis._distance import FreeSpace, far_field
+from polar_sim.gpis._kernels import apply_new, apply_reeval, candidates, gather_training, query_gp
+from polar_sim.gpis._localgp import GPStore, _var_consts
+from polar_sim.gpis._tree import Tree
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["GPISMapBase"]
+
+_STATE = ("tree_", "gps_", "n_updates_")
+
+
+class GPISMapBase:
+    """Common machinery; see :class:`GPISMap2D` / :class:`GPISMap3D` for the parameters."""
+
+    dim = 0
+    _T_BLEND = 0.4          # query blending threshold (spec §9.1)
+    _OC_SKIP = -0.1         # re-eval occlusion threshold (spec §6.2)
+    _TRAIN_R = 4.0          # training radius in units of h_c (spec §8.1)
+    _UPDATE_R = 4.0         # legacy retraining box half-width in units of h_c
+    _QUERY_W = None         # query search half-width; None = 4 * map_scale
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def get_params(self):
+        """The constructor arguments, by name."""
+        return {k: getattr(self, k) for k in self._PARAMS}
+
+    def reset(self):
+        """Forget everything learned; parameters stay."""
+        for k in list(vars(self)):
+            if k.endswith("_"):
+                delattr(self, k)
+        return self
+
+    def _init_state(self):
+        p = self._checked_params()
+        self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
+                          p["max_half"], strict=not self.legacy and self.dim == 3)
+        self.slot_gen_ = np.zeros(self.tree_.node_sample.shape[0], np.int64)
+        self.gps_ = GPStore(self.dim)
+        self.gp_gen_ = np.zeros(0, np.int64)
+        self.active_ = np.zeros((0, self.dim), np.int64)
+        self.free_ = FreeSpace(self.dim, self._free_res())
+        self.n_updates_ = 0
+        self.version_ = 0
+
+    # -- helpers --------------------------------------------------------------------------------
+    def _hc(self):
+        return self.tree_.geo[self.dim] / 2.0
+
+    def _sync_slot_arrays(self):
+        n = self.tree_.node_sample.shape[0]
+        if self.slot_gen_.shape[0] < n:
+            g = np.zeros(n, np.int64)
+            g[: self.slot_gen_.shape[0]] = self.slot_gen_
+            self.slot_gen_ = g
+        self.gps_.ensure_slots(n)
+        if self.gp_gen_.shape[0] < self.gps_.gp_m.shape[0]:
+            g = np.zeros(self.gps_.gp_m.shape[0], np.int64)
+            g[: self.gp_gen_.shape[0]] = self.gp_gen_
+            self.gp_gen_ = g
+
+    def _tree_args(self):
+        t = self.tree_
+        return t.args() + (t.nrm, t.sp, t.sg, self.slot_gen_)
+
+    # -- the update pipeline --------------------------------------------------------------------
+    def _run_update(self, scan):
+        """Stages 2-4 given a prepared scan (subclass ``_prepare`` output)."""
+        if not hasattr(self, "tree_"):
+            self._init_state()
+        tr = self.tree_
+        changed = []                      # world positions whose training sets changed
+        # stage 2: re-evaluate visible samples
+        cent, ptr, samp = candidates(scan.origin, scan.rmax, tr.geo, tr.cgrid, tr.gshape,
+                                     tr.goff, tr.node_sample, tr.node_internal, tr.level_off,
+                                     self._hc())
+        if len(cent):
+            vis = self._child_visible(cent, scan)
+            sel = np.repeat(vis, np.diff(ptr))
+            cand = samp[sel]
+        else:
+            cand = samp[:0]
+        touched = []
+        if len(cand):
+            action, P, N, sp, sg = self._reeval(cand, scan)
+            old = tr.pos[cand].copy()
+            tr.reserve(P[action == 2])
+            self._sync_slot_arrays()
+            new = apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
+            moved = action >= 1
+            changed.append(old[moved])
+            keep = new >= 0
+            changed.append(tr.pos[new[keep]])
+            touched.append(tr.pos[new[keep]])
+        # stage 3: new samples
+        P, ok, bad, N, sp, sg = self._new_samples(scan)
+        tr.reserve(P[ok])
+        self._sync_slot_arrays()
+        new = apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
+        kept = new[new >= 0]
+        changed.append(tr.pos[kept])
+        touched.append(tr.pos[kept])
+        self._sync_slot_arrays()
+        # stage 4: retrain
+        if self.legacy:
+            self._retrain_legacy(np.concatenate(touched) if touched else np.zeros((0, self.dim)))
+        else:
+            self._retrain_dirty(np.concatenate(changed))
+        self.free_.mark(scan.origin_sensor, scan.hits)
+        self.n_updates_ += 1
+        self.version_ += 1
+
+    def _cluster_coords(self, pts):
+        tr = self.tree_
+        d = self.dim
+        return np.floor((pts - tr.geo[:d]) / tr.geo[d]).astype(np.int64)
+
+    def _slots_of(self, coords):
+        """Slots of the non-empty clusters at integer coordinates (k, d); -1 where none."""
+        tr = self.tree_
+        if len(coords) == 0:
+            return np.zeros(0, np.int64)
+        rel = coords - tr.goff
+        inside = ((rel >= 0) & (rel < tr.gshape)).all(1)
+        strides = np.cumprod(np.concatenate([[1], tr.gshape[:-1]]))
+        flat = (np.where(inside[:, None], rel, 0) * strides).sum(1)
+        s = np.where(inside, tr.cgrid[flat], -1).astype(np.int64)
+        return s
+
+    def _neigh(self, coords, reach):
+        d = self.dim
+        off = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1)] * d, indexing="ij"), -1)
+        off = off.reshape(-1, d)
+        allc = (coords[:, None, :] + off[None]).reshape(-1, d)
+        return np.unique(allc, axis=0)
+
+    def _train(self, slots):
+        tr = self.tree_
+        if len(slots) == 0:
+            return
+        R = self._TRAIN_R * self._hc()
+        ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff,
+                                   tr.node_sample, tr.slot_coord, tr.pos)
+        nonempty = np.diff(ptr) > 0
+        slots = slots[nonempty]
+        ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
+        self._sync_slot_arrays()
+        self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
+                        self.legacy and self.dim == 2)
+        self._sync_slot_arrays()
+        self.gp_gen_[slots] = self.slot_gen_[slots]
+
+    def _retrain_legacy(self, touched):
+        """Spec §8.1: clusters near the active ones, with the |U| <= 1 carry-over quirk."""
+        act = np.concatenate([self.active_, self._cluster_coords(touched)])
+        act = np.unique(act, axis=0) if len(act) else act
+        reach = int(round(self._UPDATE_R / 2.0))
+        U = self._neigh(act, reach) if len(act) else act
+        slots = self._slots_of(U)
+        slots = np.unique(slots[slots >= 0])
+        if len(slots) <= (1 if self.dim == 2 else 0):
+            self.active_ = act
+            return
+        self._train(slots)
+        self.active_ = np.zeros((0, self.dim), np.int64)
+
+    def _retrain_dirty(self, changed):
+        """Default: retrain exactly the clusters whose training set changed."""
+        if len(changed) == 0:
+            return
+        R = self._TRAIN_R * self._hc()
+        w = 2.0 * self._hc()
+        reach = int(np.ceil(R / w - 0.5))
+        U = self._neigh(np.unique(self._cluster_coords(changed), axis=0), reach)
+        slots = self._slots_of(U)
+        slots = np.unique(slots[slots >= 0])
+        self._train(slots)
+
+    # -- query ----------------------------------------------------------------------------------
+    def _gp_query(self, pts):
+        """Raw published query (spec §9): rows [f, grad(d), var_f, var_grad(d)] per point."""
+        tr, g = self.tree_, self.gps_
+        self._sync_slot_arrays()
+        out = np.empty((len(pts), 2 * self.dim + 2))
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        mmax = int(g.gp_m.max()) if g.gp_m.size else 0
+        query_gp(pts, float(W), self._T_BLEND, bool(self.legacy), float(self.map_scale), v0, g0,
+                 1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
+                 tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
+                 g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(mmax, 1), out)
+        return out
+
+    def query(self, points):
+        """Signed distance, gradient and variance at points.
+
+        Parameters
+        ----------
+        points : array_like of shape (n, dim)
+            World coordinates, metres.
+
+        Returns
+        -------
+        sdf : ndarray of shape (n,)
+            Signed distance in metres: positive in free space, negative behind surfaces.
+            Legacy mode returns the published ``f + fbias``.
+        grad : ndarray of shape (n, dim)
+            Gradient of the distance (unit outward normal near surfaces).
+        var : ndarray of shape (n,)
+            Variance of the distance (see the module docs for its meaning).
+        """
+        check_updated(self, "tree_")
+        pts = as_points(points, self.dim, "points", allow_empty=True)
+        n = len(pts)
+        d = self.dim
+        if n == 0:
+            return np.zeros(0), np.zeros((0, d)), np.zeros(0)
+        if self.legacy:
+            out = self._gp_query(pts)
+            return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
+        return self._faithful(pts)
+
+    def _kd(self):
+        """KD-tree over the samples, rebuilt when the map changed."""
+        if getattr(self, "_kd_version", -1) != self.version_:
+            from scipy.spatial import cKDTree
+
+            idx = self.tree_.alive()
+            self._kd_idx = idx
+            self._kd_tree = cKDTree(self.tree_.pos[idx]) if len(idx) else None
+            self._kd_version = self.version_
+        return self._kd_tree, self._kd_idx
+
+    def _faithful(self, pts):
+        """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
+        d = self.dim
+        kd, idx = self._kd()
+        tr = self.tree_
+        dist, grad, var_far = far_field(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
+                                        self._surfel_radius(), self.free_,
+                                        1.0 + float(self.map_noise))
+        near, far = self._blend_band()
+        a = np.abs(dist)
+        w = np.clip((far - a) / (far - near), 0.0, 1.0)
+        w = w * w * (3.0 - 2.0 * w)                   # smoothstep: C1 at both ends
+        sel = np.nonzero(w > 0)[0]
+        sdf, g, v = dist.copy(), grad, var_far
+        if len(sel):
+            out = self._gp_query(pts[sel])
+            has = out[:, d + 1] < 1.0 + float(self.map_noise) - 1e-12   # a cluster answered
+            ws = np.where(has, w[sel], 0.0)
+            sdf[sel] = ws * (out[:, 0] + self.fbias) + (1 - ws) * dist[sel]
+            g[sel] = ws[:, None] * out[:, 1:d + 1] + (1 - ws)[:, None] * grad[sel]
+            v[sel] = ws * out[:, d + 1] + (1 - ws) * var_far[sel]
+        return sdf, g, v
+
+    # -- samples, persistence --------------------------------------------------------------------
+    def samples(self):
+        """Surface samples held by the map.
+
+        Returns
+        -------
+        dict with ``points`` (n, dim) m, ``normals`` (n, dim) outward unit normals,
+        ``position_noise`` (n,) and ``gradient_noise`` (n,) (variances, as in the spec).
+        """
+        check_updated(self, "tree_")
+        idx = self.tree_.alive()
+        t = self.tree_
+        return {"points": t.pos[idx].copy(), "normals": t.nrm[idx].copy(),
+                "position_noise": t.sp[idx].copy(), "gradient_noise": t.sg[idx].copy()}
+
+    def nbytes(self):
+        """Bytes held by the map's arrays (samples, tree, cluster GPs, free-space grid)."""
+        if not hasattr(self, "tree_"):
+            return 0
+        n = sum(v.nbytes for v in self.tree_.state().values())
+        return n + self.gps_.nbytes() + self.free_.nbytes() + self.slot_gen_.nbytes
+
+    def save(self, path):
+        """Write the map to ``path`` (.npz, versioned, no pickle)."""
+        _io.save(self, path)
+
+    @classmethod
+    def load(cls, path):
+        """Read a map written by :meth:`save`; raises ``ValueError`` on a bad file."""
+        return _io.load(cls, path)

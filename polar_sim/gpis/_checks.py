@@ -1,0 +1,70 @@
+"""Parameter and input checks specific to polar_sim.gpis (shared ones live in polar_sim._validation)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polar_sim._validation import _as_float_array, as_positive_float
+
+__all__ = ["check_params", "as_directions"]
+
+_ALLOW_ZERO = {"fbias", "min_grad_noise", "map_noise", "min_range", "blend_near"}
+_OPTIONAL = {"surfel_radius", "free_res"}
+_NOT_FLOAT = {"legacy", "sensor_offset", "angle_obs_limit", "obs_skip"}
+
+
+def check_params(est, vec2=()):
+    """Check an estimator's constructor parameters; return them as a dict of clean values.
+
+    Floats must be finite and > 0 (>= 0 for fbias, noise floors, min_range, blend_near);
+    ``vec2`` names hold 2-vectors. Raises ``ValueError``/``TypeError`` naming the parameter.
+    """
+    out = {}
+    for k in est._PARAMS:
+        v = getattr(est, k)
+        if k == "legacy":
+            if not isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"legacy: expected a bool, got {type(v).__name__}")
+            out[k] = bool(v)
+        elif k in vec2:
+            a = _as_float_array(v, k)
+            if a.shape != (2,) or not np.isfinite(a).all():
+                raise ValueError(f"{k}: expected 2 finite numbers, got {v!r}")
+            out[k] = a
+        elif k == "obs_skip":
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"obs_skip: expected an integer >= 1, got {v!r}")
+            out[k] = int(v)
+        elif k in _OPTIONAL and v is None:
+            out[k] = None
+        else:
+            out[k] = as_positive_float(v, k, allow_zero=k in _ALLOW_ZERO)
+    if "angle_obs_limit" in out and not out["angle_obs_limit"][0] < out["angle_obs_limit"][1]:
+        raise ValueError("angle_obs_limit: expected (low, high) with low < high")
+    lo = "min_range" if "min_range" in out else "min_depth"
+    hi = "max_range" if "max_range" in out else "max_depth"
+    if not out[lo] < out[hi]:
+        raise ValueError(f"{lo}/{hi}: expected {lo} < {hi}, got {out[lo]} and {out[hi]}")
+    if not out["blend_near"] < out["blend_far"]:
+        raise ValueError("blend_near/blend_far: expected blend_near < blend_far")
+    if not out["min_half"] <= out["cluster_half"] <= out["init_half"] <= out["max_half"] * 2:
+        raise ValueError("min_half <= cluster_half <= init_half <= 2*max_half is required")
+    r = out["init_half"] / out["cluster_half"]
+    if abs(np.log2(r) - round(np.log2(r))) > 1e-9:
+        raise ValueError("init_half / cluster_half must be a power of two")
+    return out
+
+
+def as_directions(x, name, *, n=None):
+    """Return unit ray directions (n, 3) as float64; zero-length or non-finite rows raise."""
+    a = _as_float_array(x, name)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (n, 3), got {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise ValueError(f"{name}: expected {n} rows to match the ranges, got {a.shape[0]}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    L = np.linalg.norm(a, axis=1)
+    if (L < 1e-12).any():
+        raise ValueError(f"{name}: contains zero-length directions")
+    return a / L[:, None]

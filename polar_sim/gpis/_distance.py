@@ -1,0 +1,151 @@
+"""Faithful Euclidean distance far from surfaces (default mode).
+
+Far from the surface the GPIS value drifts back to its bias, so the default query blends it with
+the distance to the fused surface samples, each treated as a small disc ("surfel") of radius
+``r_s`` centred on the sample and orthogonal to its normal: for a sample p with unit normal n and
+``v = x - p``, ``a = v.n``, tangential part ``t = v - a n``,
+``d = sqrt(a^2 + max(|t| - r_s, 0)^2)``. The distance is the minimum over the k nearest samples.
+
+Sign: positive where the point lies in *observed free space* (a coarse grid of cells that some ray
+crossed before its return, :class:`FreeSpace`); elsewhere the sign of ``a`` of the closest surfel,
+i.e. negative behind (on the occluded side of) the surface.
+
+Variance: in observed free space, the fused position variance of the closest sample (how well the
+surface that sets the distance is known); elsewhere, never-observed space, the GP prior variance
+``1 + map_noise``: the distance there is only the distance to the nearest *observed* surface.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+__all__ = ["FreeSpace", "far_field"]
+
+
+@nb.njit(cache=True)
+def _mark(grid, gshape, goff, res, origin, hits, margin):
+    dim = origin.shape[0]
+    step = 0.5 * res
+    c = np.empty(dim, np.int64)
+    for h in range(hits.shape[0]):
+        L2 = 0.0
+        for k in range(dim):
+            e = hits[h, k] - origin[k]
+            L2 += e * e
+        Lr = np.sqrt(L2) - margin * res
+        if Lr <= 0:
+            continue
+        n = int(Lr / step) + 1
+        for s in range(n):
+            t = min(s * step, Lr) / np.sqrt(L2)
+            idx = 0
+            stride = 1
+            ok = True
+            for k in range(dim):
+                x = origin[k] + t * (hits[h, k] - origin[k])
+                c[k] = int(np.floor(x / res)) - goff[k]
+                if c[k] < 0 or c[k] >= gshape[k]:
+                    ok = False
+                    break
+                idx += c[k] * stride
+                stride *= gshape[k]
+            if ok:
+                grid[idx] = 1
+
+
+class FreeSpace:
+    """Cells (edge ``res`` metres) that a sensor ray crossed at least ``margin`` cells before its return."""
+
+    def __init__(self, dim, res, margin=1.5):
+        self.dim, self.res, self.margin = dim, float(res), float(margin)
+        self.grid = np.zeros(0, np.uint8)
+        self.gshape = np.zeros(dim, np.int64)
+        self.goff = np.zeros(dim, np.int64)
+
+    def _cover(self, lo, hi):
+        glo, ghi = self.goff, self.goff + self.gshape
+        if self.grid.size and (lo >= glo).all() and (hi <= ghi).all():
+            return
+        if self.grid.size:
+            pad = (ghi - glo) // 4
+            lo = np.minimum(lo, glo - np.where(lo < glo, pad, 0))
+            hi = np.maximum(hi, ghi + np.where(hi > ghi, pad, 0))
+        shape = hi - lo
+        new = np.zeros(tuple(shape[::-1]), np.uint8)
+        if self.grid.size:
+            sl = tuple(slice(int(a), int(a + s)) for a, s in zip((glo - lo)[::-1], self.gshape[::-1]))
+            new[sl] = self.grid.reshape(tuple(self.gshape[::-1]))
+        self.grid = new.ravel()
+        self.gshape, self.goff = shape.astype(np.int64), lo.astype(np.int64)
+
+    def mark(self, origin, hits):
+        """Mark the cells along the rays from ``origin`` (d,) to ``hits`` (n, d)."""
+        if len(hits) == 0:
+            return
+        pts = np.vstack([hits, origin[None]])
+        lo = np.floor(pts.min(0) / self.res).astype(np.int64) - 1
+        hi = np.floor(pts.max(0) / self.res).astype(np.int64) + 2
+        self._cover(lo, hi)
+        _mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
+              np.ascontiguousarray(hits, np.float64), self.margin)
+
+    def observed(self, pts):
+        """True where the point lies in a cell marked free."""
+        if self.grid.size == 0:
+            return np.zeros(len(pts), bool)
+        c = np.floor(pts / self.res).astype(np.int64) - self.goff
+        inside = ((c >= 0) & (c < self.gshape)).all(1)
+        strides = np.cumprod(np.concatenate([[1], self.gshape[:-1]]))
+        flat = (np.where(inside[:, None], c, 0) * strides).sum(1)
+        return inside & (self.grid[flat] > 0)
+
+    def nbytes(self):
+        return self.grid.nbytes
+
+    def state(self):
+        return {"grid": self.grid, "gshape": self.gshape, "goff": self.goff}
+
+    def set_state(self, st):
+        self.grid = np.ascontiguousarray(st["grid"], np.uint8).copy()
+        self.gshape = np.asarray(st["gshape"], np.int64).copy()
+        self.goff = np.asarray(st["goff"], np.int64).copy()
+
+
+def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
+    """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs."""
+    n, d = pts.shape
+    if kd is None:
+        return np.full(n, np.inf), np.zeros((n, d)), np.full(n, var_unobs)
+    k = min(k, len(idx))
+    _, nn = kd.query(pts, k=k)
+    nn = nn.reshape(n, k)
+    gi = idx[nn]                                    # (n, k) sample indices
+    P = pos[gi]
+    N = nrm[gi]
+    nlen = np.linalg.norm(N, axis=2, keepdims=True)
+    good = (nlen[..., 0] > 0.5)
+    N = np.where(good[..., None], N / np.maximum(nlen, 1e-12), 0.0)
+    v = pts[:, None, :] - P
+    a = np.einsum("nkd,nkd->nk", v, N)
+    t = v - a[..., None] * N
+    tl = np.linalg.norm(t, axis=2)
+    rs = np.where(good, r_s, 0.0)
+    excess = np.maximum(tl - rs, 0.0)
+    dk = np.sqrt(a * a + excess * excess)
+    dk = np.where(good, dk, np.linalg.norm(v, axis=2))
+    j = np.argmin(dk, axis=1)
+    r = np.arange(n)
+    dist = dk[r, j]
+    # closest point on the chosen surfel and the direction from it
+    tlj = tl[r, j]
+    scale = np.where(tlj > 0, np.minimum(tlj, rs[r, j]) / np.maximum(tlj, 1e-300), 0.0)
+    c = P[r, j] + scale[:, None] * t[r, j]
+    g = pts - c
+    gl = np.linalg.norm(g, axis=1)
+    g = np.where(gl[:, None] > 0, g / np.maximum(gl, 1e-300)[:, None], N[r, j])
+    seen = free.observed(pts)
+    aj = a[r, j]
+    sign = np.where(seen, 1.0, np.where(aj < 0, -1.0, 1.0))
+    var = np.where(seen, np.minimum(sp[gi[r, j]], var_unobs), var_unobs)
+    return sign * dist, sign[:, None] * g, var

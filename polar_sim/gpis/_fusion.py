@@ -1,0 +1,157 @@
+"""Sample noise model (spec §5) and the re-evaluation / Bayesian fusion of samples (spec §6.2),
+vectorised over all candidates of one update. Works in 2D and 3D."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["normal_noise", "fuse"]
+
+_TOL = 0.02          # line-search tolerance on |oc|
+
+
+def normal_noise(g, obar, s, r_term, smin_p, smin_g, R):
+    """New-sample normal (world) and noises from the finite-difference gradient g (n, d).
+
+    ``r_term`` is r^2 in 2D and |s| in 3D (spec §5 step 5).
+    """
+    g2 = (g * g).sum(1)
+    good = g2 > 1e-6
+    gn = np.sqrt(np.where(good, g2, 1.0))
+    n = g / gn[:, None]
+    c = np.maximum(-(s * n).sum(1) / np.linalg.norm(s, axis=1), 0.1)
+    sview = smin_p * (1 - c * c) / (c * c)
+    sp = np.where(good, smin_p * np.clip(r_term, 1.0, 100.0) + sview, 100.0)
+    sg = np.where(good, np.clip(np.abs(obar), smin_g, 1.0), 1.0)
+    N = np.where(good[:, None], n @ R.T, g)
+    return N, sp, sg
+
+
+def _rotate_toward(N, Np, w, legacy):
+    """Rotate unit normals N toward N' by the fraction w of the angle between them."""
+    d = N.shape[1]
+    if d == 2:
+        th = np.arctan2(N[:, 0] * Np[:, 1] - N[:, 1] * Np[:, 0], (N * Np).sum(1))
+        a = w * th
+        c, s = np.cos(a), np.sin(a)
+        return np.stack([c * N[:, 0] - s * N[:, 1], s * N[:, 0] + c * N[:, 1]], 1)
+    dot = np.clip((N * Np).sum(1), -1.0, 1.0)
+    al = np.arccos(dot)
+    if legacy:
+        # quaternion with the non-normalised axis k = N' x N, applied as the spec's DCM
+        k = np.cross(Np, N)
+        ph = w * al
+        q0 = np.cos(ph / 2)
+        q1, q2, q3 = (k * np.sin(ph / 2)[:, None]).T
+        D = np.empty((len(N), 3, 3))
+        D[:, 0, 0] = q0**2 + q1**2 - q2**2 - q3**2
+        D[:, 0, 1] = 2 * (q1 * q2 + q0 * q3)
+        D[:, 0, 2] = 2 * (q1 * q3 - q0 * q2)
+        D[:, 1, 0] = 2 * (q1 * q2 - q0 * q3)
+        D[:, 1, 1] = q0**2 - q1**2 + q2**2 - q3**2
+        D[:, 1, 2] = 2 * (q2 * q3 + q0 * q1)
+        D[:, 2, 0] = 2 * (q1 * q3 + q0 * q2)
+        D[:, 2, 1] = 2 * (q2 * q3 - q0 * q1)
+        D[:, 2, 2] = q0**2 - q1**2 - q2**2 + q3**2
+        return np.einsum("nij,nj->ni", D, N)
+    # slerp on the unit sphere (unit rotation axis)
+    sa = np.sin(al)
+    small = sa < 1e-9
+    sa = np.where(small, 1.0, sa)
+    out = (np.sin((1 - w) * al)[:, None] * N + np.sin(w * al)[:, None] * Np) / sa[:, None]
+    out = np.where(small[:, None], N, out)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_skip, rhat_dim):
+    """Stage 2 for candidates with sensor-frame positions p and normals n (k, d).
+
+    Returns (action, P_new, N_new, sp_new, sg_new); see ``apply_reeval`` for the actions.
+    """
+    k, d = p.shape
+    legacy = bool(m.legacy)
+    dx = float(m.delx)
+    rng = (lambda q: np.linalg.norm(q, axis=1)) if d == 2 else (lambda q: q[:, 2])
+    action = np.zeros(k, np.int8)
+    Pn, Nn = np.zeros((k, d)), np.zeros((k, d))
+    spn, sgn = np.zeros(k), np.zeros(k)
+    oc0, obs0, _ = oc_fn(p, scan.gp)
+    live = obs0.copy()
+    if d == 3:
+        live &= p[:, 2] > 0
+    with np.errstate(invalid="ignore"):
+        live &= ~(oc0 < oc_skip)
+    # line search along the stored normal (spec §6.2 step 3)
+    q = p.copy()
+    delta = np.full(k, dx)
+    A = np.abs(oc0)
+    occ = oc0.copy()
+    rnew = rng(p)
+    run = live & (A > _TOL)
+    bug3d = legacy and d == 3
+    for _ in range(10):
+        idx = np.nonzero(run)[0]
+        if len(idx) == 0:
+            break
+        step = np.where(occ[idx] < 0, delta[idx], -delta[idx])
+        q[idx] += step[:, None] * n[idx]
+        if not bug3d:
+            rnew[idx] = rng(q[idx])
+        o2, ob2, _ = oc_fn(p[idx] if bug3d else q[idx], scan.gp)
+        conv = ob2 & (np.abs(o2) < _TOL)
+        prev = ob2 & ~conv & (occ[idx] < oc_skip)
+        cont = ob2 & ~conv & ~prev
+        c = idx[cont]
+        flip = occ[c] * o2[cont] < 0
+        delta[c] = np.where(flip, delta[c] / 2, 1.1 * delta[c])
+        A[c] = np.abs(o2[cont])
+        occ[c] = o2[cont]
+        run[idx] = cont
+    # finite differences at q (step 4)
+    li = np.nonzero(live)[0]
+    if len(li) == 0:
+        return action, Pn, Nn, spn, sgn
+    ql = q[li]
+    oc, fd_ok, rhat = fd_fn(ql, scan.gp)
+    g = (oc[:, 0::2] - oc[:, 1::2]) / dx
+    obar = oc.mean(1)
+    with np.errstate(invalid="ignore"):
+        vr = rhat.var(axis=1, ddof=1) / dx
+    rn = rnew[li] if not (legacy and d == 3) else ql[:, 2] - dx
+    if legacy and d == 3:
+        rn = np.where(fd_ok, rn, rnew[li])
+    gl = np.linalg.norm(g, axis=1)
+    ok = fd_ok & (gl >= 1e-3)
+    action[li[fd_ok & (gl < 1e-3)]] = 1
+    j = np.nonzero(ok)[0]
+    if len(j) == 0:
+        return action, Pn, Nn, spn, sgn
+    ii = li[j]
+    np_ = g[j] / gl[j, None]
+    qq = ql[j]
+    smin_p = float(m.min_position_noise)
+    c = np.maximum(-(qq * np_).sum(1) / np.linalg.norm(qq, axis=1), 0.1)
+    sview = smin_p * (1 - c * c) / (c * c)
+    sp = smin_p * np.clip(rn[j] ** 2, 1.0, 100.0) + sview + A[ii]
+    sg = np.clip(np.abs(obar[j]) + vr[j], float(m.min_grad_noise), 1.0) + 0.1 * sview
+    Pq = to_world(qq)
+    Nq = np_ @ R.T
+    # fusion (step 8)
+    Po, No, spo, sgo = P[ii], N[ii], sp_old[ii], sg_old[ii]
+    replace = (spo > 0.5) | (sgo > 0.6)
+    Sp = sp + spo
+    Sg = sg + sgo
+    Pf = (sp[:, None] * Po + spo[:, None] * Pq) / Sp[:, None]
+    dd = 0.5 * np.linalg.norm(Po - Pf, axis=1)
+    w = sp / Sp if legacy else sgo / Sg
+    Nf = _rotate_toward(No, Nq, w, legacy)
+    sgf = np.minimum(1.0, np.maximum(sg * sgo / Sg + dd, float(m.map_noise)))
+    spf = np.maximum(sp * spo / Sp + dd, float(m.map_noise))
+    Pf = np.where(replace[:, None], Pq, Pf)
+    Nf = np.where(replace[:, None], Nq, Nf)
+    spf = np.where(replace, sp, spf)
+    sgf = np.where(replace, sg, sgf)
+    drop = (spf > 1) & (sgf > 0.61)
+    action[ii] = np.where(drop, 3, 2)
+    Pn[ii], Nn[ii], spn[ii], sgn[ii] = Pf, Nf, spf, sgf
+    return action, Pn, Nn, spn, sgn

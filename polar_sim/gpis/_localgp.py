@@ -1,0 +1,339 @@
+"""Local GPIS per cluster (spec §8): Matérn-3/2 GP with value and gradient observations.
+
+Training builds, for each cluster, the joint covariance of the value observations and of the
+gradient observations of the samples within the training radius, factors it by Cholesky and
+stores the packed lower factor ``L`` and ``alpha = K^-1 y`` in flat buffers (``GPStore``), so that
+one numba call predicts any number of points against any cluster.
+
+Kernel, with ``a = sqrt(3)/l``, ``d = x - x'``, ``r = |d|``, ``e = exp(-a r)``:
+``k = (1 + a r) e``, ``cov(f, d'_j f) = a^2 d_j e``, ``cov(d_i f, f') = -a^2 d_i e``,
+``cov(d_i f, d'_j f) = a^2 (delta_ij - a d_i d_j / r) e`` (limit ``a^2 delta_ij`` at r = 0).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+__all__ = ["GPStore", "train_gp", "predict_gp", "kernel_blocks"]
+
+GRAD_GATE = 0.1001      # sigma_g above this: no gradient observation (spec §8.2)
+NOGRAD_VALUE_NOISE = 2.0
+
+
+@nb.njit(cache=True)
+def _obs_layout(idx, nrm, sg, dim):
+    """Which samples carry a gradient observation; returns (mask, number of observations)."""
+    n = idx.shape[0]
+    hasg = np.zeros(n, np.uint8)
+    m = 0
+    for t in range(n):
+        i = idx[t]
+        if sg[i] <= GRAD_GATE:
+            for k in range(dim):
+                if abs(nrm[i, k]) >= 1e-6:
+                    hasg[t] = 1
+                    break
+        m += hasg[t]
+    return hasg, n + dim * m
+
+
+@nb.njit(cache=True)
+def _cov_obs(xa, xb, ka, kb, a, dim):
+    """Covariance between observation kind ka at xa and kind kb at xb (0 = value, 1+j = d_j f)."""
+    r2 = 0.0
+    for k in range(dim):
+        e = xa[k] - xb[k]
+        r2 += e * e
+    r = np.sqrt(r2)
+    ex = np.exp(-a * r)
+    if ka == 0 and kb == 0:
+        return (1.0 + a * r) * ex
+    if ka == 0:
+        return a * a * (xa[kb - 1] - xb[kb - 1]) * ex
+    if kb == 0:
+        return -a * a * (xa[ka - 1] - xb[ka - 1]) * ex
+    i = ka - 1
+    j = kb - 1
+    v = 1.0 if i == j else 0.0
+    if r > 0.0:
+        v -= a * (xa[i] - xb[i]) * (xa[j] - xb[j]) / r
+    return a * a * v * ex
+
+
+@nb.njit(cache=True)
+def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout):
+    """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds."""
+    n = idx.shape[0]
+    hasg, m = _obs_layout(idx, nrm, sg, dim)
+    a = np.sqrt(3.0) / scale
+    # observation list: values first, then component 1 of gradient samples, then 2, ...
+    y = np.empty(m)
+    noise = np.empty(m)
+    t = 0
+    for u in range(n):
+        i = idx[u]
+        for k in range(dim):
+            xout[t, k] = pos[i, k]
+        kout[t] = 0
+        y[t] = -fbias
+        noise[t] = sp[i] if hasg[u] else NOGRAD_VALUE_NOISE
+        t += 1
+    for c in range(dim):
+        for u in range(n):
+            if hasg[u]:
+                i = idx[u]
+                for k in range(dim):
+                    xout[t, k] = pos[i, k]
+                kout[t] = 1 + c
+                y[t] = nrm[i, c]
+                if quirk_x and c == 0:
+                    noise[t] = np.sqrt(sp[i] * sg[i])
+                else:
+                    noise[t] = sg[i]
+                t += 1
+    K = np.empty((m, m))
+    for p in range(m):
+        for q in range(p + 1):
+            v = _cov_obs(xout[p], xout[q], kout[p], kout[q], a, dim)
+            K[p, q] = v
+            K[q, p] = v
+        K[p, p] += noise[p]
+    L = np.linalg.cholesky(K)
+    # alpha = K^-1 y by two triangular solves
+    z = np.empty(m)
+    for p in range(m):
+        s = y[p]
+        for q in range(p):
+            s -= L[p, q] * z[q]
+        z[p] = s / L[p, p]
+    for p in range(m - 1, -1, -1):
+        s = z[p]
+        for q in range(p + 1, m):
+            s -= L[q, p] * aout[q]
+        aout[p] = s / L[p, p]
+    o = 0
+    for p in range(m):
+        for q in range(p + 1):
+            Lout[o] = L[p, q]
+            o += 1
+    return m
+
+
+@nb.njit(cache=True, parallel=True)
+def _train_many(csr_ptr, csr_idx, obs_off, tri_off, pos, nrm, sp, sg, dim, scale, fbias,
+                quirk_x, Lbuf, abuf, xbuf, kbuf):
+    nc = csr_ptr.shape[0] - 1
+    for c in nb.prange(nc):
+        idx = csr_idx[csr_ptr[c]:csr_ptr[c + 1]]
+        o0, o1 = obs_off[c], obs_off[c + 1]
+        t0, t1 = tri_off[c], tri_off[c + 1]
+        _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lbuf[t0:t1], abuf[o0:o1],
+                   xbuf[o0:o1], kbuf[o0:o1])
+
+
+@nb.njit(cache=True)
+def _count_obs(csr_ptr, csr_idx, nrm, sg, dim):
+    nc = csr_ptr.shape[0] - 1
+    out = np.empty(nc, np.int64)
+    for c in range(nc):
+        _, m = _obs_layout(csr_idx[csr_ptr[c]:csr_ptr[c + 1]], nrm, sg, dim)
+        out[c] = m
+    return out
+
+
+@nb.njit(cache=True)
+def kernel_blocks(x, X, kinds, a, dim, kout):
+    """k* (m, 1 + dim): covariance of each observation with [f(x), d_1 f(x), ...]."""
+    m = X.shape[0]
+    for p in range(m):
+        for j in range(dim + 1):
+            kout[p, j] = _cov_obs(x, X[p], j, kinds[p], a, dim)
+
+
+@nb.njit(cache=True)
+def _predict_one(x, Lp, alpha, X, kinds, a, dim, var_f0, var_g0, want_gvar, out, kbuf, zbuf):
+    """Write [f, grad(dim), var_f, var_grad(dim)] of one GP at x into out."""
+    m = X.shape[0]
+    ks = kbuf[:m]
+    kernel_blocks(x, X, kinds, a, dim, ks)
+    for j in range(dim + 1):
+        s = 0.0
+        for p in range(m):
+            s += ks[p, j] * alpha[p]
+        out[j] = s
+    ncol = dim + 1 if want_gvar else 1
+    for j in range(ncol):
+        z = zbuf[:m]
+        acc = 0.0
+        o = 0
+        for p in range(m):
+            s = ks[p, j]
+            for q in range(p):
+                s -= Lp[o + q] * z[q]
+            zp = s / Lp[o + p]
+            z[p] = zp
+            acc += zp * zp
+            o += p + 1
+        out[dim + 1 + j] = (var_f0 if j == 0 else var_g0) - acc
+    if not want_gvar:
+        for j in range(1, dim + 1):
+            out[dim + 1 + j] = np.nan
+
+
+class GPStore:
+    """Trained cluster GPs in flat buffers, indexed by cluster slot.
+
+    ``gp_obs[s]`` / ``gp_tri[s]`` are offsets into the observation buffers (positions ``X``,
+    kinds ``kinds``, ``alpha``) and the packed-factor buffer ``Lbuf``; ``gp_m[s]`` is the number of
+    observations (0 = no GP). Retraining appends; the buffers are compacted when half is dead.
+    """
+
+    def __init__(self, dim):
+        self.dim = dim
+        self.gp_obs = np.zeros(0, np.int64)
+        self.gp_tri = np.zeros(0, np.int64)
+        self.gp_m = np.zeros(0, np.int64)
+        self.X = np.zeros((0, dim))
+        self.kinds = np.zeros(0, np.int64)
+        self.alpha = np.zeros(0)
+        self.Lbuf = np.zeros(0)
+        self.n_obs = 0
+        self.n_tri = 0
+
+    def ensure_slots(self, n):
+        if n > self.gp_m.shape[0]:
+            k = max(n, 2 * self.gp_m.shape[0])
+            for name in ("gp_obs", "gp_tri", "gp_m"):
+                a = np.zeros(k, np.int64)
+                old = getattr(self, name)
+                a[: old.shape[0]] = old
+                setattr(self, name, a)
+
+    def drop(self, slots):
+        self.gp_m[slots] = 0
+
+    def _compact(self, keep_obs, keep_tri):
+        live = np.nonzero(self.gp_m > 0)[0]
+        m = self.gp_m[live]
+        tri = m * (m + 1) // 2
+        nobs, ntri = int(m.sum()), int(tri.sum())
+        X = np.zeros((max(nobs + keep_obs, 1), self.dim))
+        kinds = np.zeros(max(nobs + keep_obs, 1), np.int64)
+        alpha = np.zeros(max(nobs + keep_obs, 1))
+        Lbuf = np.zeros(max(ntri + keep_tri, 1))
+        o = t = 0
+        for s, mm, tt in zip(live, m, tri):
+            a0, b0 = self.gp_obs[s], self.gp_tri[s]
+            X[o:o + mm] = self.X[a0:a0 + mm]
+            kinds[o:o + mm] = self.kinds[a0:a0 + mm]
+            alpha[o:o + mm] = self.alpha[a0:a0 + mm]
+            Lbuf[t:t + tt] = self.Lbuf[b0:b0 + tt]
+            self.gp_obs[s], self.gp_tri[s] = o, t
+            o += mm
+            t += tt
+        self.X, self.kinds, self.alpha, self.Lbuf = X, kinds, alpha, Lbuf
+        self.n_obs, self.n_tri = o, t
+
+    def train(self, slots, csr_ptr, csr_idx, tree, scale, fbias, quirk_x):
+        """(Re)train the GPs of ``slots`` on the training sets given in CSR form."""
+        slots = np.asarray(slots, np.int64)
+        self.ensure_slots(int(slots.max()) + 1 if len(slots) else 0)
+        if len(slots) == 0:
+            return
+        self.gp_m[slots] = 0
+        m = _count_obs(csr_ptr, csr_idx, tree.nrm, tree.sg, self.dim)
+        tri = m * (m + 1) // 2
+        need_o, need_t = int(m.sum()), int(tri.sum())
+        live = self.gp_m > 0
+        live_o = int(self.gp_m[live].sum())
+        if self.n_obs + need_o > self.X.shape[0] or self.n_tri + need_t > self.Lbuf.shape[0]:
+            if self.n_obs > 2 * live_o + 64:
+                self._compact(0, 0)
+            if self.n_obs + need_o > self.X.shape[0] or self.n_tri + need_t > self.Lbuf.shape[0]:
+                self._grow(self.n_obs + need_o, self.n_tri + need_t)
+        obs_off = self.n_obs + np.concatenate([[0], np.cumsum(m)])
+        tri_off = self.n_tri + np.concatenate([[0], np.cumsum(tri)])
+        _train_many(csr_ptr, csr_idx, obs_off, tri_off, tree.pos, tree.nrm, tree.sp, tree.sg,
+                    self.dim, scale, fbias, quirk_x, self.Lbuf, self.alpha, self.X, self.kinds)
+        self.gp_obs[slots] = obs_off[:-1]
+        self.gp_tri[slots] = tri_off[:-1]
+        self.gp_m[slots] = m
+        self.n_obs = int(obs_off[-1])
+        self.n_tri = int(tri_off[-1])
+
+    def _grow(self, nobs, ntri):
+        ko = max(nobs, 2 * self.X.shape[0], 64)
+        kt = max(ntri, 2 * self.Lbuf.shape[0], 1024)
+        X = np.zeros((ko, self.dim))
+        X[: self.X.shape[0]] = self.X
+        kinds = np.zeros(ko, np.int64)
+        kinds[: self.kinds.shape[0]] = self.kinds
+        alpha = np.zeros(ko)
+        alpha[: self.alpha.shape[0]] = self.alpha
+        Lbuf = np.zeros(kt)
+        Lbuf[: self.Lbuf.shape[0]] = self.Lbuf
+        self.X, self.kinds, self.alpha, self.Lbuf = X, kinds, alpha, Lbuf
+
+    def nbytes(self):
+        return sum(getattr(self, k).nbytes for k in ("gp_obs", "gp_tri", "gp_m", "X", "kinds",
+                                                         "alpha", "Lbuf"))
+
+    STATE = ("gp_obs", "gp_tri", "gp_m", "X", "kinds", "alpha", "Lbuf")
+
+    def state(self):
+        self._compact(0, 0)
+        st = {k: getattr(self, k) for k in self.STATE}
+        return st
+
+    def set_state(self, st):
+        for k in self.STATE:
+            setattr(self, k, np.ascontiguousarray(st[k]).astype(getattr(self, k).dtype, copy=True))
+        m = self.gp_m
+        live = m > 0
+        self.n_obs = int((self.gp_obs[live] + m[live]).max()) if live.any() else 0
+        t = m * (m + 1) // 2
+        self.n_tri = int((self.gp_tri[live] + t[live]).max()) if live.any() else 0
+
+
+def train_gp(train, scale, fbias=0.2, quirk_x=False):
+    """Train one GP from rows [pos(d), normal(d), pos_noise, grad_noise] (for tests and tools).
+
+    Returns a callable ``predict(points) -> (n, 2 + 2 d)`` giving [f, grad, var_f, var_grad].
+    """
+    train = np.asarray(train, np.float64)
+    dim = (train.shape[1] - 2) // 2
+    pos = np.ascontiguousarray(train[:, :dim])
+    nrm = np.ascontiguousarray(train[:, dim:2 * dim])
+    sp = np.ascontiguousarray(train[:, 2 * dim])
+    sg = np.ascontiguousarray(train[:, 2 * dim + 1])
+    idx = np.arange(len(train), dtype=np.int64)
+    _, m = _obs_layout(idx, nrm, sg, dim)
+    Lp = np.zeros(m * (m + 1) // 2)
+    alpha = np.zeros(m)
+    X = np.zeros((m, dim))
+    kinds = np.zeros(m, np.int64)
+    _train_one(idx, pos, nrm, sp, sg, dim, float(scale), fbias, quirk_x, Lp, alpha, X, kinds)
+    v0, g0 = _var_consts(dim, float(scale))
+
+    def predict(points):
+        points = np.asarray(points, np.float64)
+        out = np.zeros((len(points), 2 + 2 * dim))
+        kb = np.zeros((m, dim + 1))
+        zb = np.zeros(m)
+        a = np.sqrt(3.0) / scale
+        for i, x in enumerate(points):
+            _predict_one(x, Lp, alpha, X, kinds, a, dim, v0, g0, True, out[i], kb, zb)
+        return out
+
+    return predict
+
+
+def _var_consts(dim, scale):
+    """Hard-coded predictive-variance constants of the published code (spec §8.3)."""
+    if dim == 2:
+        return 1.01, 3.0 / scale**2 + 0.1
+    return 1.001, 3.0 / scale**2 + 0.001
+
+
+predict_gp = _predict_one

@@ -1,0 +1,257 @@
+"""Observation GPs on the current scan (spec §4): partitioned Ornstein-Uhlenbeck regressions.
+
+``ObsGP1D`` regresses rho = r^(-1/2) on beam angle (2D lidar); ``ObsGP2D`` regresses rho = 1/z on
+normalised image coordinates (v, u) in tiles (depth camera). Both predict (rho_hat, var) for
+batches of query coordinates; unobservable queries get var = 1e6 and rho_hat = NaN.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+__all__ = ["ObsGP1D", "ObsGP2D", "UNOBSERVABLE"]
+
+UNOBSERVABLE = 1e6
+
+
+class ObsGP1D:
+    """Piecewise OU GP over the valid beams of one scan (spec §4.2), vectorised.
+
+    Parameters
+    ----------
+    angles, rho : ndarray of shape (n,)
+        Valid beam angles (rad, increasing) and targets r^(-1/2).
+    scale, noise : float
+        OU length scale (rad) and noise variance.
+    group, overlap, margin : int, int, float
+        Partition size, overlap (beams) and the angular margin (rad) at both ends.
+    """
+
+    def __init__(self, angles, rho, *, scale=0.5, noise=0.01, group=20, overlap=6, margin=0.0175):
+        self.scale, self.noise, self.margin = scale, noise, margin
+        x = angles
+        N = len(x)
+        ng = N // group + 1
+        self.empty = ng == 1
+        if self.empty:
+            return
+        ranges, bounds = [], [x[0]]
+        for g in range(ng - 2):
+            i0 = group * g
+            ranges.append((i0, i0 + group + overlap - 1))
+            bounds.append(x[i0 + group + overlap // 2])
+        i1 = group * (ng - 2)
+        h = (N - i1) // 2
+        ranges.append((i1, i1 + h + overlap))
+        bounds.append(x[i1 + h + overlap // 2])
+        ranges.append((i1 + h, N - 1))
+        bounds.append(x[N - 1])
+        self.bounds = np.asarray(bounds)
+        M = max(b - a + 1 for a, b in ranges)
+        G = len(ranges)
+        X = np.zeros((G, M))
+        A = np.zeros((G, M))
+        Kinv = np.zeros((G, M, M))
+        mask = np.zeros((G, M), bool)
+        for g, (a, b) in enumerate(ranges):
+            n = b - a + 1
+            xs = x[a:b + 1]
+            K = np.exp(-np.abs(xs[:, None] - xs[None, :]) / scale) + noise * np.eye(n)
+            L = np.linalg.cholesky(K)
+            Li = np.linalg.inv(L)
+            Ki = Li.T @ Li
+            X[g, :n] = xs
+            mask[g, :n] = True
+            A[g, :n] = Ki @ rho[a:b + 1]
+            Kinv[g, :n, :n] = Ki
+        self.X, self.A, self.Kinv, self.mask = X, A, Kinv, mask
+
+    def predict(self, phi):
+        """(rho_hat, var) at angles phi (any shape)."""
+        phi = np.asarray(phi, np.float64)
+        shp = phi.shape
+        phi = phi.ravel()
+        rho = np.full(phi.shape, np.nan)
+        var = np.full(phi.shape, UNOBSERVABLE)
+        if self.empty:
+            return rho.reshape(shp), var.reshape(shp)
+        b = self.bounds
+        g = np.searchsorted(b, phi, side="left") - 1
+        ok = (phi >= b[0] + self.margin) & (phi <= b[-1] - self.margin) & (g >= 0) & (g < len(b) - 1)
+        gi = np.clip(g, 0, len(b) - 2)
+        ok &= phi != b[gi + 1]
+        idx = np.nonzero(ok)[0]
+        if len(idx):
+            gg = gi[idx]
+            k = np.exp(-np.abs(phi[idx, None] - self.X[gg]) / self.scale) * self.mask[gg]
+            rho[idx] = np.einsum("ij,ij->i", k, self.A[gg])
+            var[idx] = 1.0 + self.noise - np.einsum("ij,ijk,ik->i", k, self.Kinv[gg], k)
+        return rho.reshape(shp), var.reshape(shp)
+
+
+@nb.njit(cache=True)
+def _chol_inv_tile(xs, noise, scale, out_Kinv, y, out_a):
+    n = xs.shape[0]
+    K = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            d = 0.0
+            for k in range(2):
+                e = xs[i, k] - xs[j, k]
+                d += e * e
+            v = np.exp(-np.sqrt(d) / scale)
+            K[i, j] = v
+            K[j, i] = v
+        K[i, i] += noise
+    Ki = np.linalg.inv(K)
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            out_Kinv[i, j] = Ki[i, j]
+            s += Ki[i, j] * y[j]
+        out_a[i] = s
+
+
+@nb.njit(cache=True)
+def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale, Mmax,
+               TI, TX, TA, TK, TN):
+    """Fit the OU GPs of the listed tiles (flat indices into the (nr, nc) grid) into slots."""
+    nc = TI.shape[1]
+    xs = np.empty((Mmax, 2))
+    ys = np.empty(Mmax)
+    for r in range(tiles.shape[0]):
+        t = tiles[r]
+        s = slots[r]
+        a = t // nc
+        c = t % nc
+        n = 0
+        for j in range(cols0[c], cols1[c] + 1):       # column-major, row fastest
+            for i in range(rows0[a], rows1[a] + 1):
+                if rho[i, j] > 0:
+                    xs[n, 0] = v[i]
+                    xs[n, 1] = u[j]
+                    ys[n] = rho[i, j]
+                    n += 1
+        TI[a, c] = s
+        TN[s] = n
+        if n > 0:
+            TX[s, :n] = xs[:n]
+            Ki = np.empty((n, n))
+            _chol_inv_tile(xs[:n], noise, scale, Ki, ys[:n], TA[s, :n])
+            for i in range(n):
+                for j in range(n):
+                    TK[s, i, j] = Ki[i, j]
+
+
+@nb.njit(cache=True)
+def _predict_tiles(qv, qu, bv, bu, margin, TI, TX, TA, TK, TN, scale, noise, rho_out, var_out):
+    nr = bv.shape[0] - 1
+    nc = bu.shape[0] - 1
+    for i in range(qv.shape[0]):
+        v = qv[i]
+        u = qu[i]
+        rho_out[i] = np.nan
+        var_out[i] = UNOBSERVABLE
+        if not (v >= bv[0] + margin and v <= bv[nr] - margin and u >= bu[0] + margin
+                and u <= bu[nc] - margin):
+            continue
+        a = np.searchsorted(bv[1:], v, side="right")
+        c = np.searchsorted(bu[1:], u, side="right")
+        if a >= nr or c >= nc:
+            continue
+        t = TI[a, c]
+        if t < 0:
+            continue
+        n = TN[t]
+        if n <= 0:
+            continue
+        k = np.empty(n)
+        m = 0.0
+        for j in range(n):
+            dv = v - TX[t, j, 0]
+            du = u - TX[t, j, 1]
+            k[j] = np.exp(-np.sqrt(dv * dv + du * du) / scale)
+            m += k[j] * TA[t, j]
+        q = 0.0
+        for j in range(n):
+            s = 0.0
+            for l in range(n):
+                s += TK[t, j, l] * k[l]
+            q += k[j] * s
+        rho_out[i] = m
+        var_out[i] = 1.0 + noise - q
+
+
+class ObsGP2D:
+    """Tiled OU GP over a subsampled depth image (spec §4.3); tiles are fitted lazily.
+
+    Parameters
+    ----------
+    v, u : ndarray of shape (m,), (n,)
+        Normalised coordinates of the subsampled rows and columns (increasing).
+    rho : ndarray of shape (m, n)
+        1/z for valid pixels, -1 for invalid ones.
+    """
+
+    def __init__(self, v, u, rho, *, scale=0.5, noise=0.01, group=5, overlap=3, margin=0.005):
+        self.v, self.u, self.rho = v, u, np.ascontiguousarray(rho)
+        self.scale, self.noise, self.margin = scale, noise, margin
+        self.rows0, self.rows1, self.bv = self._partition(len(v), v, group, overlap)
+        self.cols0, self.cols1, self.bu = self._partition(len(u), u, group, overlap)
+        nr, nc = len(self.rows0), len(self.cols0)
+        self.M = int(max(self.rows1 - self.rows0 + 1) * max(self.cols1 - self.cols0 + 1))
+        self.TI = np.full((nr, nc), -1, np.int64)    # slot of a fitted tile, -1 = not fitted yet
+        self.n_fit = 0
+        self._grow(64)
+
+    def _grow(self, cap):
+        M = self.M
+        TX, TA = np.zeros((cap, M, 2)), np.zeros((cap, M))
+        TK, TN = np.zeros((cap, M, M), np.float32), np.zeros(cap, np.int64)
+        if self.n_fit:
+            k = self.n_fit
+            TX[:k], TA[:k], TK[:k], TN[:k] = self.TX[:k], self.TA[:k], self.TK[:k], self.TN[:k]
+        self.TX, self.TA, self.TK, self.TN = TX, TA, TK, TN
+
+    @staticmethod
+    def _partition(m, x, group, overlap):
+        n = (m - overlap) // group + 1
+        s0 = np.arange(n) * group
+        s1 = np.minimum(s0 + group + overlap - 1, m - 1)
+        s1[-1] = m - 1
+        b = np.empty(n + 1)
+        b[0] = x[0]
+        b[1:n] = x[s0[:-1] + group + 1]
+        b[n] = x[m - 1]
+        return s0.astype(np.int64), s1.astype(np.int64), b
+
+    def _tiles_of(self, qv, qu):
+        nr, nc = self.TI.shape
+        a = np.clip(np.searchsorted(self.bv[1:], qv, side="right"), 0, nr - 1)
+        c = np.clip(np.searchsorted(self.bu[1:], qu, side="right"), 0, nc - 1)
+        return a * nc + c
+
+    def predict(self, qv, qu):
+        """(rho_hat, var) at normalised coordinates (v, u), arrays of one shape."""
+        qv = np.ascontiguousarray(qv, np.float64).ravel()
+        qu = np.ascontiguousarray(qu, np.float64).ravel()
+        fin = np.isfinite(qv) & np.isfinite(qu)
+        qv = np.where(fin, qv, -1e9)
+        qu = np.where(fin, qu, -1e9)
+        t = np.unique(self._tiles_of(qv, qu))
+        t = t[self.TI.ravel()[t] < 0]
+        if len(t):
+            if self.n_fit + len(t) > self.TN.shape[0]:
+                self._grow(max(self.n_fit + len(t), 2 * self.TN.shape[0]))
+            slots = np.arange(self.n_fit, self.n_fit + len(t))
+            self.n_fit += len(t)
+            _fit_tiles(t, slots, self.rows0, self.rows1, self.cols0, self.cols1, self.v, self.u,
+                       self.rho, self.noise, self.scale, self.M, self.TI, self.TX, self.TA,
+                       self.TK, self.TN)
+        rho = np.empty(len(qv))
+        var = np.empty(len(qv))
+        _predict_tiles(qv, qu, self.bv, self.bu, self.margin, self.TI, self.TX, self.TA, self.TK,
+                       self.TN,
+                       self.scale, self.noise, rho, var)
+        return rho, var

@@ -1,0 +1,421 @@
+"""Quadtree / octree of surface samples (spec §7), stored as flat arrays for numba.
+
+The tree above cluster level is a regular grid: cluster cells (half-length ``h_c``) have borders
+at ``origin + k * 2 h_c`` whatever the root's growth, so the cells above cluster level carry no
+information beyond the root box (kept for the root-limit test). Each cluster cell owns a complete
+``2^d``-ary subtree of fixed depth ``L`` (levels 0 = cluster ... L = max-depth, ``h < h_min``),
+stored as two rows of ``node_sample`` / ``node_internal``; nodes are numbered level by level.
+A dense grid ``cgrid`` (grown on demand over the bounding box of the clusters) maps cluster
+coordinates to a slot. Samples live in flat arrays with a free list, so slots are reused.
+
+Semantics follow the spec: a leaf at or below cluster level holds at most one sample; inserting
+next to a sample closer than ``h_min`` in the same leaf is rejected (the chain-only "IsNotNew"
+test); a max-depth cell never splits; removal collapses parents whose children are all empty
+leaves. ``strict_spacing=True`` (default mode in 3D) additionally rejects a point closer than
+``h_min`` to *any* sample in the 3^d neighbouring clusters, i.e. the spacing the spec intends.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+__all__ = ["Tree"]
+
+_I32 = np.int32
+
+
+@nb.njit(cache=True)
+def _lin(coords, gshape, goff):
+    """Flat index into the cluster grid of integer cluster coordinates, or -1 if outside."""
+    idx = 0
+    stride = 1
+    for k in range(coords.shape[0]):
+        c = coords[k] - goff[k]
+        if c < 0 or c >= gshape[k]:
+            return -1
+        idx += c * stride
+        stride *= gshape[k]
+    return idx
+
+
+@nb.njit(cache=True)
+def _node_of(p, lo, w, level, dim, level_off):
+    """Index of the node at ``level`` containing point p in a cluster with low corner lo, width w."""
+    n = 1 << level
+    cw = w / n
+    idx = 0
+    stride = 1
+    for k in range(dim):
+        c = int(np.floor((p[k] - lo[k]) / cw))
+        if c < 0:
+            c = 0
+        elif c >= n:
+            c = n - 1
+        idx += c * stride
+        stride *= n
+    return level_off[level] + idx
+
+
+@nb.njit(cache=True)
+def _level_of(node, level_off):
+    lvl = 0
+    while node >= level_off[lvl + 1]:
+        lvl += 1
+    return lvl
+
+
+@nb.njit(cache=True)
+def _parent(node, lvl, dim, level_off):
+    """Parent index of a node at level ``lvl`` >= 1."""
+    n = 1 << lvl
+    r = node - level_off[lvl]
+    idx = 0
+    stride = 1
+    for _ in range(dim):
+        c = r % n
+        r //= n
+        idx += (c >> 1) * stride
+        stride *= n >> 1
+    return level_off[lvl - 1] + idx
+
+
+@nb.njit(cache=True)
+def _first_child(node, lvl, dim, level_off):
+    """Coordinates-based iteration helper: returns (level offset, n, coords of node)."""
+    n = 1 << lvl
+    r = node - level_off[lvl]
+    coords = np.empty(dim, np.int64)
+    for k in range(dim):
+        coords[k] = r % n
+        r //= n
+    return coords
+
+
+@nb.njit(cache=True)
+def _child_index(coords, bits, lvl, dim, level_off):
+    n = 1 << (lvl + 1)
+    idx = 0
+    stride = 1
+    for k in range(dim):
+        c = 2 * coords[k] + ((bits >> k) & 1)
+        idx += c * stride
+        stride *= n
+    return level_off[lvl + 1] + idx
+
+
+@nb.njit(cache=True)
+def _cluster_coords(p, origin, w, dim):
+    c = np.empty(dim, np.int64)
+    for k in range(dim):
+        c[k] = int(np.floor((p[k] - origin[k]) / w))
+    return c
+
+
+@nb.njit(cache=True)
+def _in_root_or_grow(p, root, hmax, dim):
+    """Grow the root toward p until it contains p or reaches its limit; True if p is inside."""
+    while True:
+        inside = True
+        for k in range(dim):
+            if not (abs(p[k] - root[k]) < root[dim]):
+                inside = False
+        if inside:
+            return True
+        if root[dim + 1] > 0.5:
+            return False
+        h = root[dim]
+        for k in range(dim):
+            root[k] += h if p[k] >= root[k] else -h
+        root[dim] = 2.0 * h
+        if root[dim] > hmax:
+            root[dim + 1] = 1.0
+
+
+@nb.njit(cache=True)
+def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos):
+    """True if any sample in the 3^d clusters around cluster cc is closer than hmin to p."""
+    nb_ = 1
+    for _ in range(dim):
+        nb_ *= 3
+    q = np.empty(dim, np.int64)
+    h2 = hmin * hmin
+    for t in range(nb_):
+        r = t
+        for k in range(dim):
+            q[k] = cc[k] + (r % 3) - 1
+            r //= 3
+        g = _lin(q, gshape, goff)
+        if g < 0:
+            continue
+        s = cgrid[g]
+        if s < 0:
+            continue
+        row = node_sample[s]
+        for j in range(row.shape[0]):
+            i = row[j]
+            if i >= 0:
+                d2 = 0.0
+                for k in range(dim):
+                    e = pos[i, k] - p[k]
+                    d2 += e * e
+                if d2 < h2:
+                    return True
+    return False
+
+
+@nb.njit(cache=True)
+def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_internal,
+            slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict):
+    """Insert p; return (sample index, cluster slot) or (-1, -1) when rejected.
+
+    geo = [origin(d), cluster width w, h_min, h_max]. counts = [n_samples_hw, n_free_samples,
+    n_slots_hw, n_free_slots]. The caller guarantees capacity and grid coverage.
+    """
+    dim = p.shape[0]
+    w = geo[dim]
+    hmin = geo[dim + 1]
+    if not _in_root_or_grow(p, root, geo[dim + 2], dim):
+        return -1, -1
+    cc = _cluster_coords(p, geo, w, dim)
+    g = _lin(cc, gshape, goff)
+    if g < 0:
+        return -1, -1
+    if strict and _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos):
+        return -1, -1
+    s = cgrid[g]
+    lo = np.empty(dim)
+    for k in range(dim):
+        lo[k] = geo[k] + cc[k] * w
+    node = 0
+    lvl = 0
+    if s >= 0:
+        while True:
+            if node_internal[s, node]:
+                lvl += 1
+                node = _node_of(p, lo, w, lvl, dim, level_off)
+                continue
+            q = node_sample[s, node]
+            if q < 0:
+                break
+            d2 = 0.0
+            for k in range(dim):
+                e = pos[q, k] - p[k]
+                d2 += e * e
+            if d2 < hmin * hmin or lvl == L:
+                return -1, -1
+            node_internal[s, node] = 1
+            node_sample[s, node] = -1
+            cq = _node_of(pos[q], lo, w, lvl + 1, dim, level_off)
+            node_sample[s, cq] = q
+            s_node[q] = cq
+            lvl += 1
+            node = _node_of(p, lo, w, lvl, dim, level_off)
+    else:
+        if counts[3] > 0:
+            counts[3] -= 1
+            s = slot_free[counts[3]]
+        else:
+            s = counts[2]
+            counts[2] += 1
+        node_sample[s, :] = -1
+        node_internal[s, :] = 0
+        for k in range(dim):
+            slot_coord[s, k] = cc[k]
+        cgrid[g] = s
+    if counts[1] > 0:
+        counts[1] -= 1
+        i = s_free[counts[1]]
+    else:
+        i = counts[0]
+        counts[0] += 1
+    node_sample[s, node] = i
+    for k in range(dim):
+        pos[i, k] = p[k]
+    s_slot[i] = s
+    s_node[i] = node
+    return i, s
+
+
+@nb.njit(cache=True)
+def _remove(i, dim, level_off, cgrid, gshape, goff, node_sample, node_internal, slot_coord,
+            slot_free, s_slot, s_node, s_free, counts):
+    """Remove sample i; collapse parents whose children are all empty leaves; free empty clusters."""
+    s = s_slot[i]
+    node = s_node[i]
+    node_sample[s, node] = -1
+    s_slot[i] = -1
+    s_node[i] = -1
+    s_free[counts[1]] = i
+    counts[1] += 1
+    nch = 1 << dim
+    lvl = _level_of(node, level_off)
+    while lvl > 0:
+        par = _parent(node, lvl, dim, level_off)
+        coords = _first_child(par, lvl - 1, dim, level_off)
+        empty = True
+        for b in range(nch):
+            c = _child_index(coords, b, lvl - 1, dim, level_off)
+            if node_internal[s, c] or node_sample[s, c] >= 0:
+                empty = False
+                break
+        if not empty:
+            return
+        node_internal[s, par] = 0
+        node = par
+        lvl -= 1
+    if not node_internal[s, 0] and node_sample[s, 0] < 0:
+        g = _lin(slot_coord[s], gshape, goff)
+        cgrid[g] = -1
+        slot_free[counts[3]] = s
+        counts[3] += 1
+
+
+class Tree:
+    """Flat-array cluster tree of dimension 2 or 3 (spec §7); owns the sample arrays.
+
+    Parameters are the spec's: ``init_half`` (root half-length at the origin), ``cluster_half``
+    (h_c), ``min_half`` (h_min) and ``max_half`` (h_max), in metres.
+    """
+
+    def __init__(self, dim, init_half, cluster_half, min_half, max_half, strict=False):
+        self.dim = dim
+        ratio = init_half / cluster_half
+        if ratio < 1 or abs(np.log2(ratio) - round(np.log2(ratio))) > 1e-9:
+            raise ValueError("init_half / cluster_half must be a power of two >= 1")
+        L, h = 0, cluster_half
+        while not h < min_half:
+            h /= 2.0
+            L += 1
+        self.L = L
+        B = 1 << dim
+        self.level_off = np.array([(B**lv - 1) // (B - 1) for lv in range(L + 2)], np.int64)
+        self.n_nodes = int(self.level_off[L + 1])
+        w = 2.0 * cluster_half
+        self.geo = np.array([-init_half] * dim + [w, min_half, max_half], np.float64)
+        self.root = np.array([0.0] * dim + [init_half, 0.0], np.float64)
+        self.strict = bool(strict)
+        self.cgrid = np.full(1, -1, _I32)
+        self.gshape = np.ones(dim, np.int64)
+        self.goff = np.zeros(dim, np.int64)
+        self.counts = np.zeros(4, np.int64)
+        self._alloc_slots(16)
+        self._alloc_samples(256)
+
+    # -- storage -----------------------------------------------------------------------------
+    def _alloc_slots(self, n):
+        d = self.dim
+        old = getattr(self, "node_sample", None)
+        ns = np.full((n, self.n_nodes), -1, _I32)
+        ni = np.zeros((n, self.n_nodes), np.uint8)
+        sc = np.zeros((n, d), np.int64)
+        sf = np.zeros(n, _I32)
+        if old is not None:
+            m = old.shape[0]
+            ns[:m] = old
+            ni[:m] = self.node_internal
+            sc[:m] = self.slot_coord
+            sf[:m] = self.slot_free
+        self.node_sample, self.node_internal, self.slot_coord, self.slot_free = ns, ni, sc, sf
+
+    def _alloc_samples(self, n):
+        d = self.dim
+        old = getattr(self, "pos", None)
+        arrs = dict(pos=np.zeros((n, d)), nrm=np.zeros((n, d)), sp=np.zeros(n), sg=np.zeros(n),
+                    s_slot=np.full(n, -1, _I32), s_node=np.full(n, -1, _I32),
+                    s_free=np.zeros(n, _I32))
+        if old is not None:
+            m = old.shape[0]
+            for k, a in arrs.items():
+                a[:m] = getattr(self, k)
+        for k, a in arrs.items():
+            setattr(self, k, a)
+
+    def reserve(self, points):
+        """Make room for inserting ``points`` (n, d): sample and slot capacity, grid coverage."""
+        n = len(points)
+        need = int(self.counts[0]) + n
+        if need > self.pos.shape[0]:
+            self._alloc_samples(max(need, 2 * self.pos.shape[0]))
+        need = int(self.counts[2]) + n
+        if need > self.node_sample.shape[0]:
+            self._alloc_slots(max(need, 2 * self.node_sample.shape[0]))
+        if n == 0:
+            return
+        d = self.dim
+        w = self.geo[d]
+        lim = 4.0 * self.geo[d + 2]
+        lo_b = self.root[:d] - lim
+        hi_b = self.root[:d] + lim
+        p = np.clip(points, lo_b, hi_b)
+        lo = np.floor((p.min(0) - self.geo[:d]) / w).astype(np.int64) - 2
+        hi = np.floor((p.max(0) - self.geo[:d]) / w).astype(np.int64) + 3
+        self._cover(lo, hi)
+
+    def _cover(self, lo, hi):
+        """Grow the dense cluster grid to cover integer cluster coordinates [lo, hi)."""
+        glo, ghi = self.goff, self.goff + self.gshape
+        if self.cgrid.size > 1 and (lo >= glo).all() and (hi <= ghi).all():
+            return
+        if self.cgrid.size > 1:
+            span = ghi - glo
+            nlo = np.minimum(lo, np.where(lo < glo, glo - span // 2, glo))
+            nhi = np.maximum(hi, np.where(hi > ghi, ghi + span // 2, ghi))
+        else:
+            nlo, nhi = lo, hi
+        shape = nhi - nlo
+        grid = np.full(tuple(shape[::-1]), -1, _I32)  # index order: last axis slowest
+        if self.cgrid.size > 1:
+            old = self.cgrid.reshape(tuple(self.gshape[::-1]))
+            sl = tuple(slice(int(a), int(a + s)) for a, s in zip((glo - nlo)[::-1], self.gshape[::-1]))
+            grid[sl] = old
+        self.cgrid = np.ascontiguousarray(grid).ravel()
+        self.gshape = shape.astype(np.int64)
+        self.goff = nlo.astype(np.int64)
+
+    # -- operations --------------------------------------------------------------------------
+    def insert(self, p):
+        """Insert one point (d,); returns (sample index, slot) or (-1, -1)."""
+        return _insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
+                       self.goff, self.node_sample, self.node_internal, self.slot_coord,
+                       self.slot_free, self.pos, self.s_slot, self.s_node, self.s_free,
+                       self.counts, self.strict)
+
+    def remove(self, i):
+        _remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
+                self.node_internal, self.slot_coord, self.slot_free, self.s_slot, self.s_node,
+                self.s_free, self.counts)
+
+    def args(self):
+        """The arrays the numba kernels take, in their order."""
+        return (self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape, self.goff,
+                self.node_sample, self.node_internal, self.slot_coord, self.slot_free, self.pos,
+                self.s_slot, self.s_node, self.s_free, self.counts, self.strict)
+
+    def alive(self):
+        """Indices of the stored samples, in slot/node order (deterministic)."""
+        ns = self.node_sample[: self.counts[2]]
+        return ns[ns >= 0].astype(np.int64)
+
+    def cluster_slots(self):
+        """Slots of the non-empty clusters, in slot order."""
+        ns = self.node_sample[: self.counts[2]]
+        ni = self.node_internal[: self.counts[2]]
+        used = (ns[:, 0] >= 0) | (ni[:, 0] > 0)
+        return np.nonzero(used)[0]
+
+    def slot_centres(self, slots):
+        d = self.dim
+        w = self.geo[d]
+        return self.geo[:d] + (self.slot_coord[slots] + 0.5) * w
+
+    # -- persistence ---------------------------------------------------------------------------
+    STATE = ("geo", "root", "cgrid", "gshape", "goff", "counts", "node_sample", "node_internal",
+             "slot_coord", "slot_free", "pos", "nrm", "sp", "sg", "s_slot", "s_node", "s_free")
+
+    def state(self):
+        return {k: getattr(self, k) for k in self.STATE}
+
+    def set_state(self, st):
+        for k in self.STATE:
+            setattr(self, k, np.ascontiguousarray(st[k]).astype(getattr(self, k).dtype, copy=True))

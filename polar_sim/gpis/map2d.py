@@ -1,0 +1,204 @@
+"""GPISMap2D: online GPIS from planar laser scans (quadtree), spec §2.1-§9."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from polar_sim._validation import as_angles, as_pose2d, as_ranges
+from polar_sim.gpis._base import GPISMapBase
+from polar_sim.gpis._checks import check_params
+from polar_sim.gpis._fusion import fuse, normal_noise
+from polar_sim.gpis._obsgp import ObsGP1D
+
+__all__ = ["GPISMap2D"]
+
+
+class GPISMap2D(GPISMapBase):
+    """Online Gaussian-process implicit surface in the plane (GPisMap, quadtree).
+
+    Parameters
+    ----------
+    map_scale : float, default=1.2
+        Matérn-3/2 length scale of the local GPs, metres; the query search half-width is 4x this.
+    fbias : float, default=0.2
+        Value target of every surface sample is -fbias; the published SDF is f + fbias.
+    obs_var_thre : float, default=0.1
+        Observation-GP variance above which a direction counts as unobservable.
+    delx : float, default=0.01
+        Finite-difference step and initial line-search step, metres.
+    min_position_noise, min_grad_noise, map_noise : float, default=0.01
+        Noise floors (variances) of the sample model (spec §1).
+    sensor_offset : (2,) array_like, default=(0.08, 0.0)
+        Laser position in the robot base frame, metres.
+    angle_obs_limit : (2,) array_like, default=(-3/4 pi, 3/4 pi)
+        Field of view of the laser, rad: beams outside are ignored and samples outside are not
+        re-evaluated.
+    min_range, max_range : float, default=0.2, 30.0
+        Valid return window, metres.
+    init_half, cluster_half, min_half, max_half : float, default=12.8, 0.8, 0.2, 102.4
+        Quadtree root half-length, cluster-cell half-length, minimum sample spacing and root
+        growth limit, metres.
+    obs_scale, obs_noise : float, default=0.5, 0.01
+        Observation GP (Ornstein-Uhlenbeck) length scale in rad and noise variance.
+    blend_near, blend_far : float, default=0.1, 0.3
+        Default mode: the query is the GPIS within ``blend_near`` of the nearest surfel, the
+        surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres.
+    surfel_radius : float or None, default=None
+        Radius of the disc each sample stands for in the far-field distance; None = min_half / 2.
+    free_res : float or None, default=None
+        Cell size of the observed-free-space grid (sign and variance far away); None = 0.1 m.
+    legacy : bool, default=False
+        Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
+        the query is then the published SDF f + fbias.
+
+    Attributes
+    ----------
+    tree_ : Tree
+        Quadtree and surface samples.
+    gps_ : GPStore
+        Trained local GPs, by cluster.
+    n_updates_ : int
+        Number of scans fused (scans with fewer than 2 valid returns are not counted).
+    """
+
+    dim = 2
+    _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
+               "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
+               "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
+               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "legacy")
+
+    def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
+                 min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
+                 sensor_offset=(0.08, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
+                 min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
+                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.3,
+                 surfel_radius=None, free_res=None, legacy=False):
+        self.map_scale = map_scale
+        self.fbias = fbias
+        self.obs_var_thre = obs_var_thre
+        self.delx = delx
+        self.min_position_noise = min_position_noise
+        self.min_grad_noise = min_grad_noise
+        self.map_noise = map_noise
+        self.sensor_offset = sensor_offset
+        self.angle_obs_limit = angle_obs_limit
+        self.min_range = min_range
+        self.max_range = max_range
+        self.init_half = init_half
+        self.cluster_half = cluster_half
+        self.min_half = min_half
+        self.max_half = max_half
+        self.obs_scale = obs_scale
+        self.obs_noise = obs_noise
+        self.blend_near = blend_near
+        self.blend_far = blend_far
+        self.surfel_radius = surfel_radius
+        self.free_res = free_res
+        self.legacy = legacy
+
+    def _checked_params(self):
+        return check_params(self, vec2=("sensor_offset", "angle_obs_limit"))
+
+    def _free_res(self):
+        return 0.1 if self.free_res is None else float(self.free_res)
+
+    def _surfel_radius(self):
+        return 0.5 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
+
+    def _blend_band(self):
+        return float(self.blend_near), float(self.blend_far)
+
+    # -- input ----------------------------------------------------------------------------------
+    def update(self, angles, ranges, pose2d):
+        """Fuse one laser scan.
+
+        Parameters
+        ----------
+        angles : array_like of shape (n,)
+            Beam angles in the sensor frame, rad.
+        ranges : array_like of shape (n,)
+            Ranges, metres; NaN/inf (and values outside [min_range, max_range]) = no return.
+        pose2d : array_like of shape (3,)
+            Robot base pose (x, y, theta) in the world, m and rad; the laser sits at
+            ``sensor_offset`` in the base frame.
+
+        Returns
+        -------
+        self
+        """
+        angles = as_angles(angles, "angles")
+        ranges = as_ranges(ranges, "ranges", n=len(angles))
+        pose = as_pose2d(pose2d, "pose2d")
+        p = self._checked_params()
+        lim = np.asarray(p["angle_obs_limit"], float)
+        with np.errstate(invalid="ignore"):
+            valid = (np.isfinite(ranges) & (ranges > p["min_range"]) & (ranges < p["max_range"])
+                     & (angles >= lim[0]) & (angles <= lim[1]))
+        if valid.sum() < 2:
+            return self
+        phi, r = angles[valid], ranges[valid]
+        if np.any(np.diff(phi) <= 0):
+            order = np.argsort(phi, kind="stable")
+            phi, r = phi[order], r[order]
+        self._run_update(self._prepare(phi, r, pose, p))
+        return self
+
+    def _prepare(self, phi, r, pose, p):
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        R = np.array([[c, -s], [s, c]])
+        t = pose[:2].copy()
+        o = np.asarray(p["sensor_offset"], float)
+        gp = ObsGP1D(phi, r ** -0.5, scale=p["obs_scale"], noise=p["obs_noise"])
+        sp = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
+        hits = (sp + o) @ R.T + t
+        return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=t, rmax=float(r.max()),
+                               sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
+                               lim=np.asarray(p["angle_obs_limit"], float))
+
+    # -- sensor model ---------------------------------------------------------------------------
+    def _oc(self, q, gp):
+        """Occupancy test (spec §3) at sensor-frame points q (..., 2): (oc, observable, r_hat)."""
+        phi = np.arctan2(q[..., 1], q[..., 0])
+        r = np.hypot(q[..., 0], q[..., 1])
+        rho_hat, var = gp.predict(phi)
+        obs = var <= self.obs_var_thre
+        with np.errstate(invalid="ignore", divide="ignore"):
+            oc = np.tanh(15.0 * r * (r ** -0.5 - rho_hat))
+            rhat = 1.0 / rho_hat ** 2
+        return oc, obs, rhat
+
+    def _fd(self, q, gp):
+        """Finite differences at sensor points q (n, 2): oc (n, 4), observable (n,), r_hat (n, 4)."""
+        dx = float(self.delx)
+        E = np.array([[dx, 0], [-dx, 0], [0, dx], [0, -dx]])
+        oc, obs, rhat = self._oc(q[:, None, :] + E[None], gp)
+        return oc, obs.all(1), rhat
+
+    def _child_visible(self, cent, scan):
+        p = (cent - scan.t) @ scan.R - scan.o
+        b = np.arctan2(p[:, 1], p[:, 0])
+        return (b > scan.lim[0]) & (b < scan.lim[1])
+
+    def _new_samples(self, scan):
+        s = scan.sensor_pts
+        _, var = scan.gp.predict(scan.phi)
+        ok = var <= self.obs_var_thre
+        oc, fd_ok, _ = self._fd(s, scan.gp)
+        g = np.stack([oc[:, 0] - oc[:, 1], oc[:, 2] - oc[:, 3]], 1) / self.delx
+        obar = oc.mean(1)
+        n, sp, sg = normal_noise(g, obar, s, scan.r ** 2, self.min_position_noise,
+                                 self.min_grad_noise, scan.R)
+        P = scan.hits
+        bad = ~fd_ok
+        return P, ok, bad, n, sp, sg
+
+    def _reeval(self, cand, scan):
+        tr = self.tree_
+        P, N = tr.pos[cand], tr.nrm[cand]
+        p = (P - scan.t) @ scan.R - scan.o
+        n = N @ scan.R
+        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
+                    lambda q: q @ scan.R.T + (scan.R @ scan.o + scan.t), scan.R, oc_skip=-0.1,
+                    rhat_dim=2)

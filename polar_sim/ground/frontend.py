@@ -1,0 +1,114 @@
+"""Feature front end: Shi–Tomasi corners tracked with pyramidal Lucas–Kanade (OpenCV).
+
+Replaces the published libviso2-style blob/corner detector and SAD matcher (spec §2.1–2.2): KLT gives
+sub-pixel positions (the published matcher has integer positions, which T4 shows costs the 6param
+scale several per cent), keeps feature identity across frames so per-track state needs no
+re-association, and costs a few milliseconds at 320x240. A forward–backward check replaces the
+published uniqueness test as the outlier filter.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["track", "detect_new", "straightness_gate", "is_static"]
+
+
+def track(prev_img, img, pts, guess, *, win=11, levels=3, fb_max=0.5, max_err=None):
+    """Track ``pts`` (n, 2) float from the previous grey image (H, W) uint8 into the current one.
+
+    (OpenCV 5's Python binding no longer takes prebuilt pyramids, so each call builds its own; that
+    costs about 0.2 ms at 320x240.)
+
+    ``guess`` (n, 2) is the predicted position (initial flow). Returns (new positions (n, 2) float64,
+    ok (n,) bool): tracked, inside the image, and back-tracked to within ``fb_max`` px of the start.
+    """
+    n = len(pts)
+    if n == 0:
+        return np.zeros((0, 2)), np.zeros(0, dtype=bool)
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01)
+    p0 = np.ascontiguousarray(pts, dtype=np.float32).reshape(-1, 1, 2)
+    p1 = np.ascontiguousarray(guess, dtype=np.float32).reshape(-1, 1, 2)
+    p1, st, _ = cv2.calcOpticalFlowPyrLK(prev_img, img, p0, p1.copy(), winSize=(win, win), maxLevel=levels,
+                                         criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+    ok = st.ravel() == 1
+    h, w = img.shape[:2]
+    q = p1.reshape(-1, 2).astype(np.float64)
+    ok &= np.isfinite(q).all(axis=1) & (q[:, 0] >= 0) & (q[:, 0] <= w - 1) & (q[:, 1] >= 0) & (q[:, 1] <= h - 1)
+    if fb_max is not None and ok.any():
+        i = np.flatnonzero(ok)
+        pb, stb, _ = cv2.calcOpticalFlowPyrLK(img, prev_img, p1[i], p0[i].copy(), winSize=(win, win),
+                                              maxLevel=levels, criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+        fb = np.linalg.norm(pb.reshape(-1, 2) - p0[i].reshape(-1, 2), axis=1)
+        ok[i] = (stb.ravel() == 1) & (fb < fb_max)
+    return q, ok
+
+
+def detect_new(grey, existing, *, max_new, cell, quality=0.001, block=3, border=4):
+    """Shi–Tomasi corners in grid cells (``cell`` px) not occupied by an existing track.
+
+    At most one new corner per free cell, strongest first, at most ``max_new``. Returns (m, 2) float64.
+    """
+    if max_new <= 0:
+        return np.zeros((0, 2))
+    h, w = grey.shape
+    c = cv2.goodFeaturesToTrack(grey, maxCorners=4 * max_new + 64, qualityLevel=quality,
+                                minDistance=max(2, cell // 2), blockSize=block)
+    if c is None:
+        return np.zeros((0, 2))
+    c = c.reshape(-1, 2).astype(np.float64)
+    c = c[(c[:, 0] >= border) & (c[:, 0] <= w - 1 - border) & (c[:, 1] >= border) & (c[:, 1] <= h - 1 - border)]
+    ncol = (w + cell - 1) // cell
+    occupied = np.zeros(((h + cell - 1) // cell) * ncol, dtype=bool)
+    if len(existing):
+        e = np.clip(existing.astype(np.intp) // cell, 0, None)
+        occupied[np.minimum(e[:, 1], (h - 1) // cell) * ncol + np.minimum(e[:, 0], (w - 1) // cell)] = True
+    cid = (c[:, 1].astype(np.intp) // cell) * ncol + c[:, 0].astype(np.intp) // cell
+    free = ~occupied[cid]
+    c, cid = c[free], cid[free]
+    _, first = np.unique(cid, return_index=True)  # strongest corner of each free cell
+    keep = np.sort(first)[:max_new]
+    return c[keep]
+
+
+def _angle_diff(a, b, wrap):
+    d = a - b
+    if wrap:
+        d = (d + 180.0) % 360.0 - 180.0
+    return np.abs(d)
+
+
+def straightness_gate(x0, x1, x2, *, min_flow=2.0, wrap=True):
+    """Keep three-frame tracks whose two steps point the same way (spec §2.3).
+
+    x0, x1, x2 : (n, 2) positions at frames k-2, k-1, k. With a = x1-x0, b = x2-x1, c = x2-x0 and θ the
+    direction atan2(Δx, Δy) in degrees: keep if |c| <= min_flow, else if |θa-θb| < 45 and |θb-θc| < 30
+    and |θa-θc| < 30. ``wrap=False`` reproduces the published unwrapped differences (B15).
+    """
+    a, b, c = x1 - x0, x2 - x1, x2 - x0
+    ta = np.degrees(np.arctan2(a[:, 0], a[:, 1]))
+    tb = np.degrees(np.arctan2(b[:, 0], b[:, 1]))
+    tc = np.degrees(np.arctan2(c[:, 0], c[:, 1]))
+    straight = ((_angle_diff(ta, tb, wrap) < 45.0) & (_angle_diff(tb, tc, wrap) < 30.0)
+                & (_angle_diff(ta, tc, wrap) < 30.0))
+    return (np.linalg.norm(c, axis=1) <= min_flow) | straight
+
+
+def is_static(disp, *, thr1=1.0, thr2=2.0, per_axis=False):
+    """Static-scene test on frame-to-frame displacements (n, 2) in px (spec §2.4).
+
+    Static if the fraction of displacements below ``thr1`` is >= 0.8 and below ``thr2`` is > 0.9.
+    ``per_axis=True`` is the published rule (B28: each axis separately, the larger fraction counts);
+    the fixed rule uses the displacement length. No displacements: not static.
+    """
+    if len(disp) == 0:
+        return False
+    if per_axis:
+        ad = np.abs(disp)
+        f1 = max(np.mean(ad[:, 0] < thr1), np.mean(ad[:, 1] < thr1))
+        f2 = max(np.mean(ad[:, 0] < thr2), np.mean(ad[:, 1] < thr2))
+    else:
+        nd = np.linalg.norm(disp, axis=1)
+        f1, f2 = np.mean(nd < thr1), np.mean(nd < thr2)
+    return bool(f1 >= 0.8 and f2 > 0.9)

@@ -1,0 +1,303 @@
+"""Sensors: RGB-D cameras with labels, 2D and 3D lidars, and their switchable noise models.
+
+A scene declares a lidar with a ``<custom><text name="sensor:NAME" data="..."/>`` entry, e.g.
+``type=lidar2d site=lidar beams=1081 fov_deg=270 min=0.1 max=30`` or
+``type=lidar3d site=lidar3d rows=32 cols=1024 vfov_min_deg=-25 vfov_max_deg=15 min=0.3 max=80``;
+the beams fan out in the site frame (x forward, y left, z up). Every MJCF camera is a camera.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from polar_sim.geometry import CV_FROM_GL, make_pose
+from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
+
+__all__ = [
+    "CameraFrame", "LidarScan", "LidarScan3D", "LidarSpec", "RangeNoise", "DepthNoise",
+    "parse_lidars", "Lidar", "CameraRig", "intrinsics",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraFrame:
+    """One camera image with its exact geometry.
+
+    Attributes
+    ----------
+    rgb : (H, W, 3) uint8
+    depth : (H, W) float32, metres along the optical axis; ``inf`` where nothing was hit
+        (and where the noise model drops a pixel)
+    labels : (H, W) int32, classes of :data:`polar_sim.sim.truth.LABELS`
+    geom_ids : (H, W) int32, MuJoCo geom id per pixel, -1 for background
+    K : (3, 3) intrinsics, OpenCV convention (x right, y down, z forward, pixel centres at integers)
+    T_world_cam : (4, 4) camera-to-world pose, OpenCV camera axes
+    t : float, simulation time in seconds
+    """
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    labels: np.ndarray
+    geom_ids: np.ndarray
+    K: np.ndarray
+    T_world_cam: np.ndarray
+    t: float
+
+
+@dataclasses.dataclass(frozen=True)
+class LidarScan:
+    """A planar scan. ``angles`` (n,) rad in the sensor frame (counter-clockwise from x);
+    ``ranges`` (n,) metres, ``inf`` for no return; ``T_world_sensor`` (4, 4); ``t`` seconds."""
+
+    angles: np.ndarray
+    ranges: np.ndarray
+    T_world_sensor: np.ndarray
+    t: float
+
+    def points(self):
+        """Beam end points (m, 2) of the valid returns in the sensor frame."""
+        ok = np.isfinite(self.ranges)
+        r = self.ranges[ok]
+        return np.stack([r * np.cos(self.angles[ok]), r * np.sin(self.angles[ok])], 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class LidarScan3D:
+    """A 3D scan. ``directions`` (n, 3) unit vectors in the sensor frame; ``ranges`` (n,) metres,
+    ``inf`` for no return; ``T_world_sensor`` (4, 4); ``t`` seconds."""
+
+    directions: np.ndarray
+    ranges: np.ndarray
+    T_world_sensor: np.ndarray
+    t: float
+
+    def points(self):
+        """End points (m, 3) of the valid returns in the sensor frame."""
+        ok = np.isfinite(self.ranges)
+        return self.directions[ok] * self.ranges[ok, None]
+
+
+@dataclasses.dataclass(frozen=True)
+class RangeNoise:
+    """Lidar noise: Gaussian range noise ``sigma`` (m) and a dropout probability per beam."""
+
+    sigma: float = 0.0
+    dropout: float = 0.0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.sigma) and self.sigma >= 0):
+            raise ValueError(f"sigma: expected a finite value >= 0, got {self.sigma}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"dropout: expected a probability in [0, 1), got {self.dropout}")
+
+    def apply(self, ranges, rng):
+        out = ranges.copy()
+        hit = np.isfinite(out)
+        if self.sigma > 0:
+            out[hit] += rng.normal(0.0, self.sigma, hit.sum())
+            out[hit] = np.maximum(out[hit], 0.0)
+        if self.dropout > 0:
+            out[rng.random(len(out)) < self.dropout] = np.inf
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class DepthNoise:
+    """Kinect-v1-like depth noise.
+
+    Axial Gaussian noise ``sigma(z) = sigma0 + sigma2 * (z - 0.4)^2`` (metres; Nguyen et al. 2012),
+    quantisation in disparity (``baseline`` m, ``disparity_step`` px: depth steps grow as z^2),
+    dropout of pixels within ``edge_px`` of a depth discontinuity larger than ``edge_jump`` m,
+    and random ``dropout``. Dropped pixels become ``inf``. RGB gets Gaussian noise ``rgb_sigma``
+    (grey levels).
+    """
+
+    sigma0: float = 0.0012
+    sigma2: float = 0.0019
+    baseline: float = 0.075
+    disparity_step: float = 0.125
+    edge_px: int = 1
+    edge_jump: float = 0.05
+    dropout: float = 0.01
+    rgb_sigma: float = 2.0
+
+    def apply(self, rgb, depth, fx, rng):
+        z = depth.astype(np.float64)
+        hit = np.isfinite(z)
+        zn = z.copy()
+        zn[hit] += rng.normal(0.0, 1.0, hit.sum()) * (self.sigma0 + self.sigma2 * (z[hit] - 0.4) ** 2)
+        if self.disparity_step > 0:
+            disp = fx * self.baseline / np.maximum(zn[hit], 1e-6)
+            disp = np.maximum(np.round(disp / self.disparity_step), 1) * self.disparity_step
+            zn[hit] = fx * self.baseline / disp
+        drop = rng.random(z.shape) < self.dropout
+        if self.edge_px > 0:
+            import cv2
+
+            zz = np.where(hit, z, 1e6).astype(np.float32)
+            k = np.ones((2 * self.edge_px + 1,) * 2, np.uint8)
+            jump = cv2.dilate(zz, k) - cv2.erode(zz, k)
+            drop |= jump > self.edge_jump
+        zn[drop] = np.inf
+        out_rgb = rgb
+        if self.rgb_sigma > 0:
+            out_rgb = np.clip(rgb + rng.normal(0.0, self.rgb_sigma, rgb.shape), 0, 255).astype(np.uint8)
+        return out_rgb, zn.astype(np.float32)
+
+
+def intrinsics(fovy_deg, width, height):
+    """Pinhole K (3, 3) of a MuJoCo camera: f = (H/2)/tan(fovy/2), principal point at the centre."""
+    f = 0.5 * height / np.tan(np.radians(fovy_deg) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+@dataclasses.dataclass(frozen=True)
+class LidarSpec:
+    name: str
+    kind: str  # "lidar2d" | "lidar3d"
+    site: str
+    min_range: float
+    max_range: float
+    directions: np.ndarray  # (n, 3) unit vectors in the site frame
+    angles: np.ndarray | None  # (n,) for 2D
+
+
+def _parse_kv(text, where):
+    out = {}
+    for tok in text.split():
+        if "=" not in tok:
+            raise ValueError(f"{where}: expected key=value tokens, got {tok!r}")
+        k, v = tok.split("=", 1)
+        out[k] = v
+    return out
+
+
+def parse_lidars(model):
+    """Lidar declarations of a compiled model, as ``{name: LidarSpec}``."""
+    out = {}
+    for i in range(model.ntext):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TEXT, i) or ""
+        if not name.startswith("sensor:"):
+            continue
+        sname = name.split(":", 1)[1]
+        adr, size = model.text_adr[i], model.text_size[i]
+        text = bytes(model.text_data[adr : adr + size]).rstrip(b"\0").decode()
+        kv = _parse_kv(text, f"<text name={name!r}>")
+        kind = kv.get("type")
+        try:
+            site = kv["site"]
+            model.site(site)
+        except KeyError as exc:
+            raise ValueError(f"<text name={name!r}>: site {kv.get('site')!r} does not exist") from exc
+        lo, hi = float(kv.get("min", 0.0)), float(kv.get("max", 30.0))
+        if kind == "lidar2d":
+            n = int(kv.get("beams", 1081))
+            fov = np.radians(float(kv.get("fov_deg", 270.0)))
+            ang = np.linspace(-fov / 2, fov / 2, n)
+            dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(n)], 1)
+            out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, ang)
+        elif kind == "lidar3d":
+            rows, cols = int(kv.get("rows", 32)), int(kv.get("cols", 1024))
+            el = np.radians(np.linspace(float(kv.get("vfov_min_deg", -25)), float(kv.get("vfov_max_deg", 15)), rows))
+            az = np.linspace(-np.pi, np.pi, cols, endpoint=False)
+            E, A = np.meshgrid(el, az, indexing="ij")
+            dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
+            out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, None)
+        else:
+            raise ValueError(f"<text name={name!r}>: unknown sensor type {kind!r}; expected lidar2d or lidar3d")
+    return out
+
+
+class Lidar:
+    """Casts one scan of a :class:`LidarSpec` with ``mj_multiRay`` (robot geoms excluded by group)."""
+
+    def __init__(self, model, spec: LidarSpec):
+        self.spec = spec
+        self._site = model.site(spec.site).id
+        n = len(spec.directions)
+        self._geomid = np.zeros(n, np.int32)
+        self._dist = np.zeros(n, np.float64)
+
+    def scan(self, model, data, noise=None, rng=None):
+        R = data.site_xmat[self._site].reshape(3, 3)
+        origin = data.site_xpos[self._site].copy()
+        vec = self.spec.directions @ R.T
+        n = len(vec)
+        mujoco.mj_multiRay(model, data, origin, vec.ravel(), RAY_GROUPS, 1, -1, self._geomid, self._dist,
+                           None, n, self.spec.max_range)
+        r = self._dist.copy()
+        r[(r < self.spec.min_range) | (r > self.spec.max_range)] = np.inf  # -1 (no hit) included
+        if noise is not None:
+            r = noise.apply(r, rng)
+        T = make_pose(R, origin)
+        if self.spec.kind == "lidar2d":
+            return LidarScan(self.spec.angles.copy(), r, T, float(data.time))
+        return LidarScan3D(self.spec.directions.copy(), r, T, float(data.time))
+
+
+class CameraRig:
+    """Renders every camera of a model: one ``mujoco.Renderer`` per image size, made lazily."""
+
+    def __init__(self, model):
+        self._renderers = {}
+        self._opt = mujoco.MjvOption()
+        self._opt.geomgroup[:] = RENDER_GROUPS
+        self._opt.sitegroup[:] = 0
+
+    def renderer(self, model, height, width):
+        key = (height, width)
+        if key not in self._renderers:
+            if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+                raise ValueError(
+                    f"width/height: {width}x{height} exceeds the scene's offscreen buffer "
+                    f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}"
+                )
+            self._renderers[key] = mujoco.Renderer(model, height, width)
+        return self._renderers[key]
+
+    def render(self, model, data, cam_id, width, height, label_lut, *, rgb=True, depth=True, seg=True):
+        r = self.renderer(model, height, width)
+        r.update_scene(data, camera=cam_id, scene_option=self._opt)
+        img = r.render().copy() if rgb else None
+        d = g = None
+        if depth:
+            r.enable_depth_rendering()
+            d = r.render().copy()
+            r.disable_depth_rendering()
+        if seg or depth:
+            r.enable_segmentation_rendering()
+            s = r.render()
+            r.disable_segmentation_rendering()
+            g = np.where(s[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, s[..., 0], -1).astype(np.int32)
+        if d is not None:
+            d[g < 0] = np.inf  # background shows the far plane: no return
+        labels = None
+        if g is not None:
+            labels = np.where(g >= 0, label_lut[np.maximum(g, 0)], 0).astype(np.int32)
+        return img, d, labels, g
+
+    def render_target_mask(self, model, data, cam_id, width, height):
+        """Full (amodal) silhouette (H, W) bool of the geoms in the target group, ignoring
+        everything that would occlude them."""
+        r = self.renderer(model, height, width)
+        opt = mujoco.MjvOption()
+        opt.geomgroup[:] = TARGET_ONLY_GROUPS
+        opt.sitegroup[:] = 0
+        r.update_scene(data, camera=cam_id, scene_option=opt)
+        r.enable_segmentation_rendering()
+        s = r.render()
+        r.disable_segmentation_rendering()
+        return s[..., 1] == mujoco.mjtObj.mjOBJ_GEOM
+
+    def close(self):
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()
+
+
+def camera_pose(data, cam_id):
+    """Camera-to-world pose (4, 4) in OpenCV camera axes."""
+    return make_pose(data.cam_xmat[cam_id].reshape(3, 3) @ CV_FROM_GL, data.cam_xpos[cam_id])

@@ -1,0 +1,256 @@
+"""Outdoor rover scenes: seeded heightfield terrain, a closed route, ground zones and obstacles.
+
+One builder serves ``rover_terrain`` (hills) and ``rover_flat`` (zero heights). The visible
+ground is a set of textured mesh tiles, one material per ground zone; collisions use a hidden
+heightfield with the same heights (a mesh collides through its convex hull, which would be wrong
+for terrain), and the sensors' rays hit the meshes (about 10x faster than a heightfield).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from polar_sim.sim.textures import GROUND_TYPES, OBSTACLE_COLOURS, ground_texture, obstacle_texture
+
+__all__ = ["TerrainGrid", "make_route", "build_rover_scene", "build_rover_terrain", "build_rover_flat"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TerrainGrid:
+    """A height map on a regular grid, triangulated exactly as the rendered and ray-cast meshes.
+
+    Vertex (i, j) sits at ``(x0 + j*cell, y0 + i*cell, heights[i, j])``. Each cell is split along
+    the diagonal from (i, j) to (i+1, j+1).
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    heights: np.ndarray  # (ny, nx) metres
+
+    @property
+    def shape(self):
+        return self.heights.shape
+
+    @property
+    def extent(self):
+        ny, nx = self.heights.shape
+        return (self.x0, self.x0 + (nx - 1) * self.cell, self.y0, self.y0 + (ny - 1) * self.cell)
+
+    def vertices(self):
+        ny, nx = self.heights.shape
+        xs = self.x0 + self.cell * np.arange(nx)
+        ys = self.y0 + self.cell * np.arange(ny)
+        X, Y = np.meshgrid(xs, ys)
+        return np.stack([X, Y, self.heights], axis=-1).reshape(-1, 3)
+
+    def faces(self, i0=0, i1=None, j0=0, j1=None):
+        """Triangles (k, 3) of the cells in rows [i0, i1) and columns [j0, j1), global vertex ids."""
+        ny, nx = self.heights.shape
+        i1 = ny - 1 if i1 is None else i1
+        j1 = nx - 1 if j1 is None else j1
+        I, J = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1), indexing="ij")
+        a = (I * nx + J).ravel()
+        b, c, d = a + 1, a + nx + 1, a + nx
+        return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+    def height(self, x, y):
+        """Exact height (m) of the triangulated surface at points x, y (arrays of equal shape)."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        ny, nx = self.heights.shape
+        u = np.clip((x - self.x0) / self.cell, 0, nx - 1 - 1e-9)
+        v = np.clip((y - self.y0) / self.cell, 0, ny - 1 - 1e-9)
+        j = np.floor(u).astype(int)
+        i = np.floor(v).astype(int)
+        fu, fv = u - j, v - i
+        H = self.heights
+        h00, h01, h11, h10 = H[i, j], H[i, j + 1], H[i + 1, j + 1], H[i + 1, j]
+        # Lower triangle (a, b, c) when fu >= fv, upper (a, c, d) otherwise.
+        lower = fu >= fv
+        return np.where(lower, h00 + fu * (h01 - h00) + fv * (h11 - h01),
+                        h00 + fv * (h10 - h00) + fu * (h11 - h10))
+
+    def normal(self, x, y):
+        """Unit up-facing normal (3,) of the triangle under a point."""
+        e = 1e-4 * self.cell
+        hx = (self.height(x + e, y) - self.height(x - e, y)) / (2 * e)
+        hy = (self.height(x, y + e) - self.height(x, y - e)) / (2 * e)
+        n = np.array([-hx, -hy, 1.0])
+        return n / np.linalg.norm(n)
+
+
+def _smooth_heights(rng, n, cell, amplitude, max_slope=0.10):
+    """Sum of random low-frequency sinusoids: hills 40-120 m long, at most ``amplitude`` high
+    and ``max_slope`` steep (rise over run), like a gently rolling rural road."""
+    if amplitude == 0:
+        return np.zeros((n, n))
+    xs = cell * np.arange(n)
+    X, Y = np.meshgrid(xs, xs)
+    Z = np.zeros((n, n))
+    for _ in range(8):
+        wavelength = rng.uniform(40.0, 120.0)
+        ang = rng.uniform(0, np.pi)
+        k = 2 * np.pi / wavelength
+        phase = rng.uniform(0, 2 * np.pi)
+        Z += rng.uniform(0.4, 1.0) * np.sin(k * (np.cos(ang) * X + np.sin(ang) * Y) + phase)
+    Z *= amplitude / (np.abs(Z).max() + 1e-9)
+    gy, gx = np.gradient(Z, cell)
+    Z *= min(1.0, max_slope / np.hypot(gx, gy).max())
+    return Z - Z.mean()
+
+
+def make_route(rng, radius=75.0, spacing=1.0):
+    """A closed, smooth loop around the origin, resampled every ``spacing`` metres of arc.
+
+    Returns (n, 2) waypoints in metres; consecutive points are ``spacing`` apart and the last point
+    connects back to the first.
+    """
+    a2, a3 = rng.uniform(0.04, 0.12, 2)
+    p2, p3 = rng.uniform(0, 2 * np.pi, 2)
+    phi = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
+    r = radius * (1 + a2 * np.sin(2 * phi + p2) + a3 * np.sin(3 * phi + p3))
+    pts = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
+    seg = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    closed = np.vstack([pts, pts[:1]])
+    n = int(s[-1] // spacing)
+    t = np.linspace(0, s[-1], n, endpoint=False)
+    return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])], 1)
+
+
+def _add_texture(spec, name, img):
+    tex = spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D,
+                           width=img.shape[1], height=img.shape[0], nchannel=3)
+    tex.data = np.ascontiguousarray(img).tobytes()
+    return tex
+
+
+def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str = "car",
+                      camera_height=None):
+    """Fill a base rover spec with seeded terrain, route, zones, obstacles and the rover.
+
+    Returns the scene metadata: ``route`` (n, 2), ``zones`` (names along the route),
+    ``zone_of_route`` (n,) zone index per waypoint, ``terrain`` (:class:`TerrainGrid`),
+    ``start_pose2d``.
+    """
+    from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
+
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 7001]))
+    cell, n = 2.0, 111  # 220 m x 220 m terrain
+    half = cell * (n - 1) / 2
+    heights = _smooth_heights(rng, n, cell, 0.0 if flat else 3.0)
+    grid = TerrainGrid(-half, -half, cell, heights)
+    route = make_route(rng)
+    n_route = len(route)
+
+    # Ground zones: contiguous arcs of the route, at least 3 appearances, order seeded.
+    zones = list(rng.permutation(GROUND_TYPES))
+    zone_of_route = (np.arange(n_route) * len(zones) // n_route).astype(int)
+    for k, kind in enumerate(zones):
+        _add_texture(spec, f"ground_{kind}", ground_texture(kind, rng))
+        mat = spec.add_material(name=f"ground_{kind}", specular=0.05, shininess=0.05)
+        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"ground_{kind}"
+
+    # Visible ground: tiles of 10x10 cells, each tile in the zone of its nearest route point.
+    verts = grid.vertices()
+    tile = 10
+    tree_pts = route
+    for i0 in range(0, n - 1, tile):
+        for j0 in range(0, n - 1, tile):
+            i1, j1 = min(i0 + tile, n - 1), min(j0 + tile, n - 1)
+            F = grid.faces(i0, i1, j0, j1)
+            used = np.unique(F)
+            remap = np.full(len(verts), -1)
+            remap[used] = np.arange(len(used))
+            V = verts[used]
+            centre = V[:, :2].mean(0)
+            k = zone_of_route[np.argmin(np.linalg.norm(tree_pts - centre, axis=1))]
+            name = f"ground_tile_{i0}_{j0}"
+            mesh = spec.add_mesh(name=name)
+            # Static visual mesh: its inertia is unused, and a flat tile has no volume.
+            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
+            mesh.uservert = V.ravel().tolist()
+            mesh.userface = remap[F].ravel().tolist()
+            # 4 m texture repeat: gravel stones of 2-6 texels come out 1.5-5 cm large.
+            mesh.usertexcoord = (V[:, :2] / 4.0).ravel().tolist()
+            spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name,
+                                    material=f"ground_{zones[k]}", contype=0, conaffinity=0,
+                                    group=GROUP["ground"])
+
+    # Collision ground: a hidden heightfield (or plane when flat) under the visible meshes.
+    if flat:
+        spec.worldbody.add_geom(name="ground_collision", type=mujoco.mjtGeom.mjGEOM_PLANE,
+                                size=[half, half, 1.0], group=GROUP["collision"], rgba=[0, 0, 0, 0],
+                                friction=[1.0, 0.01, 0.001])
+    else:
+        zmin, zmax = float(heights.min()), float(heights.max())
+        hf = spec.add_hfield(name="terrain", nrow=n, ncol=n, size=[half, half, zmax - zmin, 1.0])
+        hf.userdata = ((heights - zmin) / (zmax - zmin)).ravel().tolist()
+        spec.worldbody.add_geom(name="ground_collision", type=mujoco.mjtGeom.mjGEOM_HFIELD,
+                                hfieldname="terrain", pos=[0, 0, zmin], group=GROUP["collision"],
+                                rgba=[0, 0, 0, 0], friction=[1.0, 0.01, 0.001])
+
+    # Obstacles beside the route: boxes, walls and poles in colours unlike the ground.
+    colours = list(OBSTACLE_COLOURS)
+    for c in colours:
+        _add_texture(spec, f"obst_{c}", obstacle_texture(OBSTACLE_COLOURS[c], rng))
+        mat = spec.add_material(name=f"obst_{c}", specular=0.2)
+        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"obst_{c}"
+    tangents = np.roll(route, -1, axis=0) - np.roll(route, 1, axis=0)
+    tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
+    normals = np.stack([-tangents[:, 1], tangents[:, 0]], 1)
+    n_obst = 60
+    idx = np.sort(rng.choice(np.arange(20, n_route - 5), n_obst, replace=False))
+    for k, i in enumerate(idx):
+        side = rng.choice([-1.0, 1.0])
+        kind = rng.choice(["box", "wall", "pole"], p=[0.45, 0.25, 0.3])
+        off = rng.uniform(5.5, 10.0)
+        px, py = route[i] + side * off * normals[i]
+        yaw = np.arctan2(tangents[i, 1], tangents[i, 0])
+        colour = colours[rng.integers(len(colours))]
+        common = dict(material=f"obst_{colour}", group=GROUP["static"])
+        if kind == "box":
+            sx, sy, sz = rng.uniform(0.5, 1.2, 3)
+            yaw += rng.uniform(-0.5, 0.5)
+            size, gtype = [sx, sy, sz + 0.3], mujoco.mjtGeom.mjGEOM_BOX
+        elif kind == "wall":
+            sx, sy, sz = rng.uniform(2.0, 4.0), 0.15, rng.uniform(0.8, 1.3)
+            size, gtype = [sx, sy, sz + 0.3], mujoco.mjtGeom.mjGEOM_BOX
+        else:
+            sz = rng.uniform(1.2, 2.0)
+            size, gtype = [0.15, sz + 0.3, 0], mujoco.mjtGeom.mjGEOM_CYLINDER
+        # Sink the base 0.3 m into the ground so no gap shows on slopes.
+        zc = float(grid.height(px, py)) + size[2 if gtype == mujoco.mjtGeom.mjGEOM_BOX else 1] - 0.3
+        spec.worldbody.add_geom(name=f"obstacle_{k}_{kind}", type=gtype, size=size,
+                                pos=[px, py, zc], quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)],
+                                **common)
+
+    cfg = ROVER_PRESETS[rover]
+    if camera_height is not None:
+        cfg = dataclasses.replace(cfg, camera_height=float(camera_height))
+    t0 = route[1] - route[-1]
+    start = (route[0, 0], route[0, 1], float(np.arctan2(t0[1], t0[0])))
+    add_rover(spec, cfg, start, z0=float(grid.height(start[0], start[1])))
+    return {
+        "route": route,
+        "zones": zones,
+        "zone_of_route": zone_of_route,
+        "terrain": grid,
+        "start_pose2d": np.array(start),
+        "rover_config": cfg,
+    }
+
+
+def build_rover_terrain(spec, seed, *, camera_height=None, rover="car"):
+    """``rover_terrain``: hills up to about +-3 m. Options: ``camera_height`` (m above the
+    ground, default the preset's 1.65), ``rover`` preset ("car" or "indoor")."""
+    return build_rover_scene(spec, seed, flat=False, rover=rover, camera_height=camera_height)
+
+
+def build_rover_flat(spec, seed, *, camera_height=None, rover="car"):
+    """``rover_flat``: the same route, zones and obstacles on flat ground."""
+    return build_rover_scene(spec, seed, flat=True, rover=rover, camera_height=camera_height)

@@ -1,0 +1,270 @@
+"""Exact ground truth: per-geom labels, body poses and twists, geom meshes, and the scene SDF."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import trimesh
+from matplotlib.path import Path as MplPath
+
+from polar_sim.geometry import make_pose, quat_to_matrix
+from polar_sim.sim import sdf as _sdf
+from polar_sim.sim.robots import GROUP
+
+__all__ = ["LABELS", "label_table", "body_pose", "body_twist", "geom_trimesh", "body_trimesh",
+           "SceneSDF", "static_geoms", "subtree"]
+
+#: Per-pixel classes of ``CameraFrame.labels``.
+LABELS = {"none": 0, "ground": 1, "obstacle": 2, "target": 3, "occluder": 4, "robot": 5}
+
+_G = mujoco.mjtGeom
+
+
+def subtree(model, root_body):
+    """Ids of ``root_body`` and all its descendants."""
+    ids = [root_body]
+    for b in range(root_body + 1, model.nbody):
+        p = model.body_parentid[b]
+        if p in ids and b not in ids:
+            ids.append(b)
+    return ids
+
+
+def _is_ground(model, g):
+    name = model.geom(g).name
+    return (model.geom_type[g] in (_G.mjGEOM_PLANE, _G.mjGEOM_HFIELD)
+            or model.geom_group[g] == GROUP["ground"]
+            or name.startswith(("ground", "terrain", "floor")))
+
+
+def label_table(model, target=None):
+    """Label (see :data:`LABELS`) of every geom id, as an int array of shape (ngeom,).
+
+    Rules, first match wins: geoms of the body ``rover`` and its children are ``robot``; of a
+    body whose name starts with ``hand`` (and children) ``occluder``; of the ``target`` body
+    ``target``; ground planes, heightfields, the ground group and geoms named ground*/terrain*/
+    floor* are ``ground``; everything else is ``obstacle``.
+    """
+    lut = np.full(model.ngeom, LABELS["obstacle"], dtype=np.int32)
+    for g in range(model.ngeom):
+        if _is_ground(model, g):
+            lut[g] = LABELS["ground"]
+    def mark(body_ids, label):
+        for g in range(model.ngeom):
+            if model.geom_bodyid[g] in body_ids:
+                lut[g] = label
+    if target is not None:
+        mark(subtree(model, model.body(target).id), LABELS["target"])
+    for b in range(model.nbody):
+        if model.body(b).name.startswith("hand"):
+            mark(subtree(model, b), LABELS["occluder"])
+    try:
+        mark(subtree(model, model.body("rover").id), LABELS["robot"])
+    except KeyError:
+        pass
+    return lut
+
+
+def body_pose(data, body_id):
+    """World pose (4, 4) of a body."""
+    return make_pose(data.xmat[body_id].reshape(3, 3), data.xpos[body_id])
+
+
+def body_twist(model, data, body_id):
+    """Body twist (6,) = linear velocity (3,) then angular velocity (3,), both in the body frame.
+
+    Linear velocity is that of the body frame's origin, m/s; angular in rad/s.
+    """
+    v = np.zeros(6)
+    # (angular, linear) with world orientation, the linear part at the body's centre of mass
+    # (MuJoCo's "local" option would use the principal axes of inertia, not the body frame).
+    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body_id, v, 0)
+    w, v_com = v[:3], v[3:]
+    v_origin = v_com + np.cross(w, data.xpos[body_id] - data.xipos[body_id])
+    R = data.xmat[body_id].reshape(3, 3)
+    return np.concatenate([R.T @ v_origin, R.T @ w])
+
+
+def geom_trimesh(model, g):
+    """A ``trimesh.Trimesh`` of geom ``g`` in its own frame (primitives tessellated finely)."""
+    t = model.geom_type[g]
+    s = model.geom_size[g]
+    if t == _G.mjGEOM_MESH:
+        mid = model.geom_dataid[g]
+        v0, nv = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        f0, nf = model.mesh_faceadr[mid], model.mesh_facenum[mid]
+        # MuJoCo stores mesh vertices in a frame centred on the mesh's inertia; the geom frame is
+        # that frame, so the vertices are already geom-frame coordinates.
+        return trimesh.Trimesh(model.mesh_vert[v0 : v0 + nv].copy(), model.mesh_face[f0 : f0 + nf].copy(),
+                               process=False)
+    if t == _G.mjGEOM_BOX:
+        return trimesh.creation.box(extents=2 * s)
+    if t == _G.mjGEOM_SPHERE:
+        return trimesh.creation.icosphere(subdivisions=4, radius=s[0])
+    if t == _G.mjGEOM_CYLINDER:
+        return trimesh.creation.cylinder(radius=s[0], height=2 * s[1], sections=96)
+    if t == _G.mjGEOM_CAPSULE:
+        return trimesh.creation.capsule(radius=s[0], height=2 * s[1], count=[64, 32])
+    if t == _G.mjGEOM_ELLIPSOID:
+        m = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+        m.apply_scale(s)
+        return m
+    raise ValueError(f"geom {model.geom(g).name!r}: no mesh for geom type {int(t)}")
+
+
+def body_trimesh(model, body_id, groups=(GROUP["static"], GROUP["dynamic"])):
+    """All visible geoms of one body merged into a mesh in the body frame."""
+    parts = []
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] != body_id or model.geom_group[g] not in groups:
+            continue
+        m = geom_trimesh(model, g)
+        m.apply_transform(make_pose(quat_to_matrix(model.geom_quat[g]), model.geom_pos[g]))
+        parts.append(m)
+    if not parts:
+        raise ValueError(f"body {model.body(body_id).name!r} has no visible geoms")
+    return trimesh.util.concatenate(parts)
+
+
+def static_geoms(model):
+    """Geoms of the static scene: on bodies welded to the world (no joints, not mocap),
+    visible (not in the hidden collision group), ground included."""
+    out = []
+    for g in range(model.ngeom):
+        b = model.geom_bodyid[g]
+        root = b
+        static = True
+        while root != 0:
+            if model.body_jntnum[root] > 0 or model.body_mocapid[root] >= 0:
+                static = False
+                break
+            root = model.body_parentid[root]
+        if static and model.geom_group[g] != GROUP["collision"]:
+            out.append(g)
+    return out
+
+
+class SceneSDF:
+    """Exact signed distance of the static scene, in 3D and in a horizontal section.
+
+    Parameters
+    ----------
+    model, data : the compiled scene (static geoms do not move, so poses are read once).
+    terrain : optional ``TerrainGrid``; when given, the ground tiles are represented by it
+        exactly (distance to the triangulated surface, negative below it).
+    """
+
+    def __init__(self, model, data, terrain=None):
+        self._terrain = terrain
+        self._terrain_mesh = None
+        self._items = []
+        for g in static_geoms(model):
+            if terrain is not None and _is_ground(model, g) and model.geom_type[g] == _G.mjGEOM_MESH:
+                continue  # represented by the terrain grid
+            R = data.geom_xmat[g].reshape(3, 3).copy()
+            self._items.append((g, int(model.geom_type[g]), model.geom_size[g].copy(), R,
+                                data.geom_xpos[g].copy(), model.geom(g).name))
+        self._model = model
+        self._meshes = {}
+        self._sections = {}
+
+    # -- 3D ---------------------------------------------------------------------------------
+    def __call__(self, points):
+        """Signed distance (n,) at world points (n, 3), metres."""
+        out = np.full(len(points), np.inf)
+        for g, t, s, R, x, _ in self._items:
+            p = (points - x) @ R
+            if t == _G.mjGEOM_BOX:
+                d = _sdf.sdf_box(p, s)
+            elif t == _G.mjGEOM_SPHERE:
+                d = _sdf.sdf_sphere(p, s[0])
+            elif t == _G.mjGEOM_CYLINDER:
+                d = _sdf.sdf_cylinder(p, s[0], s[1])
+            elif t == _G.mjGEOM_CAPSULE:
+                d = _sdf.sdf_capsule(p, s[0], s[1])
+            elif t == _G.mjGEOM_PLANE:
+                d = _sdf.sdf_plane(p)
+            else:
+                d = self._mesh_sdf(g, p)
+            np.minimum(out, d, out=out)
+        if self._terrain is not None:
+            np.minimum(out, self._terrain_sdf(points), out=out)
+        return out
+
+    def _mesh_sdf(self, g, p):
+        if g not in self._meshes:
+            m = geom_trimesh(self._model, g)
+            if not m.is_watertight:
+                raise ValueError(f"geom {self._model.geom(g).name!r}: mesh is not watertight, no signed distance")
+            self._meshes[g] = m
+        # trimesh's sign convention is positive inside.
+        return -trimesh.proximity.signed_distance(self._meshes[g], p)
+
+    def _terrain_sdf(self, points):
+        grid = self._terrain
+        if self._terrain_mesh is None:
+            self._terrain_mesh = trimesh.Trimesh(grid.vertices(), grid.faces(), process=False)
+        _, dist, _ = trimesh.proximity.closest_point(self._terrain_mesh, points)
+        above = points[:, 2] >= grid.height(points[:, 0], points[:, 1])
+        return np.where(above, dist, -dist)
+
+    # -- 2D section -------------------------------------------------------------------------
+    def section(self, points2d, z):
+        """Signed distance (n,) within the horizontal plane at height ``z`` of points (n, 2).
+
+        Ground geoms are left out: the section is what a planar lidar at height ``z`` sees.
+        Vertical boxes, cylinders and capsules and all spheres are exact closed forms; any
+        other shape is sectioned as a mesh (exact for meshes, 96-gon for tilted cylinders).
+        """
+        out = np.full(len(points2d), np.inf)
+        for g, t, s, R, x, name in self._items:
+            if _is_ground(self._model, g):
+                continue
+            dz = z - x[2]
+            vertical = abs(abs(R[2, 2]) - 1.0) < 1e-9
+            p = points2d - x[:2]
+            if t == _G.mjGEOM_SPHERE:
+                if abs(dz) >= s[0]:
+                    continue
+                d = _sdf.sdf_circle2d(p, np.sqrt(s[0] ** 2 - dz ** 2))
+            elif t == _G.mjGEOM_BOX and vertical:
+                if abs(dz) >= s[2]:
+                    continue
+                d = _sdf.sdf_rect2d(p @ R[:2, :2], s[:2])
+            elif t in (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE) and vertical:
+                reach = s[1] + (s[0] if t == _G.mjGEOM_CAPSULE else 0.0)
+                if abs(dz) >= reach:
+                    continue
+                r = s[0]
+                if t == _G.mjGEOM_CAPSULE and abs(dz) > s[1]:
+                    r = np.sqrt(s[0] ** 2 - (abs(dz) - s[1]) ** 2)
+                d = _sdf.sdf_circle2d(p, r)
+            elif t == _G.mjGEOM_PLANE:
+                continue
+            else:
+                d = self._mesh_section(g, R, x, z, points2d)
+                if d is None:
+                    continue
+            np.minimum(out, d, out=out)
+        return out
+
+    def _mesh_section(self, g, R, x, z, points2d):
+        key = (g, round(z, 9))
+        if key not in self._sections:
+            m = geom_trimesh(self._model, g)
+            m.apply_transform(make_pose(R, x))
+            sec = m.section(plane_origin=[0, 0, z], plane_normal=[0, 0, 1])
+            if sec is None:
+                self._sections[key] = None
+            else:
+                loops = [np.asarray(d)[:, :2] for d in sec.discrete]
+                segs = np.concatenate([np.stack([l[:-1], l[1:]], 1) for l in loops])
+                self._sections[key] = (loops, segs)
+        entry = self._sections[key]
+        if entry is None:
+            return None
+        loops, segs = entry
+        inside = np.zeros(len(points2d), bool)
+        for l in loops:
+            inside ^= MplPath(l).contains_points(points2d)
+        return _sdf.sdf_polygons2d(points2d, segs, inside)

@@ -1,0 +1,374 @@
+"""``World``: one MuJoCo scene with its sensors, its controller or script, and exact truth."""
+
+from __future__ import annotations
+
+import numbers
+
+import mujoco
+import numpy as np
+
+from polar_sim._validation import as_int, as_rng
+from polar_sim.geometry import make_pose, quat_to_matrix, matrix_to_quat, T_to_pose2d
+from polar_sim.sim import truth as _truth
+from polar_sim.sim.robots import GROUP, RoverController
+from polar_sim.sim.scenes import load_scene
+from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, RangeNoise, camera_pose, intrinsics, parse_lidars
+
+__all__ = ["World"]
+
+
+class World:
+    """A simulated scene: load, reset, step, sense, and read exact ground truth.
+
+    Parameters
+    ----------
+    scene : str or path
+        A name from :func:`list_scenes` or a path to an MJCF file.
+    seed : int
+        Seed of the scene's procedural layout (textures, terrain, obstacles, objects) and of the
+        sensor noise. The same seed builds the same world, bit for bit.
+    kinematic : bool
+        Rover scenes only: move the rover by the exact unicycle model instead of the wheel
+        physics (for unit tests and exact nonholonomic motion). On terrain the body follows the
+        ground height and tilts with the local surface normal.
+    noise : dict, optional
+        ``{sensor_name: RangeNoise(...) | DepthNoise(...)}``. Noise is off by default.
+    control_dt : float, optional
+        Control period of one :meth:`step`, seconds; a multiple of the physics timestep.
+        Defaults to the scene's (0.1 s for the rover scenes, 1/30 s for the camera scenes).
+    **scene_options
+        Options of a named scene (see :func:`polar_sim.sim.scenes.scene_options`), e.g.
+        ``camera_height=1.2`` for the rover scenes or ``script="push"`` for ``tabletop``.
+
+    Attributes
+    ----------
+    cameras, lidars : tuple of str
+        Sensor names in this scene.
+    dt : float
+        Control period of :meth:`step`, seconds.
+    meta : dict
+        Scene metadata (``route`` (n, 2) for the rover scenes, ``target`` for tabletop, ...).
+    """
+
+    def __init__(self, scene="rover_flat", seed=0, *, kinematic=False, noise=None, control_dt=None,
+                 **scene_options):
+        self.scene = scene
+        self.seed = as_int(seed, "seed")
+        spec, self.meta = load_scene(scene, self.seed, **scene_options)
+        try:
+            self.model = spec.compile()
+        except Exception as exc:
+            raise ValueError(f"scene: {scene!r} does not compile: {exc}") from exc
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self.cameras = tuple(m.camera(i).name for i in range(m.ncam))
+        self._lidars = {k: Lidar(m, s) for k, s in parse_lidars(m).items()}
+        self.lidars = tuple(self._lidars)
+        self._rig = None
+        self._closed = False
+        self.kinematic = bool(kinematic)
+        self._has_rover = _has_body(m, "rover")
+        if self.kinematic and not self._has_rover:
+            raise ValueError("kinematic: only scenes with a rover can move kinematically")
+        self._controller = RoverController(m, self.meta["rover_config"]) if self._has_rover and "rover_config" in self.meta else None
+        self._script = self.meta.get("script")
+        dt0 = self.meta.get("control_dt", 0.1 if self._has_rover else 1.0 / 30.0)
+        self.dt = float(dt0 if control_dt is None else control_dt)
+        ts = m.opt.timestep
+        self._substeps = int(round(self.dt / ts))
+        if self._substeps < 1 or abs(self._substeps * ts - self.dt) > 1e-9:
+            raise ValueError(f"control_dt: {self.dt} s is not a positive multiple of the physics timestep {ts} s")
+        self._noise = {}
+        for name, model_ in (noise or {}).items():
+            self.set_noise(name, model_)
+        self._labels = _truth.label_table(m, self.meta.get("target"))
+        self._sdf = None
+        self.reset(self.seed)
+
+    # -- lifecycle ------------------------------------------------------------------------
+    def reset(self, seed=None):
+        """Restore the initial state. ``seed`` reseeds the sensor noise (the layout is fixed by
+        the constructor's seed; build a new ``World`` for another layout)."""
+        self._check_open()
+        if seed is not None:
+            self._rng = as_rng(as_int(seed, "seed"))
+        elif not hasattr(self, "_rng"):
+            self._rng = as_rng(self.seed)
+        mujoco.mj_resetData(self.model, self.data)
+        if self._controller is not None:
+            self._controller.reset()
+        if self._script is not None:
+            self._script.reset(self.model, self.data)
+        mujoco.mj_forward(self.model, self.data)
+        if self._has_rover and not self.kinematic:
+            # Let the rover settle on its wheels so t = 0 starts from rest on the ground.
+            for _ in range(int(0.5 / self.model.opt.timestep)):
+                self._controller.apply(self.model, self.data, 0.0, 0.0, self.model.opt.timestep)
+                mujoco.mj_step(self.model, self.data)
+            self.data.time = 0.0
+        elif self.kinematic:
+            self._kin = np.array(self.meta["start_pose2d"], dtype=np.float64)
+            self._set_kinematic_pose(0.0, 0.0)
+        return self
+
+    def close(self):
+        """Free the renderers. Safe to call twice."""
+        if self._rig is not None:
+            self._rig.close()
+            self._rig = None
+        self._closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def _check_open(self):
+        if getattr(self, "_closed", False):
+            raise RuntimeError("World is closed")
+
+    # -- stepping -------------------------------------------------------------------------
+    @property
+    def time(self):
+        """Simulation time, seconds."""
+        return float(self.data.time)
+
+    def step(self, action=None):
+        """Advance one control period :attr:`dt`.
+
+        Rover scenes take ``action = (v, omega)``: forward speed (m/s) and yaw rate (rad/s)
+        commands for the wheel controller (or the exact unicycle in kinematic mode); no action
+        means (0, 0). Scripted scenes (tabletop, object_orbit) take no action and run their
+        script. Bad actions raise ``ValueError`` and leave the world unchanged.
+        """
+        self._check_open()
+        if self._has_rover:
+            v, w = self._check_action(action)
+            if self.kinematic:
+                self._kinematic_step(v, w)
+                return
+            ts = self.model.opt.timestep
+            for _ in range(self._substeps):
+                self._controller.apply(self.model, self.data, v, w, ts)
+                mujoco.mj_step(self.model, self.data)
+            return
+        if action is not None:
+            raise ValueError(f"action: scene {self.scene!r} is scripted and takes no action, got {action!r}")
+        for _ in range(self._substeps):
+            if self._script is not None:
+                self._script.apply(self.model, self.data)
+            mujoco.mj_step(self.model, self.data)
+        if self._script is not None:
+            self._script.after_step(self.model, self.data)
+
+    def _check_action(self, action):
+        if action is None:
+            return 0.0, 0.0
+        if isinstance(action, (str, bytes)):
+            raise TypeError(f"action: expected (v, omega) numbers, got {type(action).__name__}")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (2,):
+            raise ValueError(f"action: expected (v [m/s], omega [rad/s]) of shape (2,), got shape {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"action: contains NaN or inf: {a.tolist()}")
+        cfg = self.meta["rover_config"]
+        if abs(a[0]) > cfg.max_speed + 1e-9 or abs(a[1]) > cfg.max_yaw_rate + 1e-9:
+            raise ValueError(f"action: ({a[0]:.3g}, {a[1]:.3g}) exceeds the rover's limits "
+                             f"|v| <= {cfg.max_speed} m/s, |omega| <= {cfg.max_yaw_rate} rad/s")
+        return float(a[0]), float(a[1])
+
+    def _kinematic_step(self, v, w):
+        x, y, th = self._kin
+        dt = self.dt
+        if abs(w) > 1e-12:
+            x += v / w * (np.sin(th + w * dt) - np.sin(th))
+            y -= v / w * (np.cos(th + w * dt) - np.cos(th))
+        else:
+            x += v * dt * np.cos(th)
+            y += v * dt * np.sin(th)
+        self._kin = np.array([x, y, th + w * dt])
+        self.data.time += dt
+        self._set_kinematic_pose(v, w)
+
+    def _set_kinematic_pose(self, v, w):
+        m, d = self.model, self.data
+        cfg = self.meta["rover_config"]
+        x, y, th = self._kin
+        terrain = self.meta.get("terrain")
+        z = float(terrain.height(x, y)) if terrain is not None else 0.0
+        n = terrain.normal(x, y) if terrain is not None else np.array([0.0, 0.0, 1.0])
+        h = np.array([np.cos(th), np.sin(th), 0.0])
+        xb = h - (h @ n) * n
+        xb /= np.linalg.norm(xb)
+        R = np.stack([xb, np.cross(n, xb), n], 1)
+        adr = m.jnt_qposadr[m.joint("rover_free").id]
+        vadr = m.jnt_dofadr[m.joint("rover_free").id]
+        d.qpos[adr : adr + 3] = np.array([x, y, z]) + cfg.wheel_radius * n
+        d.qpos[adr + 3 : adr + 7] = matrix_to_quat(R)
+        d.qvel[vadr : vadr + 3] = v * xb
+        d.qvel[vadr + 3 : vadr + 6] = [0.0, 0.0, w]
+        mujoco.mj_forward(m, d)
+
+    # -- sensors --------------------------------------------------------------------------
+    def set_noise(self, sensor, model):
+        """Switch a sensor's noise model on (``RangeNoise`` / ``DepthNoise``) or off (``None``)."""
+        if sensor not in self.cameras and sensor not in self._lidars:
+            raise ValueError(f"sensor: unknown sensor {sensor!r}; this scene has {sorted(self.cameras + self.lidars)}")
+        want = DepthNoise if sensor in self.cameras else RangeNoise
+        if model is not None and not isinstance(model, want):
+            raise TypeError(f"noise[{sensor!r}]: expected {want.__name__} or None, got {type(model).__name__}")
+        if model is None:
+            self._noise.pop(sensor, None)
+        else:
+            self._noise[sensor] = model
+
+    def camera(self, name, *, width=None, height=None):
+        """Render camera ``name``: a :class:`CameraFrame` (rgb, depth, labels, geom ids, K, pose, t).
+
+        ``width``/``height`` default to the camera's resolution in the scene.
+        """
+        self._check_open()
+        if name not in self.cameras:
+            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
+        cid = self.model.camera(name).id
+        res = self.model.cam_resolution[cid]
+        w = int(width or res[0] or 640)
+        h = int(height or res[1] or 480)
+        if self._rig is None:
+            self._rig = CameraRig(self.model)
+        rgb, depth, labels, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels)
+        K = intrinsics(self.model.cam_fovy[cid], w, h)
+        noise = self._noise.get(name)
+        if noise is not None:
+            rgb, depth = noise.apply(rgb, depth, K[0, 0], self._rng)
+        return CameraFrame(rgb, depth, labels, gids, K, camera_pose(self.data, cid), self.time)
+
+    def amodal_mask(self, name, *, width=None, height=None):
+        """Full silhouette (H, W) bool of the target object seen from camera ``name``, as if
+        nothing occluded it (its geoms are in the target group). Compare with
+        ``frame.labels == LABELS["target"]``, the visible part, for the occlusion ratio."""
+        self._check_open()
+        if name not in self.cameras:
+            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
+        cid = self.model.camera(name).id
+        res = self.model.cam_resolution[cid]
+        if self._rig is None:
+            self._rig = CameraRig(self.model)
+        return self._rig.render_target_mask(self.model, self.data, cid, int(width or res[0] or 640),
+                                            int(height or res[1] or 480))
+
+    def lidar(self, name):
+        """Cast lidar ``name``: a :class:`LidarScan` (2D) or :class:`LidarScan3D`."""
+        self._check_open()
+        if name not in self._lidars:
+            raise ValueError(f"name: unknown lidar {name!r}; this scene has {list(self.lidars)}")
+        return self._lidars[name].scan(self.model, self.data, self._noise.get(name), self._rng)
+
+    def lidar_spec(self, name):
+        """The declaration (beams, range limits, site) of lidar ``name``."""
+        if name not in self._lidars:
+            raise ValueError(f"name: unknown lidar {name!r}; this scene has {list(self.lidars)}")
+        return self._lidars[name].spec
+
+    # -- truth ----------------------------------------------------------------------------
+    def truth(self):
+        """Exact state as a dict of fresh arrays.
+
+        Keys: ``time``; rover scenes: ``robot_pose`` (4, 4), ``robot_pose2d`` (x, y, yaw),
+        ``robot_twist`` (6,) = body-frame linear (m/s) then angular (rad/s) velocity,
+        ``robot_collision`` (bool, a robot geom touches a non-ground geom); all scenes:
+        ``cameras`` {name: T_world_cam (4, 4), OpenCV axes}, ``lidars`` {name: T_world_sensor},
+        ``objects`` {name: 4x4 world pose} and ``object_twists`` {name: (6,)} of the movable
+        objects, ``target`` (name of the tracked object or None), and ``hand_pose`` where a hand
+        exists.
+        """
+        m, d = self.model, self.data
+        out = {"time": self.time, "target": self.meta.get("target")}
+        if self._has_rover:
+            b = m.body("rover").id
+            T = _truth.body_pose(d, b)
+            out["robot_pose"] = T
+            out["robot_pose2d"] = T_to_pose2d(T)
+            out["robot_twist"] = _truth.body_twist(m, d, b)
+            out["robot_collision"] = self._robot_collision()
+        out["cameras"] = {c: camera_pose(d, m.camera(c).id) for c in self.cameras}
+        out["lidars"] = {k: make_pose(d.site_xmat[m.site(s.spec.site).id].reshape(3, 3).copy(),
+                                      d.site_xpos[m.site(s.spec.site).id].copy())
+                         for k, s in self._lidars.items()}
+        objs, tw = {}, {}
+        for name in self.meta.get("objects", ()):
+            bid = m.body(name).id
+            objs[name] = _truth.body_pose(d, bid)
+            tw[name] = _truth.body_twist(m, d, bid)
+        out["objects"] = objs
+        out["object_twists"] = tw
+        if _has_body(m, "hand"):
+            out["hand_pose"] = _truth.body_pose(d, m.body("hand").id)
+        if self._script is not None:
+            out.update(self._script.truth(m, d))
+        return out
+
+    def _robot_collision(self):
+        m, d = self.model, self.data
+        robot = self._labels == _truth.LABELS["robot"]
+        ground = self._labels == _truth.LABELS["ground"]
+        for i in range(d.ncon):
+            g1, g2 = d.contact.geom1[i], d.contact.geom2[i]
+            if (robot[g1] and not ground[g2] and not robot[g2]) or (robot[g2] and not ground[g1] and not robot[g1]):
+                return True
+        return False
+
+    def geom_labels(self):
+        """Label of every geom id, (ngeom,) int (see ``truth.LABELS``)."""
+        return self._labels.copy()
+
+    def sdf(self, points):
+        """Exact signed distance (n,) of the static scene, metres, negative inside.
+
+        ``points`` (n, 3) are world points. ``points`` (n, 2) are taken in the horizontal plane
+        of the 2D lidar (its current height) and measured within that plane, ground excluded.
+        """
+        from polar_sim._validation import as_points
+
+        p = np.asarray(points) if not isinstance(points, np.ndarray) else points
+        dim = p.shape[1] if (hasattr(p, "ndim") and p.ndim == 2 and p.shape[1] in (2, 3)) else 3
+        p = as_points(points, dim, "points")
+        if self._sdf is None:
+            self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
+        if dim == 3:
+            return self._sdf(p)
+        return self._sdf.section(p, self.lidar_plane_height())
+
+    def lidar_plane_height(self):
+        """World height (m) of the plane 2D points of :meth:`sdf` live in: the first 2D lidar's."""
+        for k, lid in self._lidars.items():
+            if lid.spec.kind == "lidar2d":
+                return float(self.data.site_xpos[self.model.site(lid.spec.site).id][2])
+        return 0.0
+
+    def object_points(self, name, n, seed=0):
+        """(n, 3) points and (n, 3) outward unit normals sampled uniformly on the surface of
+        object ``name``, in the object's frame, metres. Same ``seed``, same points."""
+        try:
+            bid = self.model.body(name).id
+        except KeyError as exc:
+            raise ValueError(f"name: unknown object {name!r}; objects: {list(self.meta.get('objects', ()))}") from exc
+        n = as_int(n, "n", minimum=1)
+        mesh = _truth.body_trimesh(self.model, bid)
+        import trimesh
+
+        pts, face = trimesh.sample.sample_surface(mesh, n, seed=as_int(seed, "seed"))
+        return np.asarray(pts), np.asarray(mesh.face_normals[face])
+
+    def object_mesh(self, name):
+        """``trimesh.Trimesh`` of object ``name`` in its own frame."""
+        return _truth.body_trimesh(self.model, self.model.body(name).id)
+
+
+def _has_body(model, name):
+    try:
+        model.body(name)
+        return True
+    except KeyError:
+        return False

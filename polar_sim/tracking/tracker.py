@@ -1,0 +1,496 @@
+"""ObjectTracker: self-supervised object segmentation and 6-DoF tracking (spec 2, 3, 6).
+
+One frame: predict the pose (motion filter) -> project the model (visibility, silhouette, ROI)
+-> attention prior x depth likelihood x appearance likelihood = prediction map -> weighted robust
+ICP of the highly probable points -> labels O of all ROI points off the registered model -> drift
+guard -> online appearance update -> filter update.
+"""
+
+from __future__ import annotations
+
+import logging
+import numbers
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from polar_sim._validation import as_intrinsics, as_pose, as_positive_float, check_choice
+from polar_sim.geometry import make_pose
+from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
+from polar_sim.tracking._kernels import roi_distances
+from polar_sim.tracking.appearance import make_appearance
+from polar_sim.tracking.icp import weighted_icp
+from polar_sim.tracking.model import ShapeModel, estimate_normals
+from polar_sim.tracking.motion import MotionFilter
+from polar_sim.tracking.visibility import disc, project_model, splat_silhouette
+
+__all__ = ["ObjectTracker", "TrackResult", "APPEARANCE_VARIANTS"]
+
+logger = logging.getLogger(__name__)
+
+#: Values of the ``appearance`` parameter: the colour Naive Bayes, the S/W x u/w feature heads, none.
+APPEARANCE_VARIANTS = ("h", "su", "sw", "wu", "ww", "none")
+_LOGIT_CLIP = 8.0
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """Output of :meth:`ObjectTracker.process` for one frame.
+
+    Attributes
+    ----------
+    pose : (4, 4) T_cam_obj, the registration output (the prediction when the frame was lost).
+    mask : (H, W) bool target segmentation (O == 1, plus undecided pixels without depth inside
+        the registered silhouette that the appearance model calls target).
+    prob : (H, W) float32 prediction map P(L=1 | I, D, T_bar) (0 outside the ROI).
+    labels : (H, W) int8 O: 1 target, 0 not target, -1 undecided.
+    fitness : prior-weighted fraction of registered points within the inlier band.
+    inlier_rmse : m (NaN when the frame was lost).
+    n_points : points registered.
+    time_s : wall time of the call, s.
+    lost : no usable registration (object out of view, fully occluded, ICP failed or jumped) or
+        ``lost_after`` rejected frames in a row.
+    accepted : the frame passed the drift guard and trained the appearance model.
+    covariance : (6, 6) registration covariance of the body twist (omega rad, v m) about the model
+        centroid in object axes; the filter's pose covariance when lost.
+    pose_filtered, pose_predicted : (4, 4) T_cam_obj of the motion filter after / before the update.
+    roi : (x0, y0, x1, y1) pixels processed (x1, y1 exclusive).
+    gamma : weight of the appearance term this frame.
+    iterations, n_inliers : ICP iterations and inliers.
+    attention, appearance, silhouette : (H, W) maps (debug_maps=True only, else None): the spatial
+        prior pi, the appearance probability sigmoid(log Lambda_I), the registered silhouette.
+    """
+
+    pose: np.ndarray
+    mask: np.ndarray
+    prob: np.ndarray
+    labels: np.ndarray
+    fitness: float
+    inlier_rmse: float
+    n_points: int
+    time_s: float
+    lost: bool
+    accepted: bool
+    covariance: np.ndarray
+    pose_filtered: np.ndarray
+    pose_predicted: np.ndarray
+    roi: tuple
+    gamma: float
+    iterations: int
+    n_inliers: int
+    attention: np.ndarray | None = None
+    appearance: np.ndarray | None = None
+    silhouette: np.ndarray | None = None
+
+
+def _rot_angle(R):
+    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+class ObjectTracker:
+    """Model-based RGB-D object tracker with an appearance model learned online from its own labels.
+
+    Parameters
+    ----------
+    model_points : ndarray (M, 3)
+        Object model points, object frame, metres (about 3000, area-uniform).
+    K : ndarray (3, 3)
+        Camera intrinsics (OpenCV).
+    initial_pose : ndarray (4, 4)
+        T_cam_obj at the first frame.
+    model_normals : ndarray (M, 3), optional
+        Outward unit normals; estimated by local PCA (oriented away from the centroid) if omitted.
+    appearance : {"ww", "wu", "sw", "su", "h", "none"}, default="ww"
+        Appearance model (case-insensitive): multi-scale feature head S (stacked) or W (weighted
+        sum of per-scale heads) with u (uniform) or w (confidence-weighted) self-labels; "h" the
+        216-bin HSV Naive Bayes; "none" the shape-and-motion-only ablation (gamma = 0).
+    motion : {"ekf", "alpha-beta", "none"}, default="ekf"
+        Constant-velocity filter; "none" predicts the last pose (motion-prior-off ablation).
+    spatial_prior : bool, default=True
+        Blurred predicted silhouette as the prior pi; False gives pi = 0.5 in the ROI.
+    registration : {"weighted", "plain"}, default="weighted"
+        "plain": robust ICP on every ROI point with depth (no label weighting) - the baseline.
+    correspondence : {"grid", "kdtree"}, default="grid"
+        Nearest visible model point from the precomputed k-NN lookup grid, or the cKDTree itself.
+    fps : float, default=30
+        Frame rate used when ``process`` gets no time stamp.
+    n_registration : int, default=3000
+        N_Y, maximum number of points registered.
+    tau_y : float, default=0.5
+        Threshold on P for the highly probable points.
+    k_warm : int, default=5
+        Appearance ramp-in: gamma = min(1, accepted updates / k_warm).
+    epsilon : float, default=0.02
+        Floor and ceiling of the attention prior.
+    sigma_min_px : float, default=3
+        Minimum attention blur, pixels.
+    fitness_min : float, default=0.5
+        Drift guard: minimum fitness for learning.
+    min_inliers : int, default=50
+        Drift guard: minimum inliers for learning.
+    min_coverage : float, default=0.1
+        Inliers per valid-depth pixel of the predicted silhouette below which the frame counts as
+        lost (object occluded or out of view).
+    max_jump : (float, float), default=(0.5, 0.1)
+        Largest accepted change from the prediction: rotation (rad) and centroid translation (m).
+    lost_after : int, default=10
+        Rejected frames in a row after which the appearance term is switched off until a frame is
+        accepted.
+    lost_velocity_decay : float, default=0.5
+        Factor applied to the filter's velocity on each frame without a registration.
+    decay : float, default=0.7
+        Histogram fading of the "h" model.
+    lr, epochs, replay, n_samples : Adam learning rate, epochs per accepted frame, replay buffer
+        (frames), maximum positives (and negatives) sampled per frame for the feature heads.
+    max_iterations : int, default=30
+        ICP iterations.
+    random_state : int, default=0
+        Seed of the sampling Generator (point selection, training samples, mini-batches).
+    debug_maps : bool, default=False
+        Also return the attention, appearance and silhouette maps.
+    """
+
+    def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
+                 motion="ekf", spatial_prior=True, registration="weighted", correspondence="grid",
+                 fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
+                 fitness_min=0.5, min_inliers=50, min_coverage=0.1, max_jump=(0.5, 0.1),
+                 lost_after=10, lost_velocity_decay=0.5, decay=0.7, lr=1e-2, epochs=2, replay=10,
+                 n_samples=1500, max_iterations=30, random_state=0, debug_maps=False):
+        self.model_points = model_points
+        self.K = K
+        self.initial_pose = initial_pose
+        self.model_normals = model_normals
+        self.appearance = appearance
+        self.motion = motion
+        self.spatial_prior = spatial_prior
+        self.registration = registration
+        self.correspondence = correspondence
+        self.fps = fps
+        self.n_registration = n_registration
+        self.tau_y = tau_y
+        self.k_warm = k_warm
+        self.epsilon = epsilon
+        self.sigma_min_px = sigma_min_px
+        self.fitness_min = fitness_min
+        self.min_inliers = min_inliers
+        self.min_coverage = min_coverage
+        self.max_jump = max_jump
+        self.lost_after = lost_after
+        self.lost_velocity_decay = lost_velocity_decay
+        self.decay = decay
+        self.lr = lr
+        self.epochs = epochs
+        self.replay = replay
+        self.n_samples = n_samples
+        self.max_iterations = max_iterations
+        self.random_state = random_state
+        self.debug_maps = debug_maps
+        self._check_params()
+        P = as_model_points(model_points)
+        N = estimate_normals(P) if model_normals is None else as_normals(model_normals, len(P))
+        self._K = as_intrinsics(K, "K")
+        self._T0 = as_pose(initial_pose, "initial_pose")
+        self._model = ShapeModel(P, N)
+        self._C = make_pose(None, self._model.centroid)  # T_obj_cen
+        self._Cinv = make_pose(None, -self._model.centroid)
+        self.reset()
+
+    def _check_params(self):
+        if not isinstance(self.appearance, str):
+            raise TypeError(f"appearance: expected a string, got {type(self.appearance).__name__}")
+        check_choice(self.appearance.lower(), APPEARANCE_VARIANTS, "appearance")
+        check_choice(self.motion, ("ekf", "alpha-beta", "none"), "motion")
+        check_choice(self.registration, ("weighted", "plain"), "registration")
+        check_choice(self.correspondence, ("grid", "kdtree"), "correspondence")
+        for name in ("fps", "sigma_min_px", "lr"):
+            as_positive_float(getattr(self, name), name)
+        for name in ("tau_y", "epsilon", "fitness_min", "min_coverage", "lost_velocity_decay",
+                     "decay"):
+            v = as_positive_float(getattr(self, name), name, allow_zero=True)
+            if v > 1.0 or (name in ("tau_y", "epsilon") and not 0 < v < 0.5 + 0.5 * (name == "tau_y")):
+                raise ValueError(f"{name}: expected a value in the valid range (0, 1), got {v}")
+        for name, lo in (("n_registration", 6), ("k_warm", 1), ("min_inliers", 0), ("lost_after", 1),
+                         ("epochs", 0), ("replay", 1), ("n_samples", 1), ("max_iterations", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < lo:
+                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        mj = np.asarray(self.max_jump, dtype=float)
+        if mj.shape != (2,) or not np.all(np.isfinite(mj)) or np.any(mj <= 0):
+            raise ValueError(f"max_jump: expected (rotation rad, translation m) > 0, got {self.max_jump!r}")
+
+    def reset(self):
+        """Forget everything learned: back to the initial pose, zero velocity, untrained appearance."""
+        m = self._model
+        cap = (0.3, max(0.02, 0.3 * m.diameter))
+        self._filter = MotionFilter(self._T0 @ self._C, mode=self.motion, sigma_cap=cap)
+        kw = dict(decay=self.decay, lr=self.lr, epochs=self.epochs, replay=self.replay)
+        self._app = make_appearance(self.appearance, **kw)
+        self._rng = np.random.default_rng(self.random_state)
+        self._shape = None
+        self._t_prev = None
+        self._rejections = 0
+        self._frame = 0
+        for a in ("pose_", "n_frames_"):
+            if hasattr(self, a):
+                delattr(self, a)
+        return self
+
+    # ------------------------------------------------------------------------------------------
+    def process(self, rgb, depth, t=None):
+        """Track one RGB-D frame.
+
+        Parameters
+        ----------
+        rgb : ndarray (H, W, 3) uint8.
+        depth : ndarray (H, W) float, metres; 0, NaN or inf = missing.
+        t : float, optional
+            Time stamp, s; without it frames are 1/fps apart.
+
+        Returns
+        -------
+        TrackResult
+        """
+        t_start = time.perf_counter()
+        rgb, depth = as_rgbd(rgb, depth, shape=self._shape)
+        if t is not None:
+            if isinstance(t, bool) or not isinstance(t, numbers.Real) or not np.isfinite(t):
+                raise ValueError(f"t: expected a finite time stamp in seconds, got {t!r}")
+            if self._t_prev is not None and t <= self._t_prev:
+                raise ValueError(f"t: time stamps must increase, got {t} after {self._t_prev}")
+        dt = 1.0 / self.fps if (t is None or self._t_prev is None) else float(t - self._t_prev)
+        # -- validated: from here on the state changes ------------------------------------------
+        self._shape = rgb.shape[:2]
+        self._t_prev = t if t is not None else self._t_prev
+        out = self._step(rgb, depth, dt)
+        self._frame += 1
+        self.pose_ = out["pose"]
+        self.n_frames_ = self._frame
+        out["time_s"] = time.perf_counter() - t_start
+        return TrackResult(**out)
+
+    # ------------------------------------------------------------------------------------------
+    def _step(self, rgb, depth, dt):
+        m, K = self._model, self._K
+        H, W = self._shape
+        f = float(K[0, 0])
+        filt = self._filter
+        T_bar, P_bar = filt.predict(dt)
+        sig_rot = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[:3, :3]).max(), 0.0)))
+        sig_tr = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[3:, 3:]).max(), 0.0)))
+        sig_pos = sig_tr + 0.5 * m.diameter * sig_rot
+        proj = project_model(m.P, m.N, T_bar[:3, :3], T_bar[:3, 3], K, (H, W), m.spacing)
+        lost_mode = self._rejections >= self.lost_after
+        gamma = 0.0
+        if self._app is not None and not lost_mode:
+            gamma = min(1.0, self._app.n_updates / self.k_warm)
+        if proj.vis.sum() < 3:
+            return self._coast(T_bar, (0, 0, 0, 0), gamma)
+
+        # -- attention: silhouette, prior, ROI ------------------------------------------------
+        zb = proj.z_mean
+        sigma_px = max(self.sigma_min_px, f * sig_pos / zb)
+        r_s = int(max(1, np.ceil(f * m.spacing / zb)))
+        pad = int(np.ceil(max(20.0, 3.0 * sigma_px))) + r_s
+        uvv = proj.uv[proj.vis]
+        x0 = int(max(0, np.floor(uvv[:, 0].min()) - pad))
+        y0 = int(max(0, np.floor(uvv[:, 1].min()) - pad))
+        x1 = int(min(W, np.ceil(uvv[:, 0].max()) + pad + 1))
+        y1 = int(min(H, np.ceil(uvv[:, 1].max()) + pad + 1))
+        roi = (x0, y0, x1, y1)
+        D = depth[y0:y1, x0:x1]
+        S = splat_silhouette(uvv, zb, f, m.spacing, roi)
+        if self.spatial_prior:
+            blur = cv2.GaussianBlur(S.astype(np.float32), (0, 0), sigma_px)
+            pi = self.epsilon + (1.0 - 2.0 * self.epsilon) * blur
+            logit = np.log(pi / (1.0 - pi))
+        else:
+            pi = np.full(D.shape, 0.5, np.float32)
+            logit = np.zeros(D.shape, np.float32)
+
+        # -- depth likelihood against the predicted surface ---------------------------------
+        dist = self._distances(D, roi, T_bar, proj.vis)
+        sig_d = (0.0012 + 0.0019 * (D - 0.4) ** 2).astype(np.float32)
+        sr2 = sig_d * sig_d + np.float32(sig_pos * sig_pos)
+        valid = D > 0
+        with np.errstate(invalid="ignore", over="ignore"):
+            ld = np.float32(0.5 * 2.5**2) - dist * dist / (2.0 * sr2)
+        ld = np.where(valid, np.nan_to_num(ld, nan=0.0, neginf=-2 * _LOGIT_CLIP), 0.0)
+        logit = logit + ld
+
+        # -- appearance ---------------------------------------------------------------------
+        feats = None
+        lI = None
+        if self._app is not None:
+            feats = self._app.prepare(rgb[y0:y1, x0:x1])
+            if gamma > 0 or self.debug_maps:
+                lI = self._app.log_ratio(feats)
+            if gamma > 0:
+                logit = logit + np.float32(gamma) * lI
+        logit = np.clip(logit, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32)
+        Pmap = (0.5 * (1.0 + np.tanh(0.5 * logit))).astype(np.float32)
+
+        # -- select the highly probable points and register -----------------------------------
+        if self.registration == "plain":
+            cand = np.flatnonzero(valid)
+            w_all = np.ones(len(cand))
+        else:
+            cand = np.flatnonzero(valid & (Pmap > self.tau_y))
+            w_all = Pmap.ravel()[cand].astype(np.float64)
+        n_cand = len(cand)
+        if n_cand > self.n_registration:
+            pick = np.sort(self._rng.choice(n_cand, self.n_registration, replace=False, p=w_all / w_all.sum()))
+            cand, w0 = cand[pick], w_all[pick]
+        else:
+            w0 = w_all
+        res = None
+        if len(cand) >= 6:
+            X, zc = self._backproject(D, roi, cand)
+            sd = 0.0012 + 0.0019 * (zc - 0.4) ** 2
+            gate0 = min(max(3.0 * float(np.sqrt(np.median(sd**2) + sig_pos**2)), 0.015), m.margin)
+            gate_floor = min(max(3.0 * float(np.median(sd)), m.spacing), gate0)
+            res = weighted_icp(X, w0, m, T_bar, K, (H, W), sigma_d=sd, delta1=np.maximum(3 * sd, 0.006),
+                               gate0=gate0, gate_floor=gate_floor, max_iterations=self.max_iterations,
+                               exact=self.correspondence == "kdtree")
+
+        # -- drift guard ----------------------------------------------------------------------
+        measured = res is not None and res.ok and res.n_matched >= 6
+        if measured:
+            rot_jump = _rot_angle(T_bar[:3, :3].T @ res.T[:3, :3])
+            tr_jump = float(np.linalg.norm(res.T[:3, 3] - T_bar[:3, 3]))
+            expected = max(int(np.count_nonzero(valid & (S > 0))), 1)
+            scale = n_cand / max(len(cand), 1)
+            coverage = res.n_inliers * scale / expected
+            measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
+                        and coverage >= self.min_coverage)
+        if not measured:
+            return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, vis=proj.vis,
+                               n_points=len(cand), res=res)
+        accepted = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
+        T_hat = res.T
+        O, S_hat, r_hat = self._labels(D, roi, T_hat)
+        if accepted and self._app is not None:
+            self._train(feats, O, S_hat, r_hat, D)
+        filt.update(T_hat, res.cov, dt, inflate=1.0 if accepted else 4.0)
+        self._rejections = 0 if accepted else self._rejections + 1
+        lost = self._rejections >= self.lost_after
+        return self._emit(T_hat, roi, O, S_hat, Pmap, pi, lI, valid, gamma, res.fitness, res.rmse,
+                          len(cand), lost, accepted, res.cov, res.iterations, res.n_inliers)
+
+    # ------------------------------------------------------------------------------------------
+    def _distances(self, D, roi, T, vis):
+        m, K = self._model, self._K
+        Ti = np.linalg.inv(T)
+        out = np.empty(D.shape, np.float32)
+        roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
+                      np.ascontiguousarray(Ti[:3, :3]), np.ascontiguousarray(Ti[:3, 3]),
+                      m.origin, m.inv_h, m.knn, m.P, vis, out)
+        return out
+
+    def _backproject(self, D, roi, flat):
+        K = self._K
+        w = D.shape[1]
+        v, u = np.divmod(flat, w)
+        z = D.ravel()[flat].astype(np.float64)
+        x = (u + roi[0] - K[0, 2]) / K[0, 0] * z
+        y = (v + roi[1] - K[1, 2]) / K[1, 1] * z
+        return np.stack([x, y, z], axis=1), z
+
+    def _labels(self, D, roi, T):
+        """Labels O (h, w) int8, silhouette (h, w) uint8 and distances (h, w) at pose T (spec 3.6)."""
+        m, K = self._model, self._K
+        pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing)
+        S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.spacing, roi)
+        r = self._distances(D, roi, T, pr.vis)
+        sig_d = 0.0012 + 0.0019 * (D - 0.4) ** 2
+        d1 = np.maximum(3.0 * sig_d, 0.006)
+        inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
+        outer = cv2.dilate(S, disc(2)) > 0
+        O = np.full(D.shape, -1, np.int8)
+        with np.errstate(invalid="ignore"):
+            O[~outer | (r > 0.015)] = 0
+            O[inner & (r < d1)] = 1
+        return O, S, r
+
+    def _train(self, feats, O, S, r, D):
+        rng = self._rng
+        h, w = O.shape
+        app = self._app
+        if app.name == "h":
+            ys, xs = np.nonzero(O >= 0)
+            lab = O[ys, xs]
+            app.update(feats, ys, xs, lab, np.ones(len(ys)), rng)
+            return
+        n = self.n_samples
+        pos = np.flatnonzero(O.ravel() == 1)
+        ring = (cv2.dilate(S, disc(15)) > 0) & (S == 0)  # 30 px wide band of hard negatives
+        ring = cv2.dilate(ring.astype(np.uint8), disc(15)) > 0
+        neg0 = O.ravel() == 0
+        neg_ring = np.flatnonzero(neg0 & ring.ravel())
+        neg_rest = np.flatnonzero(neg0 & ~ring.ravel())
+        if len(pos) < 10 or len(neg_ring) + len(neg_rest) < 10:
+            return
+        pos = rng.choice(pos, min(n, len(pos)), replace=False)
+        k_ring = min(len(neg_ring), (2 * n) // 3)
+        k_rest = min(len(neg_rest), n - k_ring)
+        neg = np.concatenate([rng.choice(neg_ring, k_ring, replace=False),
+                              rng.choice(neg_rest, k_rest, replace=False)])
+        flat = np.concatenate([pos, neg])
+        ys, xs = np.divmod(flat, w)
+        lab = np.concatenate([np.ones(len(pos), np.int8), np.zeros(len(neg), np.int8)])
+        sig_d = 0.0012 + 0.0019 * (D.ravel()[pos] - 0.4) ** 2
+        d1 = np.maximum(3.0 * sig_d, 0.006)
+        wpos = np.clip(1.0 - r.ravel()[pos] / d1, 0.1, 1.0)
+        weights = np.concatenate([wpos, np.ones(len(neg))])
+        app.update(feats, ys, xs, lab, weights, rng)
+
+    def _coast(self, T_bar, roi, gamma, *, D=None, Pmap=None, pi=None, lI=None, vis=None,
+               n_points=0, res=None):
+        """No usable registration: keep the prediction, damp the velocity, label at the prediction."""
+        self._filter.coast(velocity_decay=self.lost_velocity_decay)
+        self._rejections += 1
+        cov = self._filter.pose_cov
+        if D is None:
+            H, W = self._shape
+            z = np.zeros((0, 0), np.float32)
+            return self._emit(T_bar, (0, 0, 0, 0), np.zeros((0, 0), np.int8), z.astype(np.uint8), z,
+                              None, None, z > 0, gamma, 0.0, float("nan"), 0, True, False, cov, 0, 0)
+        O, S, _ = self._labels(D, roi, T_bar)
+        it = res.iterations if res is not None else 0
+        return self._emit(T_bar, roi, O, S, Pmap, pi, lI, D > 0, gamma, 0.0, float("nan"), n_points,
+                          True, False, cov, it, 0)
+
+    def _emit(self, T_cen, roi, O, S, Pmap, pi, lI, valid, gamma, fitness, rmse, n_points, lost,
+              accepted, cov, iterations, n_inliers):
+        H, W = self._shape
+        x0, y0, x1, y1 = roi
+        labels = np.zeros((H, W), np.int8)
+        mask = np.zeros((H, W), bool)
+        prob = np.zeros((H, W), np.float32)
+        if x1 > x0 and y1 > y0:
+            labels[y0:y1, x0:x1] = O
+            inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
+            und = (O == -1) & inner & ~valid
+            if lI is not None and gamma > 0:
+                und &= lI > 0
+            mask[y0:y1, x0:x1] = (O == 1) | und
+            prob[y0:y1, x0:x1] = Pmap
+        extra = {}
+        if self.debug_maps:
+            att = np.zeros((H, W), np.float32)
+            app = np.full((H, W), np.nan, np.float32)
+            sil = np.zeros((H, W), bool)
+            if x1 > x0 and y1 > y0:
+                att[y0:y1, x0:x1] = pi
+                if lI is not None:
+                    app[y0:y1, x0:x1] = 0.5 * (1.0 + np.tanh(0.5 * lI))
+                sil[y0:y1, x0:x1] = S > 0
+            extra = dict(attention=att, appearance=app, silhouette=sil)
+        pose = T_cen @ self._Cinv
+        return dict(pose=pose, mask=mask, prob=prob, labels=labels, fitness=float(fitness),
+                    inlier_rmse=float(rmse), n_points=int(n_points), time_s=0.0, lost=bool(lost),
+                    accepted=bool(accepted), covariance=np.array(cov, dtype=float),
+                    pose_filtered=self._filter.T @ self._Cinv,
+                    pose_predicted=self._filter.T_bar @ self._Cinv, roi=tuple(int(v) for v in roi),
+                    gamma=float(gamma), iterations=int(iterations), n_inliers=int(n_inliers), **extra)
