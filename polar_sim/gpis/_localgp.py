@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["GPStore", "train_gp", "predict_gp", "kernel_blocks"]
+__all__ = ["GPStore", "train_gp", "predict_gp"]
 
 GRAD_GATE = 0.1001      # sigma_g above this: no gradient observation (spec §8.2)
 NOGRAD_VALUE_NOISE = 2.0
@@ -39,30 +39,8 @@ def _obs_layout(idx, nrm, sg, dim):
 
 
 @nb.njit(cache=True)
-def _cov_obs(xa, xb, ka, kb, a, dim):
-    """Covariance between observation kind ka at xa and kind kb at xb (0 = value, 1+j = d_j f)."""
-    r2 = 0.0
-    for k in range(dim):
-        e = xa[k] - xb[k]
-        r2 += e * e
-    r = np.sqrt(r2)
-    ex = np.exp(-a * r)
-    if ka == 0 and kb == 0:
-        return (1.0 + a * r) * ex
-    if ka == 0:
-        return a * a * (xa[kb - 1] - xb[kb - 1]) * ex
-    if kb == 0:
-        return -a * a * (xa[ka - 1] - xb[ka - 1]) * ex
-    i = ka - 1
-    j = kb - 1
-    v = 1.0 if i == j else 0.0
-    if r > 0.0:
-        v -= a * (xa[i] - xb[i]) * (xa[j] - xb[j]) / r
-    return a * a * v * ex
-
-
-@nb.njit(cache=True)
 def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout):
+    """kout[t] = kind (0 value, 1+c gradient c) * 2^32 + index of the sample's value obs."""
     """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds."""
     n = idx.shape[0]
     hasg, m = _obs_layout(idx, nrm, sg, dim)
@@ -75,7 +53,7 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
         i = idx[u]
         for k in range(dim):
             xout[t, k] = pos[i, k]
-        kout[t] = 0
+        kout[t] = t
         y[t] = -fbias
         noise[t] = sp[i] if hasg[u] else NOGRAD_VALUE_NOISE
         t += 1
@@ -85,19 +63,57 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
                 i = idx[u]
                 for k in range(dim):
                     xout[t, k] = pos[i, k]
-                kout[t] = 1 + c
+                kout[t] = ((1 + c) << 32) + u
                 y[t] = nrm[i, c]
                 if quirk_x and c == 0:
                     noise[t] = np.sqrt(sp[i] * sg[i])
                 else:
                     noise[t] = sg[i]
                 t += 1
+    # observation index of each sample's value and gradient components (-1 = none)
+    col = np.full((n, dim + 1), -1, np.int64)
+    t = 0
+    for u in range(n):
+        col[u, 0] = t
+        t += 1
+    for c in range(dim):
+        for u in range(n):
+            if hasg[u]:
+                col[u, 1 + c] = t
+                t += 1
     K = np.empty((m, m))
+    a2 = a * a
+    dv = np.empty(dim)
+    for u in range(n):
+        for v in range(u + 1):
+            r2 = 0.0
+            for k in range(dim):
+                dv[k] = pos[idx[u], k] - pos[idx[v], k]
+                r2 += dv[k] * dv[k]
+            r = np.sqrt(r2)
+            ex = np.exp(-a * r)
+            inv_r = 1.0 / r if r > 0.0 else 0.0
+            # blocks cov(obs_i at x_u, obs_j at x_v), i, j in {value, d_1 .. d_dim}
+            for i in range(dim + 1):
+                pi = col[u, i]
+                if pi < 0:
+                    continue
+                for j in range(dim + 1):
+                    qj = col[v, j]
+                    if qj < 0:
+                        continue
+                    if i == 0 and j == 0:
+                        val = (1.0 + a * r) * ex
+                    elif i == 0:
+                        val = a2 * dv[j - 1] * ex
+                    elif j == 0:
+                        val = -a2 * dv[i - 1] * ex
+                    else:
+                        val = (1.0 if i == j else 0.0) - a * dv[i - 1] * dv[j - 1] * inv_r
+                        val *= a2 * ex
+                    K[pi, qj] = val
+                    K[qj, pi] = val
     for p in range(m):
-        for q in range(p + 1):
-            v = _cov_obs(xout[p], xout[q], kout[p], kout[q], a, dim)
-            K[p, q] = v
-            K[q, p] = v
         K[p, p] += noise[p]
     L = np.linalg.cholesky(K)
     # alpha = K^-1 y by two triangular solves
@@ -142,13 +158,20 @@ def _count_obs(csr_ptr, csr_idx, nrm, sg, dim):
     return out
 
 
-@nb.njit(cache=True)
-def kernel_blocks(x, X, kinds, a, dim, kout):
-    """k* (m, 1 + dim): covariance of each observation with [f(x), d_1 f(x), ...]."""
-    m = X.shape[0]
+@nb.njit(cache=True, fastmath=True)
+def _tri_sq(Lp, ks, j, m, z):
+    """|L^-1 k_j|^2 by forward substitution on the packed lower factor."""
+    acc = 0.0
+    o = 0
     for p in range(m):
-        for j in range(dim + 1):
-            kout[p, j] = _cov_obs(x, X[p], j, kinds[p], a, dim)
+        s = ks[p, j]
+        for q in range(p):
+            s -= Lp[o + q] * z[q]
+        zp = s / Lp[o + p]
+        z[p] = zp
+        acc += zp * zp
+        o += p + 1
+    return acc
 
 
 @nb.njit(cache=True)
@@ -156,7 +179,33 @@ def _predict_one(x, Lp, alpha, X, kinds, a, dim, var_f0, var_g0, want_gvar, out,
     """Write [f, grad(dim), var_f, var_grad(dim)] of one GP at x into out."""
     m = X.shape[0]
     ks = kbuf[:m]
-    kernel_blocks(x, X, kinds, a, dim, ks)
+    a2 = a * a
+    # value observations come first: one distance and exp per training sample
+    nv = 0
+    while nv < m and (kinds[nv] >> 32) == 0:
+        nv += 1
+    for p in range(nv):
+        r2 = 0.0
+        for k in range(dim):
+            e = x[k] - X[p, k]
+            r2 += e * e
+        r = np.sqrt(r2)
+        ex = np.exp(-a * r)
+        zbuf[p] = r
+        ks[p, 0] = (1.0 + a * r) * ex
+        for k in range(dim):
+            ks[p, 1 + k] = -a2 * (x[k] - X[p, k]) * ex
+    for p in range(nv, m):
+        c = (kinds[p] >> 32) - 1
+        u = kinds[p] & 0xFFFFFFFF
+        r = zbuf[u]
+        ex = np.exp(-a * r)
+        dc = x[c] - X[p, c]
+        ks[p, 0] = a2 * dc * ex
+        inv_r = 1.0 / r if r > 0.0 else 0.0
+        for k in range(dim):
+            v = (1.0 if k == c else 0.0) - a * (x[k] - X[p, k]) * dc * inv_r
+            ks[p, 1 + k] = a2 * v * ex
     for j in range(dim + 1):
         s = 0.0
         for p in range(m):
@@ -164,17 +213,7 @@ def _predict_one(x, Lp, alpha, X, kinds, a, dim, var_f0, var_g0, want_gvar, out,
         out[j] = s
     ncol = dim + 1 if want_gvar else 1
     for j in range(ncol):
-        z = zbuf[:m]
-        acc = 0.0
-        o = 0
-        for p in range(m):
-            s = ks[p, j]
-            for q in range(p):
-                s -= Lp[o + q] * z[q]
-            zp = s / Lp[o + p]
-            z[p] = zp
-            acc += zp * zp
-            o += p + 1
+        acc = _tri_sq(Lp, ks, j, m, zbuf)
         out[dim + 1 + j] = (var_f0 if j == 0 else var_g0) - acc
     if not want_gvar:
         for j in range(1, dim + 1):

@@ -63,6 +63,8 @@ def _query(map, q, dim):
         out = map.query(q)
     except NotUpdatedError as exc:
         raise ValueError(f"map: has no data to localise against ({exc})") from exc
+    except ValueError as exc:
+        raise ValueError(f"map: query rejected {dim}D scan points (is the map {dim}D?): {exc}") from exc
     try:
         d, g, v = out
     except (TypeError, ValueError) as exc:
@@ -251,14 +253,15 @@ def localize(
             sensor_offset = getattr(map, "sensor_offset", None)
         off = as_sensor_offset((0.0, 0.0) if sensor_offset is None else sensor_offset)
         ok = valid_beams(ranges, min_range, max_range)
+        n_valid = int(ok.sum())
         pts = beam_points(angles[ok], ranges[ok], off)
         pts = pts[arc_length_subsample(pts, n_points)]
     else:
         pts = scan3d_points(scan, pixel_stride=as_int(pixel_stride, "pixel_stride", minimum=1),
                             min_range=min_range, max_range=max_range)
+        n_valid = len(pts)
         if len(pts) > n_points:
             pts = pts[np.round(np.linspace(0, len(pts) - 1, n_points)).astype(int)]
-    n_valid = int(ok.sum()) if dim == 2 else len(pts)
 
     x0 = problem.x.copy()
     dof = 3 if dim == 2 else 6

@@ -134,8 +134,9 @@ class GPISMap2D(GPISMapBase):
         p = self._checked_params()
         lim = np.asarray(p["angle_obs_limit"], float)
         with np.errstate(invalid="ignore"):
-            valid = (np.isfinite(ranges) & (ranges > p["min_range"]) & (ranges < p["max_range"])
-                     & (angles >= lim[0]) & (angles <= lim[1]))
+            valid = np.isfinite(ranges) & (ranges > p["min_range"]) & (ranges < p["max_range"])
+        if not p["legacy"]:        # the published code uses the limits for re-evaluation only
+            valid &= (angles >= lim[0] - 1e-6) & (angles <= lim[1] + 1e-6)
         if valid.sum() < 2:
             return self
         phi, r = angles[valid], ranges[valid]

@@ -51,8 +51,10 @@ def _sample(pyr, a, b, level):
         m = level == lv
         tex = pyr[lv]
         n = tex.shape[0]
-        x = a[m] / (2.0**lv) - 0.5
-        y = b[m] / (2.0**lv) - 0.5
+        # pyrDown keeps texel 2j of the finer level as texel j, so texel j of level lv is centred at
+        # j 2^lv in level-0 units at every level (blending levels then shifts nothing).
+        x = a[m] / (2.0**lv)
+        y = b[m] / (2.0**lv)
         x0 = np.floor(x)
         y0 = np.floor(y)
         fx = (x - x0)[:, None].astype(np.float32)
@@ -134,24 +136,9 @@ class CorridorScene:
         Returns (rgb (H, W, 3) uint8, ground_mask (H, W) bool, depth (H, W) float32 z-depth in m,
         inf for sky).
         """
-        R = T_world_cam[:3, :3]
-        o = T_world_cam[:3, 3]
         px, py = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-        dc = np.stack([(px.ravel() - K[0, 2]) / K[0, 0], (py.ravel() - K[1, 2]) / K[1, 1],
-                       np.ones(px.size)], axis=1)  # camera ray with z = 1: its parameter is the z-depth
-        d = dc @ R.T
-        h = self.camera_height
+        t_best, kind, o, d = self._cast(T_world_cam, K, np.stack([px.ravel(), py.ravel()], axis=1))
         n = len(d)
-        t_best = np.full(n, np.inf)
-        kind = np.zeros(n, dtype=np.int8)  # 0 sky, 1 ground, 2 wall
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tg = np.where(d[:, 1] > 1e-9, (h - o[1]) / d[:, 1], np.inf)
-        hit = (tg > 0) & (tg < t_best)
-        t_best[hit], kind[hit] = tg[hit], 1
-        for tw, arc in self._walls(o, d):
-            y = o[1] + tw * d[:, 1]
-            ok = np.isfinite(tw) & (tw > 0) & (tw < t_best) & (y >= h - self.wall_height) & (y <= h)
-            t_best[ok], kind[ok] = tw[ok], 2
         img = np.empty((n, 3), dtype=np.float32)
         img[:] = np.asarray(self.sky_rgb, np.float32)
         pix_ang = 1.0 / K[0, 0]
@@ -168,13 +155,44 @@ class CorridorScene:
             else:
                 a, b, cosang = self._wall_coords(p, d[m], dn[m])
             foot = t * dn[m] * pix_ang / np.maximum(cosang, 0.05)
-            level = np.clip(np.ceil(np.log2(np.maximum(foot / self.texel, 1.0))), 0, len(pyr) - 1).astype(np.intp)
-            img[m] = _sample(pyr, a / self.texel, b / self.texel, level)
+            # Trilinear filtering: blend the two mip levels around the footprint, so that a surface
+            # point's appearance changes smoothly as it approaches (no level switching).
+            lev = np.clip(np.log2(np.maximum(foot / self.texel, 1.0)) + 0.5, 0, len(pyr) - 1.001)
+            l0 = np.floor(lev).astype(np.intp)
+            wgt = (lev - l0).astype(np.float32)[:, None]
+            img[m] = (_sample(pyr, a / self.texel, b / self.texel, l0) * (1 - wgt)
+                      + _sample(pyr, a / self.texel, b / self.texel, l0 + 1) * wgt)
         if noise_std > 0:
             img += as_rng(rng).normal(0.0, noise_std, img.shape).astype(np.float32)
         rgb = np.clip(np.rint(img), 0, 255).astype(np.uint8).reshape(height, width, 3)
         depth = np.where(kind > 0, t_best, np.inf).astype(np.float32).reshape(height, width)
         return rgb, (kind == 1).reshape(height, width), depth
+
+    def raycast(self, T_world_cam, K, pixels):
+        """Exact z-depth (n,) in m (inf: sky) and surface kind (n,) (0 sky, 1 ground, 2 wall) of
+        sub-pixel positions (n, 2) (column, row)."""
+        t, kind, _, _ = self._cast(T_world_cam, K, np.asarray(pixels, dtype=np.float64))
+        return np.where(kind > 0, t, np.inf), kind
+
+    def _cast(self, T_world_cam, K, pix):
+        R = T_world_cam[:3, :3]
+        o = T_world_cam[:3, 3]
+        dc = np.stack([(pix[:, 0] - K[0, 2]) / K[0, 0], (pix[:, 1] - K[1, 2]) / K[1, 1],
+                       np.ones(len(pix))], axis=1)  # camera ray with z = 1: its parameter is the z-depth
+        d = dc @ R.T
+        h = self.camera_height
+        n = len(d)
+        t_best = np.full(n, np.inf)
+        kind = np.zeros(n, dtype=np.int8)  # 0 sky, 1 ground, 2 wall
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tg = np.where(d[:, 1] > 1e-9, (h - o[1]) / d[:, 1], np.inf)
+        hit = (tg > 0) & (tg < t_best)
+        t_best[hit], kind[hit] = tg[hit], 1
+        for tw, _ in self._walls(o, d):
+            y = o[1] + tw * d[:, 1]
+            ok = np.isfinite(tw) & (tw > 0) & (tw < t_best) & (y >= h - self.wall_height) & (y <= h)
+            t_best[ok], kind[ok] = tw[ok], 2
+        return t_best, kind, o, d
 
     def _walls(self, o, d):
         """Ray parameters of the two walls (with their along-wall coordinate unused here)."""

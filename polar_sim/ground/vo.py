@@ -139,6 +139,9 @@ class GroundVO:
         Ridge on the pitch and roll rates Ωx, Ωz.
     estimate_foe : bool, default=False
         Also estimate the focus of expansion (Gauss–Newton, n_g = 5).
+    exact_flow : bool, default=True
+        Correct the centred flow for the exact motion between the three frames (not in the spec, and
+        off under "code"): removes the O((V dt/Z)²) bias of the differential model on near points.
     min_triplets, min_inliers : int, default=30, 10
         Minimum three-frame tracks to solve motion; minimum ground inliers to accept the scale.
     speed_prior, speed_prior_var : float, default=0.0, 25.0
@@ -166,7 +169,7 @@ class GroundVO:
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=None,
                  n_iter=None, lam=0.1, sigma=None, weight_exponent=None, downsample=2, max_features=400,
                  klt_window=11, klt_levels=3, fb_max=0.5, irls_iter=None, ridge=1.0, estimate_foe=False,
-                 min_triplets=30, min_inliers=10, speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15,
+                 exact_flow=True, min_triplets=30, min_inliers=10, speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15,
                  speed_r=3.0, yaw_prior=0.0, yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None,
                  depth_r=None, depth_p_reset=None, alpha=0.7, ground_prior=0.2, ng_from_outliers=None,
                  horizon_row=None, integration="planar"):
@@ -188,6 +191,7 @@ class GroundVO:
         self.irls_iter = irls_iter
         self.ridge = ridge
         self.estimate_foe = estimate_foe
+        self.exact_flow = exact_flow
         self.min_triplets = min_triplets
         self.min_inliers = min_inliers
         self.speed_prior = speed_prior
@@ -235,6 +239,7 @@ class GroundVO:
         c["irls_iter"] = (0 if code else 10) if self.irls_iter is None else as_int(self.irls_iter, "irls_iter", minimum=0)
         c["ridge"] = as_positive_float(self.ridge, "ridge", allow_zero=True)
         c["foe"] = bool(self.estimate_foe)
+        c["exact_flow"] = bool(self.exact_flow) and not code
         c["min_triplets"] = as_int(self.min_triplets, "min_triplets", minimum=10)
         c["min_inliers"] = as_int(self.min_inliers, "min_inliers", minimum=2)
         for name in ("speed_prior", "yaw_prior"):
@@ -495,8 +500,10 @@ class GroundVO:
         v = (x1[:, 1] - self.cy_) / self.fy_
         udot = (x2[:, 0] - x0[:, 0]) / span / self.fx_
         vdot = (x2[:, 1] - x0[:, 1]) / span / self.fy_
+        halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
         m = estimate_motion(u, v, udot, vdot, n_global=3, ridge=c["ridge"], irls_iter=c["irls_iter"],
-                            estimate_foe=c["foe"], compat=c["compat"])
+                            estimate_foe=c["foe"], span=halves if c["exact_flow"] else None,
+                            compat=c["compat"])
         diag["irls_iterations"] = int(m.iterations)
         rates_raw = m.rates.copy()
         yaw_raw = float(m.rates[1])

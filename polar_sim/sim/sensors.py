@@ -196,7 +196,8 @@ def parse_lidars(model):
         if kind == "lidar2d":
             n = int(kv.get("beams", 1081))
             fov = np.radians(float(kv.get("fov_deg", 270.0)))
-            ang = np.linspace(-fov / 2, fov / 2, n)
+            # A full circle must not repeat its first beam at +180 deg.
+            ang = np.linspace(-fov / 2, fov / 2, n, endpoint=fov < 2 * np.pi - 1e-9)
             dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(n)], 1)
             out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, ang)
         elif kind == "lidar3d":

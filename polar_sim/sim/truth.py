@@ -169,9 +169,13 @@ class SceneSDF:
         self._sections = {}
 
     # -- 3D ---------------------------------------------------------------------------------
-    def __call__(self, points):
-        """Signed distance (n,) at world points (n, 3), metres."""
+    def __call__(self, points, return_geom=False):
+        """Signed distance (n,) at world points (n, 3), metres.
+
+        With ``return_geom``, also the id (n,) of the geom whose surface is nearest (-1 for the
+        terrain grid)."""
         out = np.full(len(points), np.inf)
+        which = np.full(len(points), -1, dtype=np.int64)
         for g, t, s, R, x, _ in self._items:
             p = (points - x) @ R
             if t == _G.mjGEOM_BOX:
@@ -186,10 +190,15 @@ class SceneSDF:
                 d = _sdf.sdf_plane(p)
             else:
                 d = self._mesh_sdf(g, p)
-            np.minimum(out, d, out=out)
+            closer = d < out
+            which[closer] = g
+            out[closer] = d[closer]
         if self._terrain is not None:
-            np.minimum(out, self._terrain_sdf(points), out=out)
-        return out
+            d = self._terrain_sdf(points)
+            closer = d < out
+            which[closer] = -1
+            out[closer] = d[closer]
+        return (out, which) if return_geom else out
 
     def _mesh_sdf(self, g, p):
         if g not in self._meshes:

@@ -72,9 +72,12 @@ class World:
             raise ValueError("kinematic: only scenes with a rover can move kinematically")
         self._controller = RoverController(m, self.meta["rover_config"]) if self._has_rover and "rover_config" in self.meta else None
         self._script = self.meta.get("script")
-        dt0 = self.meta.get("control_dt", 0.1 if self._has_rover else 1.0 / 30.0)
-        self.dt = float(dt0 if control_dt is None else control_dt)
         ts = m.opt.timestep
+        if control_dt is None:
+            # The scene's period, snapped to a whole number of physics steps.
+            dt0 = self.meta.get("control_dt", 0.1 if self._has_rover else 1.0 / 30.0)
+            control_dt = max(1, round(dt0 / ts)) * ts
+        self.dt = float(control_dt)
         self._substeps = int(round(self.dt / ts))
         if self._substeps < 1 or abs(self._substeps * ts - self.dt) > 1e-9:
             raise ValueError(f"control_dt: {self.dt} s is not a positive multiple of the physics timestep {ts} s")
@@ -339,6 +342,17 @@ class World:
         if dim == 3:
             return self._sdf(p)
         return self._sdf.section(p, self.lidar_plane_height())
+
+    def nearest_surface(self, points):
+        """Label (n,) of the static surface nearest to each world point (n, 3) (see
+        ``truth.LABELS``), from the exact geometry; the terrain counts as ground."""
+        from polar_sim._validation import as_points
+
+        p = as_points(points, 3, "points")
+        if self._sdf is None:
+            self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
+        _, g = self._sdf(p, return_geom=True)
+        return np.where(g < 0, _truth.LABELS["ground"], self._labels[np.maximum(g, 0)])
 
     def lidar_plane_height(self):
         """World height (m) of the plane 2D points of :meth:`sdf` live in: the first 2D lidar's."""

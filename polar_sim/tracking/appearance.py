@@ -63,22 +63,23 @@ class ColourNB:
 
 
 class _Adam:
-    def __init__(self, shapes, lr):
+    """Adam on one flat parameter vector (in place)."""
+
+    def __init__(self, n, lr):
         self.lr = lr
-        self.m = [np.zeros(s) for s in shapes]
-        self.v = [np.zeros(s) for s in shapes]
+        self.m = np.zeros(n)
+        self.v = np.zeros(n)
         self.t = 0
 
-    def step(self, params, grads):
+    def step(self, theta, g):
         self.t += 1
         b1, b2 = 0.9, 0.999
-        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
-        for p, g, m, v in zip(params, grads, self.m, self.v):
-            m *= b1
-            m += (1 - b1) * g
-            v *= b2
-            v += (1 - b2) * g * g
-            p -= self.lr * (m / c1) / (np.sqrt(v / c2) + 1e-8)
+        self.m *= b1
+        self.m += (1 - b1) * g
+        self.v *= b2
+        self.v += (1 - b2) * g * g
+        lr = self.lr * np.sqrt(1 - b2**self.t) / (1 - b1**self.t)
+        theta -= lr * self.m / (np.sqrt(self.v) + 1e-8)
 
 
 def _sigmoid(z):
@@ -107,12 +108,18 @@ class FeatureHead:
         self.mean = np.zeros(D)
         self.m2 = np.zeros(D)
         self.n_updates = 0
+        # all parameters live in one flat vector; ``params`` are views into it
         if head == "S":
-            self.params = [np.zeros(D), np.zeros(1)]
+            shapes = [(D,), (1,)]
         else:
-            self.params = [np.zeros((N_LEVELS, N_CHANNELS)), np.zeros(N_LEVELS),
-                           np.full(N_LEVELS, 1.0 / N_LEVELS), np.zeros(1)]
-        self.opt = _Adam([p.shape for p in self.params], lr)
+            shapes = [(N_LEVELS, N_CHANNELS), (N_LEVELS,), (N_LEVELS,), (1,)]
+        sizes = [int(np.prod(sh)) for sh in shapes]
+        self.theta = np.zeros(sum(sizes))
+        offs = np.cumsum([0] + sizes)
+        self.params = [self.theta[a:b].reshape(sh) for a, b, sh in zip(offs[:-1], offs[1:], shapes)]
+        if head == "W":
+            self.params[2][:] = 1.0 / N_LEVELS
+        self.opt = _Adam(len(self.theta), lr)
 
     # -- features and inference -------------------------------------------------------------
     def prepare(self, rgb):
@@ -171,7 +178,7 @@ class FeatureHead:
             w, b = self.params
             z = Xs @ w + b[0]
             g = (_sigmoid(z) - y) * wt
-            return [Xs.T @ g + self.l2 * w, np.array([g.sum()])]
+            return np.concatenate([Xs.T @ g + self.l2 * w, [g.sum()]])
         W, b, alpha, c = self.params
         Xl = Xs.reshape(len(Xs), N_LEVELS, N_CHANNELS)
         a = np.einsum("nsc,sc->ns", Xl, W) + b
@@ -179,38 +186,46 @@ class FeatureHead:
         gz = (_sigmoid(z) - y) * wt
         ga = gz[:, None] * alpha[None, :] + self.side_weight * (_sigmoid(a) - y[:, None]) * wt[:, None]
         gW = np.einsum("ns,nsc->sc", ga, Xl) + self.l2 * W
-        return [gW, ga.sum(axis=0), a.T @ gz + self.l2 * (alpha - 1.0 / N_LEVELS), np.array([gz.sum()])]
+        return np.concatenate([gW.ravel(), ga.sum(axis=0), a.T @ gz + self.l2 * (alpha - 1.0 / N_LEVELS),
+                               [gz.sum()]])
 
     def update(self, feats, ys, xs, labels, weights, rng):
         """Train on pixels (ys, xs) of the crop with labels (n,) in {0, 1} and weights (n,)."""
-        X = gather(feats, ys, xs, feats[0].shape[:2]).astype(np.float64)
-        y = labels.astype(np.float64)
-        wt = weights.astype(np.float64) if self.weighting == "w" else np.ones(len(y))
-        self._standardise_update(X)
+        X = gather(feats, ys, xs, feats[0].shape[:2])
+        y = labels.astype(np.float32)
+        wt = weights.astype(np.float32) if self.weighting == "w" else np.ones(len(y), np.float32)
+        self._standardise_update(X.astype(np.float64))
         new = (X, y, wt)
         if self.buffer:
-            RX = np.concatenate([b[0] for b in self.buffer])
-            Ry = np.concatenate([b[1] for b in self.buffer])
-            Rw = np.concatenate([b[2] for b in self.buffer])
-            k = min(len(RX), len(X))
-            pick = rng.choice(len(RX), size=k, replace=False)
-            X = np.concatenate([X, RX[pick]])
-            y = np.concatenate([y, Ry[pick]])
-            wt = np.concatenate([wt, Rw[pick]])
+            # replay: as many samples as the new frame gives, drawn uniformly from the buffer
+            sizes = np.array([len(b[1]) for b in self.buffer])
+            k = int(min(sizes.sum(), len(X)))
+            j = rng.integers(0, sizes.sum(), k)
+            which = np.searchsorted(np.cumsum(sizes), j, side="right")
+            local = j - np.concatenate([[0], np.cumsum(sizes)[:-1]])[which]
+            parts = [[], [], []]
+            for f, b in enumerate(self.buffer):
+                sel = local[which == f]
+                for i in range(3):
+                    parts[i].append(b[i][sel])
+            X = np.concatenate([X] + parts[0])
+            y = np.concatenate([y] + parts[1])
+            wt = np.concatenate([wt] + parts[2])
         self.buffer.append(new)
         # class balance: both classes carry the same total weight (training prior 0.5)
+        wt = wt.astype(np.float64)
         for c in (0, 1):
             s = wt[y == c].sum()
             if s > 0:
                 wt[y == c] *= 0.5 * len(y) / s
         Xs = (X - self.mean) / self._std()
+        y = y.astype(np.float64)
         n = len(y)
         for _ in range(self.epochs):
             order = rng.permutation(n)
             for i in range(0, n, self.batch):
                 j = order[i : i + self.batch]
-                grads = self._grads(Xs[j], y[j], wt[j] / len(j))
-                self.opt.step(self.params, grads)
+                self.opt.step(self.theta, self._grads(Xs[j], y[j], wt[j] / len(j)))
         self.n_updates += 1
 
 

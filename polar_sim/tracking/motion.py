@@ -31,7 +31,7 @@ class MotionFilter:
     """
 
     def __init__(self, T0, *, mode="ekf", q_pose=(0.05, 0.01), q_vel=(2.0, 0.5),
-                 meas_floor=(np.deg2rad(0.5), 0.002), sigma_cap=(0.3, 0.04), beta=0.5,
+                 meas_floor=(np.deg2rad(0.5), 0.002), sigma_cap=(0.3, 0.04), beta=0.5, v0=(0.5, 0.1),
                  sigma_static=(0.05, 0.01)):
         self.mode = mode
         self.T = T0.copy()
@@ -43,7 +43,7 @@ class MotionFilter:
         self.beta = beta
         self.static = np.repeat(np.asarray(sigma_static, float) ** 2, 3)
         p0 = np.concatenate([np.repeat(np.array([np.deg2rad(1.0), 0.002]) ** 2, 3),
-                             np.repeat(np.array([1.0, 0.3]) ** 2, 3)])
+                             np.repeat(np.asarray(v0, float) ** 2, 3)])
         self.P = np.diag(p0)
         self.T_bar = self.T.copy()
         self.P_bar = self.P.copy()

@@ -1,0 +1,3 @@
+"""placeholder"""
+class GPISMap3D:
+    pass
