@@ -157,7 +157,8 @@ def bench_gpis(quick):
         m.query(q[:k])
         _, dt = _timed(lambda: m.query(q[:k]))
         print(f"- map.query of {k} points: {dt * 1e3:.2f} ms")
-    print(f"- map: {len(mapped)} scans (every {step}th) fused in {t_build:.1f} s; {len(held)} held-out scans, 270 beams each\n")
+    print(f"- map: {len(mapped)} scans (every {step}th) fused in {t_build:.1f} s; "
+          f"{len(held)} held-out scans, 270 beams each\n")
     print("| start error | median ms | p90 ms | max ms | iterations (median) | points queried (median) "
           "| median error (cm, deg) | p90 error (cm, deg) | not ok |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -115,7 +115,8 @@ class ICPLocalizer(ResetMixin):
             elif callable(getattr(target, "query", None)):
                 self.map_ = target
             else:
-                raise TypeError(f"target: method='sdf' needs an OccupancyGrid2D or a map with query(), got {type(target).__name__}")
+                raise TypeError("target: method='sdf' needs an OccupancyGrid2D or a map with query(), "
+                                f"got {type(target).__name__}")
             return self
         pts = target.surface_points() if hasattr(target, "surface_points") else target
         arr = _as_float_array(pts, "target")

@@ -177,7 +177,8 @@ class OccupancyGrid2D(ResetMixin):
         if self.bounds is not None:
             b = _as_float_array(self.bounds, "bounds")
             if b.shape != (4,) or not np.isfinite(b).all() or not (b[2] - b[0] >= cs and b[3] - b[1] >= cs):
-                raise ValueError(f"bounds: expected finite (xmin, ymin, xmax, ymax) at least one cell wide, got {self.bounds!r}")
+                raise ValueError("bounds: expected finite (xmin, ymin, xmax, ymax) at least one cell wide, "
+                                 f"got {self.bounds!r}")
         return cs
 
     # ------------------------------------------------------------------ update

@@ -274,7 +274,7 @@ def query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, 
     a = np.sqrt(3.0) / scale
     nblk = 64
     for blk in nb.prange((n + nblk - 1) // nblk):
-        kb = np.empty((mmax, dim + 1))
+        kb = np.empty((mmax, dim + 2))
         zb = np.empty(mmax)
         best_s = np.empty(3, np.int64)
         best_d = np.empty(3)

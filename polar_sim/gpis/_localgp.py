@@ -164,10 +164,11 @@ def _tri_sq(Lp, ks, j, m, z):
     acc = 0.0
     o = 0
     for p in range(m):
-        s = ks[p, j]
+        t = 0.0
+        row = Lp[o:o + p]
         for q in range(p):
-            s -= Lp[o + q] * z[q]
-        zp = s / Lp[o + p]
+            t += row[q] * z[q]
+        zp = (ks[p, j] - t) / Lp[o + p]
         z[p] = zp
         acc += zp * zp
         o += p + 1
@@ -192,6 +193,7 @@ def _predict_one(x, Lp, alpha, X, kinds, a, dim, var_f0, var_g0, want_gvar, out,
         r = np.sqrt(r2)
         ex = np.exp(-a * r)
         zbuf[p] = r
+        ks[p, dim + 1] = ex
         ks[p, 0] = (1.0 + a * r) * ex
         for k in range(dim):
             ks[p, 1 + k] = -a2 * (x[k] - X[p, k]) * ex
@@ -199,7 +201,7 @@ def _predict_one(x, Lp, alpha, X, kinds, a, dim, var_f0, var_g0, want_gvar, out,
         c = (kinds[p] >> 32) - 1
         u = kinds[p] & 0xFFFFFFFF
         r = zbuf[u]
-        ex = np.exp(-a * r)
+        ex = ks[u, dim + 1]
         dc = x[c] - X[p, c]
         ks[p, 0] = a2 * dc * ex
         inv_r = 1.0 / r if r > 0.0 else 0.0
@@ -358,7 +360,7 @@ def train_gp(train, scale, fbias=0.2, quirk_x=False):
     def predict(points):
         points = np.asarray(points, np.float64)
         out = np.zeros((len(points), 2 + 2 * dim))
-        kb = np.zeros((m, dim + 1))
+        kb = np.zeros((m, dim + 2))
         zb = np.zeros(m)
         a = np.sqrt(3.0) / scale
         for i, x in enumerate(points):

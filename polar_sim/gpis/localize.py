@@ -243,7 +243,7 @@ def localize(
         raise ValueError(f"coarse_fraction: expected a fraction in (0, 1], got {coarse_fraction}")
     step_t, step_r = (as_positive_float(v, "max_step") for v in _pair(max_step, "max_step"))
     corr_t, corr_r = (as_positive_float(v, "max_correction") for v in _pair(max_correction, "max_correction"))
-    n_points = as_int(600 if dim == 3 else 200, "n_points") if n_points is None else as_int(n_points, "n_points", minimum=1)
+    n_points = (600 if dim == 3 else 200) if n_points is None else as_int(n_points, "n_points", minimum=1)
 
     if dim == 2:
         if not (isinstance(scan, (tuple, list)) and len(scan) == 2):
@@ -309,6 +309,7 @@ def localize(
         ct, cr = problem.correction(x0)
         if ct > corr_t or cr > corr_r:
             info.update(status="diverged", reason=f"moved {ct:.3f} m / {np.degrees(cr):.1f} deg from the prior")
+            logger.debug("localize diverged after %d iterations: %s", it, info["reason"])
             return x0, no_cov, info
         dt, dr = dt * shrink, dr * shrink
         if coarse and dt < 10 * tolerance and dr < 10 * tolerance:
@@ -316,6 +317,7 @@ def localize(
         elif not coarse and dt < tolerance and dr < tolerance:
             return problem.x, cov, info
     info.update(status="max_iter", reason=f"no convergence in {max_iterations} iterations")
+    logger.debug("localize: %s", info["reason"])
     return problem.x, (no_cov if cov is None else cov), info
 
 

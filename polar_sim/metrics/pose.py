@@ -1,3 +1,356 @@
-"""pose metrics."""
+"""Pose metrics: ADD, ADD-S, 5 cm / 5 deg, AUC, success rates and the BOP errors VSD, MSSD, MSPD.
 
-__all__ = []
+Conventions: poses are 4x4 ``T_cam_obj`` (object to camera), one pose (4, 4) or a stack (n, 4, 4);
+model points (m, 3) in the object frame, metres; errors in metres (ADD, ADD-S, MSSD), pixels
+(MSPD), radians (rotation), or unitless (VSD). Rates are fractions in [0, 1] (multiply by 100 for
+the YCB-Video / BOP tables). Definitions: Hinterstoisser et al. (ADD, ADD-S and the 0.1 d
+criterion), PoseCNN / YCB-Video (AUC of ADD up to 10 cm), and the BOP toolkit (Hodan et al.: VSD
+with BOP19 visibility, MSSD, MSPD and their thresholds), re-implemented from the definitions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, cKDTree
+
+from polar_sim._validation import as_intrinsics, as_points, as_pose, as_positive_float
+
+__all__ = [
+    "object_diameter",
+    "add",
+    "adds",
+    "rotation_error",
+    "translation_error",
+    "success_5cm5deg",
+    "add_success",
+    "success_rate",
+    "success_curve",
+    "pose_auc",
+    "frames_until_loss",
+    "mssd",
+    "mspd",
+    "vsd",
+    "render_depth",
+    "bop_recall",
+    "ar_vsd",
+    "ar_mssd",
+    "ar_mspd",
+    "BOP_VSD_TAUS",
+    "BOP_VSD_THETAS",
+    "BOP_MSSD_FRACTIONS",
+    "BOP_MSPD_PIXELS",
+]
+
+#: BOP19 VSD misalignment tolerances tau (fractions of the diameter) and correctness thresholds.
+BOP_VSD_TAUS = np.arange(0.05, 0.51, 0.05)
+BOP_VSD_THETAS = np.arange(0.05, 0.51, 0.05)
+#: BOP19 MSSD thresholds (fractions of the diameter) and MSPD thresholds (pixels at 640 wide).
+BOP_MSSD_FRACTIONS = np.arange(0.05, 0.51, 0.05)
+BOP_MSPD_PIXELS = np.arange(5, 51, 5).astype(float)
+
+
+def _as_poses(T, name):
+    """(n, 4, 4) stack of checked poses and whether the input was a single pose."""
+    a = np.asarray(T, dtype=np.float64)
+    if a.ndim == 2:
+        return as_pose(a, name)[None], True
+    if a.ndim != 3 or a.shape[1:] != (4, 4):
+        raise ValueError(f"{name}: expected a 4x4 pose or a stack (n, 4, 4), got shape {a.shape}")
+    return np.stack([as_pose(t, f"{name}[{i}]") for i, t in enumerate(a)]) if len(a) else a, False
+
+
+def _pair(T_gt, T_est):
+    G, single_g = _as_poses(T_gt, "T_gt")
+    E, single_e = _as_poses(T_est, "T_est")
+    if len(G) != len(E):
+        raise ValueError(f"T_gt and T_est: expected the same number of poses, got {len(G)} and {len(E)}")
+    return G, E, single_g and single_e
+
+
+def _out(x, single):
+    return float(x[0]) if single else x
+
+
+def _as_errors(e, name="errors"):
+    a = np.asarray(e, dtype=np.float64).ravel()
+    if a.size == 0:
+        raise ValueError(f"{name}: expected at least one error value")
+    if np.isnan(a).any() or (a < 0).any():
+        raise ValueError(f"{name}: expected non-negative errors (inf allowed), got NaN or negatives")
+    return a
+
+
+def object_diameter(points):
+    """Largest distance between two model points (m, 3), metres (exact, through the convex hull)."""
+    P = as_points(points, 3, "points")
+    if len(P) > 4:
+        try:
+            P = P[ConvexHull(P).vertices]
+        except Exception:  # flat or degenerate point sets
+            pass
+    best = 0.0
+    for i in range(0, len(P), 1024):
+        best = max(best, float(np.linalg.norm(P[i : i + 1024, None] - P[None], axis=2).max()))
+    return best
+
+
+def add(model_points, T_gt, T_est):
+    """ADD: mean distance between model points under the true and the estimated pose, metres.
+
+    One pose pair gives a float; stacks (n, 4, 4) give (n,).
+    """
+    P = as_points(model_points, 3, "model_points")
+    G, E, single = _pair(T_gt, T_est)
+    out = np.empty(len(G))
+    for i, (g, e) in enumerate(zip(G, E)):
+        out[i] = np.linalg.norm(P @ (e[:3, :3] - g[:3, :3]).T + (e[:3, 3] - g[:3, 3]), axis=1).mean()
+    return _out(out, single)
+
+
+def adds(model_points, T_gt, T_est):
+    """ADD-S (ADI): mean over estimated points of the distance to the closest true point, metres."""
+    P = as_points(model_points, 3, "model_points")
+    G, E, single = _pair(T_gt, T_est)
+    tree = cKDTree(P)
+    out = np.empty(len(G))
+    for i, (g, e) in enumerate(zip(G, E)):
+        # estimated points expressed in the true object frame, matched against the model itself
+        Q = (P @ e[:3, :3].T + e[:3, 3] - g[:3, 3]) @ g[:3, :3]
+        out[i] = tree.query(Q, k=1)[0].mean()
+    return _out(out, single)
+
+
+def rotation_error(T_gt, T_est):
+    """Angle of R_est R_gt^T, radians (float or (n,))."""
+    G, E, single = _pair(T_gt, T_est)
+    c = (np.einsum("nij,nij->n", E[:, :3, :3], G[:, :3, :3]) - 1.0) / 2.0
+    return _out(np.arccos(np.clip(c, -1.0, 1.0)), single)
+
+
+def translation_error(T_gt, T_est):
+    """Distance between the translations, metres (float or (n,))."""
+    G, E, single = _pair(T_gt, T_est)
+    return _out(np.linalg.norm(E[:, :3, 3] - G[:, :3, 3], axis=1), single)
+
+
+def success_5cm5deg(T_gt, T_est, *, max_translation=0.05, max_rotation=np.deg2rad(5.0)):
+    """Fraction of poses with translation error < 5 cm and rotation error < 5 deg (radians given)."""
+    te = np.atleast_1d(translation_error(T_gt, T_est))
+    re = np.atleast_1d(rotation_error(T_gt, T_est))
+    return float(np.mean((te < max_translation) & (re < max_rotation)))
+
+
+def add_success(errors, diameter, k=0.1):
+    """Fraction of ADD (or ADD-S) errors below k * diameter (headline k = 0.1)."""
+    e = _as_errors(errors)
+    d = as_positive_float(diameter, "diameter")
+    as_positive_float(k, "k")
+    return float(np.mean(e < k * d))
+
+
+def success_rate(errors, threshold):
+    """SR(theta) = fraction of errors <= threshold."""
+    e = _as_errors(errors)
+    return float(np.mean(e <= threshold))
+
+
+def success_curve(errors, thresholds):
+    """Success rate (len(thresholds),) at each threshold (errors <= threshold)."""
+    e = np.sort(_as_errors(errors))
+    th = np.asarray(thresholds, dtype=np.float64).ravel()
+    return np.searchsorted(e, th, side="right") / len(e)
+
+
+def pose_auc(errors, max_threshold=0.10):
+    """Area under the success-rate curve over [0, max_threshold], normalised to [0, 1].
+
+    The YCB-Video convention (PoseCNN's VOC-style integral of the accuracy-threshold curve of ADD
+    or ADD-S up to 10 cm). The integral of the empirical success curve has the closed form
+    ``mean(max(0, 1 - e / max_threshold))``.
+    """
+    e = _as_errors(errors)
+    m = as_positive_float(max_threshold, "max_threshold")
+    return float(np.mean(np.clip(1.0 - e / m, 0.0, 1.0)))
+
+
+def frames_until_loss(errors, threshold, patience=10):
+    """Index of the first frame of the first run of ``patience`` frames with error > threshold
+    (the number of frames tracked before the loss); len(errors) if the track is never lost.
+
+    The tracking protocol of the spec uses ADD > 0.3 d for 10 frames."""
+    e = _as_errors(errors)
+    bad = e > threshold
+    run = 0
+    for i, b in enumerate(bad):
+        run = run + 1 if b else 0
+        if run >= patience:
+            return i - patience + 1
+    return len(e)
+
+
+# -- BOP ------------------------------------------------------------------------------------
+def _symmetries(symmetries):
+    if symmetries is None:
+        return np.eye(4)[None]
+    S, _ = _as_poses(symmetries, "symmetries")
+    return S
+
+
+def mssd(model_points, T_gt, T_est, symmetries=None):
+    """Maximum Symmetry-aware Surface Distance, metres: min over symmetry transforms S (object
+    frame, (k, 4, 4); identity if None) of max_x |T_est x - T_gt S x|."""
+    P = as_points(model_points, 3, "model_points")
+    G, E, single = _pair(T_gt, T_est)
+    S = _symmetries(symmetries)
+    out = np.empty(len(G))
+    for i, (g, e) in enumerate(zip(G, E)):
+        pe = P @ e[:3, :3].T + e[:3, 3]
+        best = np.inf
+        for s in S:
+            gs = g @ s
+            best = min(best, float(np.linalg.norm(pe - (P @ gs[:3, :3].T + gs[:3, 3]), axis=1).max()))
+        out[i] = best
+    return _out(out, single)
+
+
+def _project(K, X):
+    return np.stack([K[0, 0] * X[:, 0] / X[:, 2] + K[0, 2], K[1, 1] * X[:, 1] / X[:, 2] + K[1, 2]], 1)
+
+
+def mspd(model_points, K, T_gt, T_est, symmetries=None):
+    """Maximum Symmetry-aware Projection Distance, pixels: min_S max_x |pi(T_est x) - pi(T_gt S x)|."""
+    P = as_points(model_points, 3, "model_points")
+    K = as_intrinsics(K, "K")
+    G, E, single = _pair(T_gt, T_est)
+    S = _symmetries(symmetries)
+    out = np.empty(len(G))
+    for i, (g, e) in enumerate(zip(G, E)):
+        ue = _project(K, P @ e[:3, :3].T + e[:3, 3])
+        best = np.inf
+        for s in S:
+            gs = g @ s
+            best = min(best, float(np.linalg.norm(ue - _project(K, P @ gs[:3, :3].T + gs[:3, 3]), axis=1).max()))
+        out[i] = best
+    return _out(out, single)
+
+
+def render_depth(model_points, K, T, shape, *, radius_px=None):
+    """Depth image (H, W) float32 of model points under pose T (4, 4) by z-buffered point splats.
+
+    Each point is a disc of ``radius_px`` pixels (default: half the mean point spacing at the
+    points' median depth, at least 1). 0 where nothing projects. A stand-in for a mesh renderer,
+    good for VSD when points are dense (the tolerances are centimetres).
+    """
+    import cv2
+
+    P = as_points(model_points, 3, "model_points")
+    K = as_intrinsics(K, "K")
+    T = as_pose(T, "T")
+    H, W = shape
+    X = P @ T[:3, :3].T + T[:3, 3]
+    X = X[X[:, 2] > 1e-6]
+    out = np.zeros((H, W), np.float32)
+    if len(X) == 0:
+        return out
+    if radius_px is None:
+        d, _ = cKDTree(P).query(P, k=2) if len(P) > 1 else (np.zeros((1, 2)), None)
+        spacing = 2.0 * float(np.mean(d[:, 1]))
+        radius_px = max(1, int(np.ceil(K[0, 0] * spacing / (2.0 * float(np.median(X[:, 2]))))))
+    r = int(radius_px)
+    uv = np.rint(_project(K, X)).astype(np.int64) + r
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < W + 2 * r) & (uv[:, 1] >= 0) & (uv[:, 1] < H + 2 * r)
+    buf = np.full((H + 2 * r, W + 2 * r), np.inf, np.float32)
+    np.minimum.at(buf, (uv[ok, 1], uv[ok, 0]), X[ok, 2].astype(np.float32))
+    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    buf = cv2.erode(np.where(np.isfinite(buf), buf, 1e9).astype(np.float32), ker)[r : r + H, r : r + W]
+    out[buf < 1e8] = buf[buf < 1e8]
+    return out
+
+
+def _dist_image(depth, K):
+    H, W = depth.shape
+    u = (np.arange(W) - K[0, 2]) / K[0, 0]
+    v = (np.arange(H) - K[1, 2]) / K[1, 1]
+    return depth * np.sqrt(u[None, :] ** 2 + v[:, None] ** 2 + 1.0)
+
+
+def _as_depth_image(d, name, shape=None):
+    a = np.asarray(d, dtype=np.float64)
+    if a.ndim != 2 or (shape is not None and a.shape != shape):
+        raise ValueError(f"{name}: expected a depth image of shape {shape or '(H, W)'}, got {a.shape}")
+    a = np.where(np.isfinite(a), a, 0.0)
+    if (a < 0).any():
+        raise ValueError(f"{name}: contains negative depths")
+    return a
+
+
+def vsd(depth_est, depth_gt, depth_test, K, diameter, *, taus=BOP_VSD_TAUS, delta=0.015,
+        normalized_by_diameter=True, cost="step"):
+    """Visible Surface Discrepancy (BOP19) for each misalignment tolerance tau: array (len(taus),).
+
+    Parameters
+    ----------
+    depth_est, depth_gt : (H, W) depth of the model rendered at the estimated / true pose, metres
+        (0 where the model is absent), e.g. from :func:`render_depth` or the simulator.
+    depth_test : (H, W) the test (sensor) depth image, metres, 0 = missing.
+    K : (3, 3) intrinsics (depths are converted to distances from the camera centre, as BOP does).
+    diameter : object diameter, metres.
+    taus : tolerances, fractions of the diameter when ``normalized_by_diameter`` else metres.
+    delta : visibility tolerance, metres (15 mm in BOP19).
+    cost : "step" (BOP) or "tlinear".
+
+    Visibility (BOP19): a rendered pixel is visible if it has depth and the test depth is missing
+    or not more than ``delta`` in front of it; the estimate's visible mask also includes the pixels
+    where the true model is visible and the estimate has depth. The error is the mean cost over the
+    union of both masks, cost 0 where both are visible and their distances differ by < tau.
+    """
+    K = as_intrinsics(K, "K")
+    de = _as_depth_image(depth_est, "depth_est")
+    dg = _as_depth_image(depth_gt, "depth_gt", de.shape)
+    dt = _as_depth_image(depth_test, "depth_test", de.shape)
+    d = as_positive_float(diameter, "diameter")
+    if cost not in ("step", "tlinear"):
+        raise ValueError(f"cost: unknown value {cost!r}; expected 'step' or 'tlinear'")
+    de, dg, dt = _dist_image(de, K), _dist_image(dg, K), _dist_image(dt, K)
+    vis_gt = (dg > 0) & ((dg - dt <= delta) | (dt == 0))
+    vis_est = ((de > 0) & ((de - dt <= delta) | (dt == 0))) | (vis_gt & (de > 0))
+    inter = vis_gt & vis_est
+    union = int((vis_gt | vis_est).sum())
+    taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
+    if union == 0:
+        return np.ones(len(taus))
+    diff = np.abs(dg[inter] - de[inter])
+    if normalized_by_diameter:
+        diff = diff / d
+    n_outside = union - int(inter.sum())
+    out = np.empty(len(taus))
+    for i, tau in enumerate(taus):
+        c = (diff >= tau).astype(float) if cost == "step" else np.minimum(diff / tau, 1.0)
+        out[i] = (c.sum() + n_outside) / union
+    return out
+
+
+def bop_recall(errors, thresholds):
+    """Mean over thresholds of the fraction of errors strictly below each threshold.
+
+    ``errors`` (n,) for MSSD / MSPD, or (n, n_tau) for VSD (averaged over tau too)."""
+    e = np.asarray(errors, dtype=np.float64)
+    if e.size == 0 or np.isnan(e).any():
+        raise ValueError("errors: expected a non-empty array without NaN")
+    th = np.asarray(thresholds, dtype=np.float64).ravel()
+    return float(np.mean([(e < t).mean() for t in th]))
+
+
+def ar_vsd(vsd_errors, thetas=BOP_VSD_THETAS):
+    """AR_VSD: recall averaged over the VSD thresholds theta and the tolerances (n, n_tau)."""
+    return bop_recall(vsd_errors, thetas)
+
+
+def ar_mssd(mssd_errors, diameter, fractions=BOP_MSSD_FRACTIONS):
+    """AR_MSSD: recall averaged over thresholds fractions * diameter (metres)."""
+    return bop_recall(mssd_errors, np.asarray(fractions) * as_positive_float(diameter, "diameter"))
+
+
+def ar_mspd(mspd_errors, image_width, pixels=BOP_MSPD_PIXELS):
+    """AR_MSPD: recall averaged over thresholds pixels * image_width / 640."""
+    return bop_recall(mspd_errors, np.asarray(pixels) * as_positive_float(image_width, "image_width") / 640.0)

@@ -1,3 +1,106 @@
-"""segmentation metrics."""
+"""Segmentation metrics: IoU and its success rate, precision/recall, occluder-as-target fraction,
+ROC AUC of probability maps.
 
-__all__ = []
+Masks are boolean arrays (H, W) or stacks (n, H, W). Rates are fractions in [0, 1].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "iou",
+    "iou_success",
+    "iou_success_curve",
+    "precision_recall",
+    "occluder_as_target",
+    "roc_auc",
+]
+
+
+def _as_mask(m, name, shape=None):
+    if not isinstance(m, np.ndarray):
+        m = np.asarray(m)
+    if m.dtype != bool:
+        if not (np.issubdtype(m.dtype, np.integer) and np.isin(m, (0, 1)).all()):
+            raise ValueError(f"{name}: expected a boolean mask (or 0/1 integers), got dtype {m.dtype}")
+        m = m.astype(bool)
+    if m.ndim not in (2, 3):
+        raise ValueError(f"{name}: expected shape (H, W) or (n, H, W), got {m.shape}")
+    if shape is not None and m.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape} to match, got {m.shape}")
+    return m
+
+
+def iou(mask_a, mask_b):
+    """Intersection over union of two masks; (n, H, W) stacks give (n,). Two empty masks give 1."""
+    a = _as_mask(mask_a, "mask_a")
+    b = _as_mask(mask_b, "mask_b", a.shape)
+    ax = (-2, -1)
+    inter = np.logical_and(a, b).sum(axis=ax)
+    union = np.logical_or(a, b).sum(axis=ax)
+    out = np.where(union > 0, inter / np.maximum(union, 1), 1.0)
+    return float(out) if a.ndim == 2 else out.astype(float)
+
+
+def iou_success(ious, threshold=0.5):
+    """Fraction of frames whose IoU exceeds ``threshold`` (headline 0.5)."""
+    v = np.asarray(ious, dtype=np.float64).ravel()
+    if v.size == 0 or np.isnan(v).any():
+        raise ValueError("ious: expected a non-empty array without NaN")
+    return float(np.mean(v > threshold))
+
+
+def iou_success_curve(ious, thresholds=None):
+    """Success curve over IoU thresholds (default 101 from 0 to 1) and its mean (the AUC).
+
+    Returns ``(thresholds, rates, auc)``."""
+    v = np.asarray(ious, dtype=np.float64).ravel()
+    if v.size == 0 or np.isnan(v).any():
+        raise ValueError("ious: expected a non-empty array without NaN")
+    th = np.linspace(0.0, 1.0, 101) if thresholds is None else np.asarray(thresholds, float).ravel()
+    rates = np.array([np.mean(v > t) for t in th])
+    return th, rates, float(rates.mean())
+
+
+def precision_recall(pred, gt):
+    """Pooled precision and recall of a predicted mask (or stack) against the truth.
+
+    Precision is 1 when nothing is predicted; recall is 1 when the truth is empty."""
+    p = _as_mask(pred, "pred")
+    g = _as_mask(gt, "gt", p.shape)
+    tp = int(np.logical_and(p, g).sum())
+    npred, ngt = int(p.sum()), int(g.sum())
+    return (tp / npred if npred else 1.0), (tp / ngt if ngt else 1.0)
+
+
+def occluder_as_target(pred, occluder):
+    """Fraction of occluder (hand) pixels labelled as target, pooled over a stack; NaN if no occluder pixel."""
+    p = _as_mask(pred, "pred")
+    o = _as_mask(occluder, "occluder", p.shape)
+    n = int(o.sum())
+    return float(np.logical_and(p, o).sum() / n) if n else float("nan")
+
+
+def roc_auc(scores, labels):
+    """Area under the ROC curve of per-pixel scores against boolean labels (ties count one half).
+
+    Computed from ranks (Mann-Whitney U); raises if one class is absent."""
+    s = np.asarray(scores, dtype=np.float64).ravel()
+    y = _as_mask(np.asarray(labels).reshape(np.shape(labels)) if np.ndim(labels) >= 2 else
+                 np.asarray(labels)[None, :], "labels").ravel()
+    if s.shape != y.shape:
+        raise ValueError(f"scores: expected {y.shape[0]} values to match labels, got {s.shape[0]}")
+    if not np.isfinite(s).all():
+        raise ValueError("scores: contains NaN or inf")
+    npos, nneg = int(y.sum()), int((~y).sum())
+    if npos == 0 or nneg == 0:
+        raise ValueError("labels: both classes are needed for a ROC AUC")
+    order = np.argsort(s, kind="mergesort")
+    ss = s[order]
+    ranks = np.empty(len(s))
+    # average ranks over ties
+    _, first, counts = np.unique(ss, return_index=True, return_counts=True)
+    avg = first + (counts - 1) / 2.0 + 1.0
+    ranks[order] = np.repeat(avg, counts)
+    return float((ranks[y].sum() - npos * (npos + 1) / 2.0) / (npos * nneg))

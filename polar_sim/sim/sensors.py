@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from polar_sim.geometry import CV_FROM_GL, make_pose
+from polar_sim.sim.render import OffscreenRenderer
 from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
 
 __all__ = [
@@ -240,58 +241,50 @@ class Lidar:
 
 
 class CameraRig:
-    """Renders every camera of a model: one ``mujoco.Renderer`` per image size, made lazily."""
+    """Renders every camera of a model: one :class:`OffscreenRenderer` per image size, made lazily."""
 
     def __init__(self, model):
         self._renderers = {}
         self._opt = mujoco.MjvOption()
         self._opt.geomgroup[:] = RENDER_GROUPS
         self._opt.sitegroup[:] = 0
+        self._target_opt = mujoco.MjvOption()
+        self._target_opt.geomgroup[:] = TARGET_ONLY_GROUPS
+        self._target_opt.sitegroup[:] = 0
 
     def renderer(self, model, height, width):
         key = (height, width)
         if key not in self._renderers:
-            if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
-                raise ValueError(
-                    f"width/height: {width}x{height} exceeds the scene's offscreen buffer "
-                    f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}"
-                )
-            self._renderers[key] = mujoco.Renderer(model, height, width)
+            self._renderers[key] = OffscreenRenderer(model, height, width)
         return self._renderers[key]
 
     def render(self, model, data, cam_id, width, height, label_lut, *, rgb=True, depth=True, seg=True):
-        r = self.renderer(model, height, width)
-        r.update_scene(data, camera=cam_id, scene_option=self._opt)
-        img = r.render().copy() if rgb else None
-        d = g = None
-        if depth:
-            r.enable_depth_rendering()
-            d = r.render().copy()
-            r.disable_depth_rendering()
-        if seg or depth:
-            r.enable_segmentation_rendering()
-            s = r.render()
-            r.disable_segmentation_rendering()
-            g = np.where(s[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, s[..., 0], -1).astype(np.int32)
-        if d is not None:
-            d[g < 0] = np.inf  # background shows the far plane: no return
+        """``(rgb, depth, labels, geom_ids)`` of a fixed camera; unrequested parts are None."""
+        img, d, g = self.renderer(model, height, width).render(data, cam_id, self._opt, rgb=rgb,
+                                                                 depth=depth, ids=seg or depth)
         labels = None
         if g is not None:
             labels = np.where(g >= 0, label_lut[np.maximum(g, 0)], 0).astype(np.int32)
         return img, d, labels, g
 
+    def render_free(self, model, data, width, height, lookat, distance, azimuth, elevation):
+        """RGB (H, W, 3) from a free camera orbiting ``lookat`` (m) at ``distance`` (m),
+        ``azimuth`` and ``elevation`` in degrees (MuJoCo's viewer convention)."""
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        cam.lookat[:] = lookat
+        cam.distance = distance
+        cam.azimuth = azimuth
+        cam.elevation = elevation
+        img, _, _ = self.renderer(model, height, width).render(data, cam, self._opt, depth=False, ids=False)
+        return img
+
     def render_target_mask(self, model, data, cam_id, width, height):
         """Full (amodal) silhouette (H, W) bool of the geoms in the target group, ignoring
         everything that would occlude them."""
-        r = self.renderer(model, height, width)
-        opt = mujoco.MjvOption()
-        opt.geomgroup[:] = TARGET_ONLY_GROUPS
-        opt.sitegroup[:] = 0
-        r.update_scene(data, camera=cam_id, scene_option=opt)
-        r.enable_segmentation_rendering()
-        s = r.render()
-        r.disable_segmentation_rendering()
-        return s[..., 1] == mujoco.mjtObj.mjOBJ_GEOM
+        _, _, g = self.renderer(model, height, width).render(data, cam_id, self._target_opt, rgb=False,
+                                                              depth=False, ids=True)
+        return g >= 0
 
     def close(self):
         for r in self._renderers.values():

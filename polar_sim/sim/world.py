@@ -207,7 +207,9 @@ class World:
         R = np.stack([xb, np.cross(n, xb), n], 1)
         adr = m.jnt_qposadr[m.joint("rover_free").id]
         vadr = m.jnt_dofadr[m.joint("rover_free").id]
-        d.qpos[adr : adr + 3] = np.array([x, y, z]) + cfg.wheel_radius * n
+        # Directly above the ground point (x, y), at the height where a wheel of radius r
+        # touches the local tangent plane: the unicycle holds exactly in the horizontal plane.
+        d.qpos[adr : adr + 3] = [x, y, z + cfg.wheel_radius / n[2]]
         d.qpos[adr + 3 : adr + 7] = matrix_to_quat(R)
         d.qvel[vadr : vadr + 3] = v * xb
         d.qvel[vadr + 3 : vadr + 6] = [0.0, 0.0, w]
@@ -246,6 +248,28 @@ class World:
         if noise is not None:
             rgb, depth = noise.apply(rgb, depth, K[0, 0], self._rng)
         return CameraFrame(rgb, depth, labels, gids, K, camera_pose(self.data, cid), self.time)
+
+    def render_view(self, *, width=640, height=480, lookat=None, distance=None, azimuth=90.0,
+                    elevation=-45.0):
+        """RGB (H, W, 3) uint8 of the scene from a free third-person camera.
+
+        ``lookat`` (3,) defaults to the robot (rover scenes) or the scene centre; ``distance``
+        (m) defaults to a view that frames the robot's surroundings. ``elevation=-90`` looks
+        straight down (a top-down map view).
+        """
+        self._check_open()
+        if lookat is None:
+            if self._has_rover:
+                lookat = self.data.xpos[self.model.body("rover").id]
+            else:
+                lookat = self.model.stat.center
+        if distance is None:
+            distance = (12.0 * self.meta["rover_config"].wheelbase if self._has_rover
+                        else 1.5 * self.model.stat.extent)
+        if self._rig is None:
+            self._rig = CameraRig(self.model)
+        return self._rig.render_free(self.model, self.data, width, height, np.asarray(lookat, float),
+                                     float(distance), float(azimuth), float(elevation))
 
     def amodal_mask(self, name, *, width=None, height=None):
         """Full silhouette (H, W) bool of the target object seen from camera ``name``, as if

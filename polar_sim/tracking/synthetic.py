@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 #: Label values in the label image returned by :func:`render` for :func:`make_sequence` scenes.
-BACKGROUND, TABLE, TARGET, HAND = -1, 0, 1, 2
+BACKGROUND, TABLE, TARGET, HAND, OCCLUDER = -1, 0, 1, 2, 3
 
 
 @dataclass
@@ -255,8 +255,8 @@ class Sequence:
     """A rendered-on-demand synthetic RGB-D sequence with exact truth.
 
     ``frame(i)`` returns a dict with ``rgb``, ``depth`` (noisy), ``depth_clean``, ``labels``
-    (BACKGROUND/TABLE/TARGET/HAND per pixel), ``mask`` (visible target), ``hand`` (visible hand)
-    and ``pose`` (T_cam_obj).
+    (BACKGROUND/TABLE/TARGET/HAND/OCCLUDER per pixel), ``mask`` (visible target), ``hand``
+    (visible hand) and ``pose`` (T_cam_obj).
     """
 
     K: np.ndarray
@@ -268,6 +268,7 @@ class Sequence:
     seed: int = 0
     noise: bool = True
     hidden: frozenset = frozenset()
+    occluded: frozenset = frozenset()
     extras: list = field(default_factory=list)
 
     def __len__(self):
@@ -286,6 +287,12 @@ class Sequence:
         if i not in self.hidden and self.hand_poses is not None:
             parts.append(make_hand())
             poses.append(self.hand_poses[i])
+        if i in self.occluded:
+            # a grey board between the camera and the object, 40% of the way: full occlusion
+            board = trimesh.creation.box([0.3, 0.3, 0.01])
+            parts.append(Part.from_trimesh(board, (128, 128, 128), OCCLUDER))
+            c = self.poses[i][:3, 3]
+            poses.append(make_pose(None, 0.6 * c))
         for part, T in self.extras:
             parts.append(part)
             poses.append(T)
@@ -300,12 +307,13 @@ class Sequence:
 
 
 def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape=(480, 640),
-                  noise=True, hidden=()):
+                  noise=True, hidden=(), occluded=()):
     """A hand-held object on a table seen from 0.7 m, 30 fps.
 
     The object slides about 8 cm, lifts 3 cm and turns +-25 deg about its vertical axis (scaled by
     ``speed``); the hand holds its camera-facing side. Frames listed in ``hidden`` drop the object
-    and the hand from the image (as if they left the view), for lost/recover tests.
+    and the hand from the image (as if they left the view); frames in ``occluded`` put a board
+    between the camera and the object (full occlusion): both for lost/recover tests.
     """
     H, W = shape
     K = intrinsics(W, H)
@@ -326,4 +334,4 @@ def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape
         poses.append(T_co)
         hposes.append(T_co @ T_obj_hand)
     return Sequence(K, (H, W), target, np.array(poses), np.array(hposes) if hand else None, T_wc,
-                    seed, noise, frozenset(hidden))
+                    seed, noise, frozenset(hidden), frozenset(occluded))

@@ -130,7 +130,11 @@ def test_bad_input_raises_and_leaves_the_filter_unchanged(room, field):
 
 @pytest.mark.parametrize(
     "params, name",
-    [({"n_particles": 0}, "n_particles"), ({"alphas": (0.1, 0.1)}, "alphas"), ({"resample_threshold": 2.0}, "resample_threshold")],
+    [
+        ({"n_particles": 0}, "n_particles"),
+        ({"alphas": (0.1, 0.1)}, "alphas"),
+        ({"resample_threshold": 2.0}, "resample_threshold"),
+    ],
 )
 def test_bad_parameters_raise(field, params, name):
     # Parameters are checked at initialize, naming the parameter.

@@ -1,0 +1,74 @@
+"""Simulator speed: lidar throughput against raw mj_multiRay, camera frame rates, physics steps/s.
+
+Usage: python benchmarks/bench_sim.py [--quick]
+Prints a markdown table; the figures recorded in benchmarks/RESULTS.md come from this script.
+"""
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from polar_sim.sim import World  # noqa: E402
+from polar_sim.sim.robots import RAY_GROUPS  # noqa: E402
+
+
+def rate(fn, seconds):
+    fn()  # warm-up (renderer creation, caches)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        fn()
+        n += 1
+    return n / (time.perf_counter() - t0)
+
+
+def raw_multiray(w, name):
+    """The bare mj_multiRay call a lidar scan needs, with directions precomputed in world axes."""
+    spec = w.lidar_spec(name)
+    sid = w.model.site(spec.site).id
+    R = w.data.site_xmat[sid].reshape(3, 3)
+    vec = (spec.directions @ R.T).ravel()
+    org = w.data.site_xpos[sid].copy()
+    n = len(spec.directions)
+    gid, dist = np.zeros(n, np.int32), np.zeros(n)
+    return lambda: mujoco.mj_multiRay(w.model, w.data, org, vec, RAY_GROUPS, 1, -1, gid, dist, None, n, spec.max_range)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    T = 0.5 if args.quick else 3.0
+    rows = []
+    for scene, steps, action in (("office2d", 5, (1.0, 0.0)), ("rover_terrain", 20, (6.0, 0.08))):
+        w = World(scene, seed=0)
+        for _ in range(steps):
+            w.step(action)
+        for name in ("lidar", "lidar3d"):
+            api = rate(lambda: w.lidar(name), T)
+            raw = rate(raw_multiray(w, name), T)
+            rows.append((f"{scene} {name} ({len(w.lidar_spec(name).directions)} beams)", f"{api:.0f} scans/s",
+                         f"{raw:.0f} scans/s raw", f"{100 * api / raw:.0f}% of raw"))
+        w.close()
+    w = World("rover_terrain", seed=0)
+    for _ in range(20):
+        w.step((6.0, 0.08))
+    for (W, H) in ((640, 480), (320, 240)):
+        fps = rate(lambda: w.camera("front", width=W, height=H), T)
+        rows.append((f"rover_terrain camera {W}x{H} rgb+depth+labels", f"{fps:.1f} frames/s", "", ""))
+    # Physics only: World.step without sensors, counted in physics steps (timestep 4 ms).
+    n_ctrl = rate(lambda: w.step((6.0, 0.08)), T)
+    rows.append(("rover_terrain World.step, physics only", f"{n_ctrl * w._substeps:.0f} physics steps/s",
+                 f"{n_ctrl:.0f} World.step/s (dt = {w.dt} s)", f"{n_ctrl * w.dt:.0f}x real time"))
+    print(f"load: {os.getloadavg()[0]:.2f}")
+    print("| what | measured | reference | ratio |\n|---|---|---|---|")
+    for r in rows:
+        print("| " + " | ".join(r) + " |")
+
+
+if __name__ == "__main__":
+    main()
