@@ -56,10 +56,11 @@ def _trial_dir(out_dir, params, seed):
     return out_dir / "trials" / f"{slug}_seed-{seed}"[:180]
 
 
-def _execute(exp_name, params, seed, trial_dir, quick):
-    """Run one trial (in this process or a worker). Returns the result row."""
+def _execute(exp, params, seed, trial_dir, quick):
+    """Run one trial (in this process or a worker). ``exp`` is an Experiment or a registered
+    name (workers re-import registered experiments by name). Returns the result row."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    exp = get_experiment(exp_name)
+    exp = get_experiment(exp)
     trial_dir = Path(trial_dir)
     trial_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -82,6 +83,14 @@ def _execute(exp_name, params, seed, trial_dir, quick):
     return row
 
 
+def _portable(exp):
+    """What to send to a worker: the registered name if there is one, else the object itself
+    (its functions must then be importable module-level functions)."""
+    from polar_sim.runner.registry import list_experiments
+
+    return exp.name if exp.name in list_experiments() and get_experiment(exp.name) is exp else exp
+
+
 def _run_ray(exp, todo, out_dir, quick, workers):
     try:
         import ray
@@ -92,7 +101,7 @@ def _run_ray(exp, todo, out_dir, quick, workers):
         ray.init(num_cpus=workers if not os.environ.get("RAY_ADDRESS") else None, log_to_driver=False,
                  include_dashboard=False, ignore_reinit_error=True)
     remote = ray.remote(num_cpus=1)(_execute)
-    pending = {remote.remote(exp.name, p, s, str(_trial_dir(out_dir, p, s)), quick): (p, s) for p, s in todo}
+    pending = {remote.remote(_portable(exp), p, s, str(_trial_dir(out_dir, p, s)), quick): (p, s) for p, s in todo}
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
         for ref in done:
@@ -103,12 +112,12 @@ def _run_ray(exp, todo, out_dir, quick, workers):
 def _run_local(exp, todo, out_dir, quick, workers):
     if workers <= 1:
         for p, s in todo:
-            yield _execute(exp.name, p, s, str(_trial_dir(out_dir, p, s)), quick)
+            yield _execute(exp, p, s, str(_trial_dir(out_dir, p, s)), quick)
         return
     # spawn: a forked child of a parent that holds a GL context deadlocks.
     ctx = mp.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futs = [pool.submit(_execute, exp.name, p, s, str(_trial_dir(out_dir, p, s)), quick) for p, s in todo]
+        futs = [pool.submit(_execute, _portable(exp), p, s, str(_trial_dir(out_dir, p, s)), quick) for p, s in todo]
         for f in cf.as_completed(futs):
             yield f.result()
 

@@ -45,9 +45,28 @@ def tukey(u):
     return np.where(a > 0.0, a * a, 0.0)
 
 
+def _normal_equations(J, r, w, m, n, y, mu):
+    """J^T W J and J^T W r of point-to-plane plus the weighted tangential point-to-point term."""
+    Jw = J * w[:, None]
+    H = Jw.T @ J
+    g = Jw.T @ r
+    if mu > 0:
+        e = m - y
+        e = e - n * np.einsum("ij,ij->i", e, n)[:, None]  # tangential residual (I - n n^T)(m - y)
+        # Jacobian of (m + w x m + v - y) is [-hat(m), I]; project both blocks on the tangent plane
+        Jr = np.stack([np.cross(np.eye(3)[k], m) for k in range(3)], axis=2)  # d/d omega_k: e_k x m
+        Jr = Jr - n[:, :, None] * np.einsum("ij,ijk->ik", n, Jr)[:, None, :]
+        Jt = np.broadcast_to(np.eye(3), (len(m), 3, 3)) - n[:, :, None] * n[:, None, :]
+        Jf = np.concatenate([Jr, Jt], axis=2)  # (n, 3, 6)
+        ww = (mu * mu) * w
+        H = H + np.einsum("n,nij,nik->jk", ww, Jf, Jf)
+        g = g + np.einsum("n,nij,ni->j", ww, Jf, e)
+    return H, g
+
+
 def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate_floor,
                  max_iterations=30, vis_every=5, gate_decay=0.7, tol_rot=1e-4, tol_trans=1e-5,
-                 exact=False, min_points=6):
+                 exact=False, min_points=6, tangential_weight=0.3):
     """Register camera-frame points X (n, 3) with prior weights w0 (n,) to the model.
 
     Parameters
@@ -59,6 +78,10 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     gate0, gate_floor : correspondence gate (point-to-point, m) at the first outer iteration and
         its floor; it shrinks by ``gate_decay`` per outer iteration of ``vis_every`` iterations,
         after which the visibility is recomputed.
+    tangential_weight : weight mu of an added point-to-point term restricted to the tangent plane,
+        ``mu^2 |(I - n n^T)(m - y)|^2``. Point-to-plane alone cannot see a slide along a face (a
+        box seen face-on); the tangential term lets the boundary of the selected points pin it.
+        0 gives pure point-to-plane.
     """
     T = T_init.copy()
     P, N = model.P, model.N
@@ -90,9 +113,7 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
             J = np.concatenate([np.cross(m, n), n], axis=1)
             sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), sig_floor)
             w = w0[sel] * tukey(r / (4.685 * sigma))
-            Jw = J * w[:, None]
-            H = Jw.T @ J
-            g = Jw.T @ r
+            H, g = _normal_equations(J, r, w, m, n, y, tangential_weight)
             tr = np.trace(H)
             if not np.isfinite(tr) or tr <= 0:
                 ok_any = False
@@ -123,7 +144,7 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     rmse = float(np.sqrt(np.mean(r[np.abs(r) < delta1[sel]] ** 2))) if inl.any() else np.inf
     J = np.concatenate([np.cross(m, n), n], axis=1)
     w = w0[sel] * tukey(r / (4.685 * sigma))
-    H = (J * w[:, None]).T @ J
+    H, _ = _normal_equations(J, r, w, m, n, Y[sel], tangential_weight)
     tr = np.trace(H)
     try:
         cov = sigma**2 * np.linalg.inv(H + 1e-6 * max(tr, 1e-12) * np.eye(6))

@@ -43,7 +43,8 @@ class TrackResult:
     ----------
     pose : (4, 4) T_cam_obj, the registration output (the prediction when the frame was lost).
     mask : (H, W) bool target segmentation (O == 1, plus undecided pixels without depth inside
-        the registered silhouette that the appearance model calls target).
+        the registered silhouette that the appearance model calls target); empty when the frame
+        had no usable registration.
     prob : (H, W) float32 prediction map P(L=1 | I, D, T_bar) (0 outside the ROI).
     labels : (H, W) int8 O: 1 target, 0 not target, -1 undecided.
     fitness : prior-weighted fraction of registered points within the inlier band.
@@ -457,6 +458,7 @@ class ObjectTracker:
             return self._emit(T_bar, (0, 0, 0, 0), np.zeros((0, 0), np.int8), z.astype(np.uint8), z,
                               None, None, z > 0, gamma, 0.0, float("nan"), 0, True, False, cov, 0, 0)
         O, S, _ = self._labels(D, roi, T_bar)
+        O[O == 1] = -1  # nothing is confidently target without a registration
         it = res.iterations if res is not None else 0
         return self._emit(T_bar, roi, O, S, Pmap, pi, lI, D > 0, gamma, 0.0, float("nan"), n_points,
                           True, False, cov, it, 0)
@@ -474,7 +476,8 @@ class ObjectTracker:
             und = (O == -1) & inner & ~valid
             if lI is not None and gamma > 0:
                 und &= lI > 0
-            mask[y0:y1, x0:x1] = (O == 1) | und
+            if not lost or accepted:
+                mask[y0:y1, x0:x1] = (O == 1) | und
             prob[y0:y1, x0:x1] = Pmap
         extra = {}
         if self.debug_maps:
