@@ -142,6 +142,10 @@ class GroundVO:
     exact_flow : bool, default=True
         Correct the centred flow for the exact motion between the three frames (not in the spec, and
         off under "code"): removes the O((V dt/Z)²) bias of the differential model on near points.
+    ground_warp : bool, default=True
+        Also track points below the horizon in the previous image warped by the predicted ground
+        homography (from the filtered V, ω and h), keeping the better-matching track: removes most of
+        the KLT error on strongly foreshortened near ground.
     min_triplets, min_inliers : int, default=30, 10
         Minimum three-frame tracks to solve motion; minimum ground inliers to accept the scale.
     speed_prior, speed_prior_var : float, default=0.0, 25.0
@@ -169,7 +173,7 @@ class GroundVO:
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=None,
                  n_iter=None, lam=0.1, sigma=None, weight_exponent=None, downsample=2, max_features=400,
                  klt_window=11, klt_levels=3, fb_max=0.5, irls_iter=None, ridge=1.0, estimate_foe=False,
-                 exact_flow=True, min_triplets=30, min_inliers=10, speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15,
+                 exact_flow=True, ground_warp=True, min_triplets=30, min_inliers=10, speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15,
                  speed_r=3.0, yaw_prior=0.0, yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None,
                  depth_r=None, depth_p_reset=None, alpha=0.7, ground_prior=0.2, ng_from_outliers=None,
                  horizon_row=None, integration="planar"):
@@ -192,6 +196,7 @@ class GroundVO:
         self.ridge = ridge
         self.estimate_foe = estimate_foe
         self.exact_flow = exact_flow
+        self.ground_warp = ground_warp
         self.min_triplets = min_triplets
         self.min_inliers = min_inliers
         self.speed_prior = speed_prior
@@ -240,6 +245,7 @@ class GroundVO:
         c["ridge"] = as_positive_float(self.ridge, "ridge", allow_zero=True)
         c["foe"] = bool(self.estimate_foe)
         c["exact_flow"] = bool(self.exact_flow) and not code
+        c["ground_warp"] = bool(self.ground_warp)
         c["min_triplets"] = as_int(self.min_triplets, "min_triplets", minimum=10)
         c["min_inliers"] = as_int(self.min_inliers, "min_inliers", minimum=2)
         for name in ("speed_prior", "yaw_prior"):
@@ -389,8 +395,20 @@ class GroundVO:
             gh, gw = g.shape
             guess[:, 0] = np.clip(guess[:, 0], 0, gw - 1)
             guess[:, 1] = np.clip(guess[:, 1], 0, gh - 1)
-            x_new, ok = frontend.track(self.prev_grey_, g, x_prev, guess, win=c["win"], levels=c["levels"],
-                                       fb_max=c["fb_max"])
+            x_new, ok, err = frontend.track(self.prev_grey_, g, x_prev, guess, win=c["win"], levels=c["levels"],
+                                            fb_max=c["fb_max"], return_err=True)
+            if c["ground_warp"] and vf.x > 0:
+                # Ground-stabilised tracking of points below the horizon: keep whichever of the plain and the
+                # homography-warped track matches its patch better.
+                low = np.flatnonzero(x_prev[:, 1] > self.horizon_)
+                if len(low):
+                    Kp = np.array([[self.fx_, 0.0, self.cx_], [0.0, self.fy_, self.cy_], [0.0, 0.0, 1.0]])
+                    Hg = frontend.ground_homography(Kp, vf.x, yf.x, dt, c["h"])
+                    qw, okw, errw = frontend.track_ground_warped(self.prev_grey_, g, x_prev[low], Hg, win=c["win"],
+                                                                 levels=c["levels"], fb_max=c["fb_max"])
+                    better = okw & (~ok[low] | (errw < err[low]))
+                    x_new[low[better]] = qw[better]
+                    ok[low[better]] = True
             diag["n_tracked"] = int(ok.sum())
             disp = x_new[ok] - x_prev[ok]
             _select(trk, ok)

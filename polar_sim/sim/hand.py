@@ -453,15 +453,20 @@ class HandScript:
         v = np.array([sign, 0.0, 0.0])
         x = np.cross(v, [0.0, 0.0, 1.0])
         P = self._world_samples(To)
-        low = P[P[:, 2] < self.table_z + 0.05]
-        mid = 0.5 * ((P @ x).max() + (P @ x).min())
-        start = ((low @ v).min() - FINGER_OUTER - 0.02) * v + mid * x
+        low = P[P[:, 2] < self.table_z + 0.04]
+        mid = 0.5 * ((low @ x).max() + (low @ x).min())
+        # Start clear of every part of the object in the hand's path (overhangs included), so
+        # the hand comes down beside it, never onto it.
+        band = P[np.abs(P @ x - mid) < PALM_HALF[0] + 0.01]
+        gap = (low @ v).min() - (band @ v).min()
+        start = ((band @ v).min() - FINGER_OUTER - 0.02) * v + mid * x
         start[2] = self.table_z + 0.007 - TIP_Z
         q = matrix_to_quat(np.stack([x, v, [0.0, 0.0, 1.0]], 1))
         self._approach(plan, (start, q))
-        plan.move((start + (dist + 0.02) * v, q), (dist + 0.02) / 0.06, "push")
+        travel = dist + gap + 0.02
+        plan.move((start + travel * v, q), travel / 0.06, "push")
         plan.hold(0.4, "push")
-        plan.move((start + (dist + 0.005) * v, q), 0.4, "release")
+        plan.move((start + (travel - 0.015) * v, q), 0.4, "release")
         self._leave(plan)
 
     def _grasp_and(self, plan, To, moves, yaw=None):

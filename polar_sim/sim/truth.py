@@ -112,8 +112,9 @@ def geom_trimesh(model, g):
     raise ValueError(f"geom {model.geom(g).name!r}: no mesh for geom type {int(t)}")
 
 
-def body_trimesh(model, body_id, groups=(GROUP["static"], GROUP["dynamic"])):
-    """All visible geoms of one body merged into a mesh in the body frame."""
+def body_trimesh(model, body_id, groups=(GROUP["static"], GROUP["dynamic"], GROUP["target"])):
+    """All visible geoms of one body merged into a mesh in the body frame (the tracked object's
+    visible geoms are in the target group)."""
     parts = []
     for g in range(model.ngeom):
         if model.geom_bodyid[g] != body_id or model.geom_group[g] not in groups:

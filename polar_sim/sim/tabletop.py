@@ -1,0 +1,391 @@
+"""The manipulation scenes: ``tabletop`` (objects on a table, a scripted mocap hand, a static
+RGB-D camera) and ``object_orbit`` (an RGB-D camera circling one object).
+
+Both builders add the seeded parts to their base MJCF (``scenes/tabletop.xml``,
+``scenes/object_orbit.xml``): object choice, placement and colours, procedural textures, the
+hand and the script. Objects come from :mod:`polar_sim.sim.objects`; each is a textured visual
+mesh (no collisions) plus hidden collision primitives. The tracked object's visible geom is in
+the ``target`` geom group, so :meth:`World.amodal_mask` renders its full silhouette.
+
+Scripts of ``tabletop`` (option ``script``):
+
+========  =====================================================================================
+touch     the palm rests on the target's top, fingers over its front; twice (Mode B, contact)
+push      the fingers push the target 10 cm along +x, then 8 cm back (Mode B, physics)
+lift      grasp, lift 15 cm, tilt toward the camera, turn, put back (Mode A, kinematic)
+turn      grasp, lift 3 cm, turn 70-110 deg about the vertical, roll, put down; twice
+fast      grasp and shake: +-7 cm, +-25 deg moves of 0.5 s (peaks ~0.5 m/s, ~180 deg/s)
+light     the key light dims to 30 % and brightens to 130 % while the hand touches and turns
+pass      the hand sweeps across in front of the target without touching it, twice
+demo      touch, pass, lift, turn, push, and again (cycles for ever)
+========  =====================================================================================
+"""
+
+from __future__ import annotations
+
+import logging
+
+import mujoco
+import numpy as np
+
+from polar_sim.geometry import matrix_to_quat
+from polar_sim.sim import objects as _objects
+from polar_sim.sim.hand import (COLLIDE_OBJECT, HAND_SKIN, HandScript, add_hand, look_at_quat,
+                                matrix_to_quat as _m2q)
+from polar_sim.sim.robots import GROUP
+
+__all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "COLOURS", "OrbitScript", "object_texture"]
+
+logger = logging.getLogger(__name__)
+
+TABLE_Z = 0.75
+CONTROL_DT = 1.0 / 30.0
+TIMESTEP = CONTROL_DT / 20  # 20 physics substeps per camera frame
+
+#: Object colours (RGB 0..255): distinct hues. "skin" is the hand's colour.
+COLOURS = {
+    "red": (196, 36, 40), "blue": (36, 84, 200), "green": (40, 150, 70), "yellow": (232, 196, 30),
+    "orange": (238, 120, 28), "purple": (120, 52, 160), "cyan": (30, 170, 190), "white": (228, 228, 222),
+    "skin": tuple(int(round(255 * c)) for c in HAND_SKIN[:3]),
+}
+
+#: Scripts: (actions, options) — actions as in :mod:`polar_sim.sim.hand`.
+SCRIPTS = {
+    "touch": [("touch", {"yaw": 0.0}), ("touch", {"yaw": 0.5, "hold": 2.2})],
+    "push": [("push", {"dir": 1.0, "dist": 0.10}), ("push", {"dir": -1.0, "dist": 0.08})],
+    "lift": [("lift", {})],
+    "turn": [("turn", {}), ("turn", {})],
+    "fast": [("fast", {})],
+    "light": [("touch", {"hold": 2.0}), ("turn", {})],
+    "pass": [("pass", {"dir": 1.0, "height": 0.0}), ("pass", {"dir": -1.0, "height": -0.03})],
+    "demo": ["touch", "pass", "lift", "turn", "push"],
+}
+CAMERA_MOTIONS = ("static", "sway")
+
+
+def _check(value, choices, name):
+    if value not in choices:
+        raise ValueError(f"{name}: unknown value {value!r}; expected one of {', '.join(map(repr, choices))}")
+    return value
+
+
+# -- textures --------------------------------------------------------------------------------
+
+def _noise(rng, shape, sigma):
+    from scipy.ndimage import gaussian_filter
+
+    n = gaussian_filter(rng.standard_normal(shape), sigma, mode="wrap")
+    return n / (n.std() + 1e-9)
+
+
+def object_texture(base, accent, rng, size=256):
+    """A 2x2 texture atlas (size, size, 3) uint8 for one object (tiles: see
+    ``objects.ATLAS_TILES``): body (base colour, mottled, seeded stripes), accent, printed
+    label (light ground, blocks of both colours, dark text-like bars), dark plastic/metal."""
+    h = size // 2
+    base, accent = np.asarray(base, float), np.asarray(accent, float)
+    tiles = []
+    body = np.ones((h, h, 3)) * base + 6 * _noise(rng, (h, h), 2)[..., None]
+    for _ in range(rng.integers(0, 3)):
+        r0 = rng.integers(8, h - 16)
+        body[r0 : r0 + rng.integers(3, 9)] = 0.5 * base + 0.5 * accent
+    tiles.append(body)
+    tiles.append(np.ones((h, h, 3)) * accent + 5 * _noise(rng, (h, h), 2)[..., None])
+    label = np.ones((h, h, 3)) * np.array([236.0, 232.0, 220.0])
+    r0, r1 = sorted(rng.integers(10, h - 10, 2))
+    label[max(r0 - 20, 0) : r1 + 4, :] = base
+    c0 = rng.integers(5, h // 2)
+    label[r0 : r0 + 22, c0 : c0 + rng.integers(20, h // 2)] = accent
+    for _ in range(6):
+        rr, cc = rng.integers(4, h - 8), rng.integers(4, h - 40)
+        label[rr : rr + 4, cc : cc + rng.integers(12, 36)] = (30, 30, 34)
+    tiles.append(label + 4 * _noise(rng, (h, h), 1)[..., None])
+    tiles.append(np.ones((h, h, 3)) * 42.0 + 8 * _noise(rng, (h, h), 1.5)[..., None])
+    img = np.zeros((size, size, 3))
+    for k, t in enumerate(tiles):
+        # Tile k covers u in [k%2, k%2+1]/2 and v in [k//2, k//2+1]/2; image rows run along v.
+        img[(k // 2) * h : (k // 2 + 1) * h, (k % 2) * h : (k % 2 + 1) * h] = t
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _wood_texture(rng, size=256):
+    y = np.arange(size)[:, None] / size
+    x = np.arange(size)[None, :] / size
+    grain = np.sin(2 * np.pi * (14 * y + 1.5 * _noise(rng, (size, size), 12) * 0.3 + 0.05 * np.sin(6 * np.pi * x)))
+    tone = np.array([168.0, 128.0, 88.0]) * rng.uniform(0.85, 1.1)
+    img = tone + (12 * grain + 5 * _noise(rng, (size, size), 1.0))[..., None] * np.array([1.0, 0.8, 0.6])
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _wall_texture(rng, size=128):
+    tone = np.array([205.0, 203.0, 196.0]) + rng.uniform(-15, 10, 3)
+    img = tone + 5 * _noise(rng, (size, size), 1.5)[..., None]
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _add_texture(spec, name, img):
+    tex = spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D,
+                           width=img.shape[1], height=img.shape[0], nchannel=3)
+    tex.data = np.ascontiguousarray(img).tobytes()
+    mat = spec.add_material(name=name, specular=0.15, shininess=0.2)
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
+    return mat
+
+
+# -- objects ---------------------------------------------------------------------------------
+
+def _add_mesh(spec, name):
+    """Add object ``name``'s shipped OBJ mesh (vertices, faces and texture coordinates)."""
+    V, T, F, FT = [], [], [], []
+    for line in _objects.asset_path(name).read_text().splitlines():
+        tok = line.split()
+        if not tok:
+            continue
+        if tok[0] == "v":
+            V.extend(float(a) for a in tok[1:4])
+        elif tok[0] == "vt":
+            T.extend(float(a) for a in tok[1:3])
+        elif tok[0] == "f":
+            for c in tok[1:4]:
+                v, t = c.split("/")[:2]
+                F.append(int(v) - 1)
+                FT.append(int(t) - 1)
+    mesh = spec.add_mesh(name=f"mesh_{name}")
+    mesh.uservert = V
+    mesh.userface = F
+    mesh.usertexcoord = T
+    mesh.userfacetexcoord = FT
+    return mesh
+
+
+def _add_object(spec, name, pos, yaw, material, *, target, free=True):
+    info = _objects.object_info(name)
+    _add_mesh(spec, name)
+    body = spec.worldbody.add_body(name=name, pos=list(pos), quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+    if free:
+        body.add_freejoint(name=f"{name}_free")
+    body.add_geom(name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh_{name}",
+                  material=material, contype=0, conaffinity=0, density=0.0,
+                  group=GROUP["target"] if target else GROUP["dynamic"])
+    if not free:
+        return body
+    vols = []
+    for c in info.collision:
+        s = c["size"]
+        vols.append(8 * s[0] * s[1] * s[2] if c["type"] == "box" else 2 * np.pi * s[0] ** 2 * s[1])
+    for k, (c, vol) in enumerate(zip(info.collision, vols)):
+        kw = dict(name=f"{name}_collision{k}", size=list(c["size"]) + [0] * (3 - len(c["size"])),
+                  pos=list(c["pos"]), group=GROUP["collision"], rgba=[0, 0, 0, 0],
+                  contype=COLLIDE_OBJECT, conaffinity=COLLIDE_OBJECT, mass=info.mass * vol / sum(vols),
+                  friction=[0.5, 0.005, 0.0001], condim=4)
+        if c["type"] == "box":
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, **kw)
+        else:
+            if c.get("axis", "z") == "x":
+                kw["quat"] = [np.sqrt(0.5), 0, np.sqrt(0.5), 0]
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, **kw)
+    return body
+
+
+def _footprint(mesh):
+    return float(np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 1]).max())
+
+
+def _place(rng, target, others, meshes):
+    """Seeded positions (x, y) and yaws. The target stands in the front half of the table; the
+    others stand in rows behind it, clear of the strips the hand uses beside and in front of it
+    (for pushing, reaching and the crossing pass)."""
+    xt, yt = rng.uniform(-0.10, 0.0), rng.uniform(-0.10, -0.04)
+    rt = _footprint(meshes[target])
+    out = {target: (xt, yt, rng.uniform(-np.pi, np.pi))}
+    placed = [(xt, yt, rt)]
+    for o in others:
+        r = _footprint(meshes[o])
+        for _ in range(2000):
+            x, y = rng.uniform(-0.42, 0.42), rng.uniform(yt + rt + r + 0.07, 0.30)
+            if abs(x - xt) < rt + r + 0.10:
+                continue
+            if all(np.hypot(x - a, y - b) > r + c + 0.03 for a, b, c in placed):
+                break
+        else:
+            raise ValueError(f"n_objects: cannot place {len(others) + 1} objects on the table")
+        out[o] = (x, y, rng.uniform(-np.pi, np.pi))
+        placed.append((x, y, r))
+    return out
+
+
+def _surface_samples(mesh, n=4000):
+    import trimesh
+
+    pts, _ = trimesh.sample.sample_surface_even(mesh, n, seed=0)
+    return np.vstack([np.asarray(pts), mesh.vertices])
+
+
+def _light_ramp(t):
+    """Key-light scale over time: 1 until 1.5 s, down to 0.3 at 4.5 s, held, up to 1.3 at
+    9.5 s, held."""
+    from polar_sim.sim.hand import min_jerk
+
+    if t < 1.5:
+        return 1.0
+    if t < 4.5:
+        return 1.0 - 0.7 * min_jerk((t - 1.5) / 3.0)
+    if t < 6.5:
+        return 0.3
+    return 0.3 + 1.0 * min_jerk((t - 6.5) / 3.0)
+
+
+def _camera_sway(p0, look):
+    p0 = np.asarray(p0, float)
+
+    def pose(t):
+        p = p0 + np.array([0.10 * np.sin(2 * np.pi * t / 9.0), 0.03 * np.sin(2 * np.pi * t / 6.0),
+                           0.05 * np.sin(2 * np.pi * t / 7.0)])
+        return p, look_at_quat(p, look)
+    return pose
+
+
+def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None, n_objects=4,
+                   target_colour=None, distractor_like_target=False, camera_motion="static"):
+    """``tabletop``: 4-6 objects on a table, a scripted mocap hand, a static RGB-D camera.
+
+    Options: ``script`` (one of :data:`SCRIPTS`), ``target`` (an object name from
+    :func:`polar_sim.sim.objects.object_names`, default chosen from the seed), ``n_objects``
+    (4-6), ``target_colour`` (a name of :data:`COLOURS`, e.g. ``"skin"`` for an object the colour
+    of the hand; default seeded), ``distractor_like_target`` (give one other object the
+    target's colours), ``camera_motion`` ("static" or "sway": the camera drifts slowly, always
+    looking at the table).
+
+    Returns the metadata: ``objects``, ``target``, ``control_dt``, ``script`` (a
+    :class:`polar_sim.sim.hand.HandScript`), ``script_name``, ``colours``, ``table_z``.
+    """
+    _check(script, tuple(SCRIPTS), "script")
+    names = _objects.object_names()
+    if target is not None:
+        _check(target, tuple(names), "target")
+    if isinstance(n_objects, bool) or not isinstance(n_objects, (int, np.integer)) or not 4 <= n_objects <= 6:
+        raise ValueError(f"n_objects: expected an integer in 4..6, got {n_objects!r}")
+    if target_colour is not None:
+        _check(target_colour, tuple(COLOURS), "target_colour")
+    _check(camera_motion, CAMERA_MOTIONS, "camera_motion")
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7101]))
+    spec.option.timestep = TIMESTEP
+    _add_texture(spec, "table_wood", _wood_texture(rng))
+    _add_texture(spec, "wall", _wall_texture(rng))
+
+    if target is None:
+        target = str(rng.choice(names))
+    others = [str(o) for o in rng.permutation([n for n in names if n != target])[: n_objects - 1]]
+    meshes = {o: _objects.load_mesh(o) for o in [target] + others}
+    layout = _place(rng, target, others, meshes)
+    palette = [c for c in COLOURS if c != "skin"]
+    order = [str(c) for c in rng.permutation(palette)]
+    colours = {}
+    for k, o in enumerate([target] + others):
+        colours[o] = (order[k % len(order)], order[(k + 3) % len(order)])
+    if target_colour is not None:
+        colours[target] = (target_colour, colours[target][1])
+    if distractor_like_target:
+        colours[others[0]] = colours[target]
+    for o in [target] + others:
+        base, accent = colours[o]
+        _add_texture(spec, f"tex_{o}", object_texture(COLOURS[base], COLOURS[accent], rng))
+        x, y, yaw = layout[o]
+        _add_object(spec, o, (x, y, TABLE_Z), yaw, f"tex_{o}", target=(o == target))
+
+    home = (np.array([0.32, 0.42, 1.32]), _m2q(np.diag([-1.0, -1.0, 1.0])))
+    add_hand(spec, *home)
+    cam_body = spec.body("camera_rig")
+    cam_pos = np.array(cam_body.pos, float)
+    actions = SCRIPTS[script]
+    light = None
+    if script == "light":
+        light = _light_ramp
+    camera = _camera_sway(cam_pos, (0.0, 0.05, TABLE_Z + 0.05)) if camera_motion == "sway" else None
+    samples = {target: _surface_samples(meshes[target])}
+    hs = HandScript(actions, target, [target] + others, samples, cam_pos, home, TABLE_Z,
+                    int(rng.integers(2 ** 31)), cycle=(script == "demo"), light=light, camera=camera)
+    return {
+        "objects": [target] + others,
+        "target": target,
+        "control_dt": CONTROL_DT,
+        "script": hs,
+        "script_name": script,
+        "colours": {o: list(c) for o, c in colours.items()},
+        "table_z": TABLE_Z,
+    }
+
+
+class OrbitScript:
+    """Moves the camera rig of ``object_orbit`` on a circle around the object, looking at it.
+
+    The camera circles once every ``period`` seconds at ``radius`` metres (horizontal), its
+    height swinging between ``elevation_deg`` +- 12 deg twice per turn.
+    """
+
+    def __init__(self, centre, radius, elevation_deg, period, phase0):
+        self.centre = np.asarray(centre, float)
+        self.radius, self.period, self.phase0 = float(radius), float(period), float(phase0)
+        self.elevation = np.radians(elevation_deg)
+
+    def pose(self, t):
+        th = self.phase0 + 2 * np.pi * t / self.period
+        el = self.elevation + np.radians(12.0) * np.sin(2 * th)
+        d = self.radius / np.cos(el)  # slant distance
+        p = self.centre + d * np.array([np.cos(el) * np.cos(th), np.cos(el) * np.sin(th), np.sin(el)])
+        return p, look_at_quat(p, self.centre)
+
+    def _set(self, model, data):
+        m = model.body_mocapid[model.body("camera_rig").id]
+        p, q = self.pose(float(data.time))
+        data.mocap_pos[m] = p
+        data.mocap_quat[m] = q
+
+    def reset(self, model, data):
+        self._set(model, data)
+
+    def apply(self, model, data):
+        self._set(model, data)
+
+    def after_step(self, model, data):
+        self._set(model, data)
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_camlight(model, data)
+
+    def truth(self, model, data):
+        return {"in_contact": False, "grasped": False, "held": None, "phase": "orbit", "light_scale": 1.0}
+
+
+STAND_Z = 0.5
+
+
+def build_object_orbit(spec: mujoco.MjSpec, seed: int, *, object=None, radius=0.8, elevation_deg=30.0,
+                       period=10.0):
+    """``object_orbit``: one object on a stand, the RGB-D camera circling it.
+
+    Options: ``object`` (a name from :func:`polar_sim.sim.objects.object_names`, default from the
+    seed), ``radius`` (horizontal distance of the camera from the object, 0.5-1.5 m),
+    ``elevation_deg`` (mean camera elevation, 5-60 deg), ``period`` (seconds per turn, > 0).
+    The object is welded to the stand (no joint): it belongs to the static scene, so
+    ``World.sdf`` includes it exactly.
+    """
+    names = _objects.object_names()
+    if object is not None:
+        _check(object, tuple(names), "object")
+    for val, lo, hi, nm in ((radius, 0.5, 1.5, "radius"), (elevation_deg, 5.0, 60.0, "elevation_deg"),
+                            (period, 1e-3, 1e6, "period")):
+        if isinstance(val, bool) or not isinstance(val, (int, float, np.number)) or not lo <= val <= hi:
+            raise ValueError(f"{nm}: expected a number in [{lo}, {hi}], got {val!r}")
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7102]))
+    if object is None:
+        object = str(rng.choice(names))
+    palette = [c for c in COLOURS if c != "skin"]
+    base, accent = (str(c) for c in rng.choice(palette, 2, replace=False))
+    _add_texture(spec, f"tex_{object}", object_texture(COLOURS[base], COLOURS[accent], rng))
+    _add_object(spec, object, (0.0, 0.0, STAND_Z), rng.uniform(-np.pi, np.pi), f"tex_{object}",
+                target=True, free=False)
+    top = float(_objects.load_mesh(object).vertices[:, 2].max())
+    centre = (0.0, 0.0, STAND_Z + 0.5 * top)
+    script = OrbitScript(centre, radius, elevation_deg, period, rng.uniform(0, 2 * np.pi))
+    return {"objects": [object], "target": object, "control_dt": CONTROL_DT, "script": script,
+            "script_name": "orbit", "colours": {object: [base, accent]}, "centre": list(centre)}
