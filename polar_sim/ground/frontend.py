@@ -44,7 +44,10 @@ def track(prev_img, img, pts, guess, *, win=11, levels=3, fb_max=0.5, return_err
         fb = np.linalg.norm(pb.reshape(-1, 2) - p0[i].reshape(-1, 2), axis=1)
         ok[i] = (stb.ravel() == 1) & (fb < fb_max)
     if return_err:
-        return q, ok, err.ravel().astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            e = np.array(err, dtype=np.float64).ravel()
+        e[~ok | ~np.isfinite(e)] = np.inf
+        return q, ok, e
     return q, ok
 
 

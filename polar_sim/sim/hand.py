@@ -52,6 +52,8 @@ GRASP_SPAN = FINGER_INNER + (-THUMB_Y - THUMB_R)  # fingers to thumb, inner surf
 
 #: The actions a script is made of.
 ACTIONS = ("touch", "push", "lift", "turn", "fast", "pass")
+#: Approach directions of a grasp or touch, as yaw offsets from the camera direction (rad).
+APPROACHES = {"front": 0.0, "side": -np.pi / 2, "left": np.pi / 2}
 
 
 def add_hand(spec: mujoco.MjSpec, pos, quat):
@@ -396,8 +398,8 @@ class HandScript:
         near = P[P[:, 2] > top + TIP_Z + FINGER_R]
         u0 = self._toward_camera(To)
         best = None
-        offsets = np.radians(np.arange(-80, 81, 5))
-        for off in offsets[np.argsort(np.abs(offsets - yaw_pref), kind="stable")]:
+        d = np.radians(np.arange(-80, 81, 5))
+        for off in yaw_pref + d[np.argsort(np.abs(d), kind="stable")]:
             c, s = np.cos(off), np.sin(off)
             u = np.array([c * u0[0] - s * u0[1], s * u0[0] + c * u0[1], 0.0])
             x = np.cross(u, [0.0, 0.0, 1.0])
@@ -437,8 +439,7 @@ class HandScript:
     # -- actions -----------------------------------------------------------------------------
     def _plan_touch(self, plan, To, prm):
         """Rest the palm on the object's top (pressing 1 mm), fingers over its front, then leave."""
-        yaw = self._rng.uniform(-0.4, 0.4) if prm.get("yaw") is None else prm["yaw"]
-        pose = self._top_grasp(To, 0.003, -0.001, yaw)
+        pose = self._top_grasp(To, 0.003, -0.001, self._yaw(prm, "front"))
         self._approach(plan, pose)
         plan.hold(prm.get("hold", 1.6), "touch")
         p = pose[0].copy()
@@ -469,10 +470,20 @@ class HandScript:
         plan.move((start + (travel - 0.015) * v, q), 0.4, "release")
         self._leave(plan)
 
-    def _grasp_and(self, plan, To, moves, yaw=None):
+    def _yaw(self, prm, default):
+        """Approach yaw (rad) relative to the camera direction: ``approach`` "front" puts the
+        fingers on the camera's side of the object (most occlusion), "side" brings the hand in
+        from the right (fingers on the object's left), "left" from the left; plus ``yaw``
+        (default: seeded, +-0.3 rad)."""
+        a = prm.get("approach", default)
+        if a not in APPROACHES:
+            raise ValueError(f"approach: unknown value {a!r}; expected one of {', '.join(map(repr, APPROACHES))}")
+        jitter = prm.get("yaw")
+        return APPROACHES[a] + (self._rng.uniform(-0.3, 0.3) if jitter is None else float(jitter))
+
+    def _grasp_and(self, plan, To, moves, yaw=0.0):
         """Top-grasp the target, carry its pivot through ``moves`` = [(dp (3,), R (3,3) applied
         in the world about the pivot, duration, phase)], put it back where it was, let go."""
-        yaw = self._rng.uniform(-0.3, 0.3) if yaw is None else yaw
         hp = self._top_grasp(To, 0.0015, 0.002, yaw)
         self._approach(plan, hp)
         plan.hold(0.3, "grasp")
@@ -496,7 +507,7 @@ class HandScript:
         I = np.eye(3)
         up = [0, 0, h]
         self._grasp_and(plan, To, [(up, I, 1.4, "lift"), (up, tilt, 1.2, "tilt"), (up, yaw @ tilt, 1.2, "turn"),
-                                   (up, I, 1.4, "lift"), ([0, 0, 0], I, 1.4, "place")])
+                                   (up, I, 1.4, "lift"), ([0, 0, 0], I, 1.4, "place")], self._yaw(prm, "side"))
 
     def _plan_turn(self, plan, To, prm):
         """Lift 3 cm, turn about the vertical by 70-110 deg, roll 30 deg and back, put it down."""
@@ -509,7 +520,7 @@ class HandScript:
         up = [0, 0, 0.03]
         self._grasp_and(plan, To, [(up, np.eye(3), 0.8, "lift"), (up, Rz, 2.4, "turn"),
                                    (up, roll @ Rz, 1.1, "roll"), (up, Rz, 1.1, "roll"),
-                                   ([0, 0, 0], Rz, 0.8, "place")])
+                                   ([0, 0, 0], Rz, 0.8, "place")], self._yaw(prm, "side"))
 
     def _plan_fast(self, plan, To, prm):
         """Lift 10 cm and shake: 0.5 s moves of +-7 cm and +-25 deg about changing axes
@@ -525,7 +536,7 @@ class HandScript:
             dp = up + s * 0.07 * x + np.array([0, 0, 0.03 * ((k // 2) % 2)])
             moves.append((dp, _rot(axes[(k // 2) % len(axes)], s * np.radians(25)), 0.5, "fast"))
         moves += [(up, np.eye(3), 0.6, "fast"), ([0, 0, 0], np.eye(3), 0.8, "place")]
-        self._grasp_and(plan, To, moves)
+        self._grasp_and(plan, To, moves, self._yaw(prm, "side"))
 
     def _plan_pass(self, plan, To, prm):
         """Sweep the hand across in front of the object, between it and the camera, without

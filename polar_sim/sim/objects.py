@@ -44,7 +44,9 @@ class ObjectInfo:
     description : str
     collision : tuple of dict
         Primitives in the object frame: ``{"type": "box", "size": half sizes (3,), "pos": (3,)}``
-        or ``{"type": "cylinder", "size": (radius, half_height), "pos": (3,), "axis": "z"|"x"}``.
+        or ``{"type": "cylinder", "size": (radius, half_height), "pos": (3,), "axis": "z"|"x"}``;
+        an optional ``"mass_frac"`` sets a primitive's share of the mass (default: by volume; the
+        drill's battery is heavy, as on a real one).
     mass : float
         kg.
     grasp_halfwidth : float
@@ -238,9 +240,12 @@ OBJECTS = {
                          (_cyl(0.036, 0.135), _cyl(0.024, 0.045, 0.135), _cyl(0.016, 0.042, 0.180)),
                          0.40, 0.020, "z-continuous"),
     "drill": ObjectInfo("drill", "drill-like composite: battery, grip, housing, chuck (non-convex)",
-                        (_bx((0.0375, 0.031, 0.015), (0, 0, 0.015)), _bx((0.019, 0.017, 0.055), (0.010, 0, 0.085)),
-                         {"type": "cylinder", "size": (0.029, 0.0775), "pos": (0.0175, 0, 0.165), "axis": "x"},
-                         {"type": "cylinder", "size": (0.016, 0.035), "pos": (0.128, 0, 0.165), "axis": "x"}),
+                        (dict(_bx((0.0375, 0.031, 0.015), (0, 0, 0.015)), mass_frac=0.5),
+                         dict(_bx((0.019, 0.017, 0.055), (0.010, 0, 0.085)), mass_frac=0.15),
+                         {"type": "cylinder", "size": (0.029, 0.0775), "pos": (0.0175, 0, 0.165), "axis": "x",
+                          "mass_frac": 0.3},
+                         {"type": "cylinder", "size": (0.016, 0.035), "pos": (0.128, 0, 0.165), "axis": "x",
+                          "mass_frac": 0.05}),
                         0.60, 0.031),
     "bracket": ObjectInfo("bracket", "L-bracket with a gusset (non-convex)",
                           (_bx((0.06, 0.025, 0.005), (0, 0, 0.005)), _bx((0.006, 0.025, 0.05), (-0.054, 0, 0.05))),

@@ -73,7 +73,7 @@ ROVER_PRESETS = {
 
 
 def add_rover(spec: mujoco.MjSpec, config: RoverConfig, pose2d=(0.0, 0.0, 0.0), z0=0.0,
-              *, camera_width=640, camera_height_px=480):
+              *, camera_width=640, camera_height_px=480, lidar_beams=1081):
     """Add the rover body "rover" with its sensors' mount points to ``spec``.
 
     Adds the camera ``front``, the 2D lidar site ``lidar`` and the 3D lidar site ``lidar3d``, the
@@ -145,7 +145,7 @@ def add_rover(spec: mujoco.MjSpec, config: RoverConfig, pose2d=(0.0, 0.0, 0.0), 
                     fovy=c.camera_fovy_deg, resolution=[camera_width, camera_height_px])
     body.add_site(name="lidar", pos=[0.0, 0, c.lidar_height - r], size=[0.02, 0, 0])
     body.add_site(name="lidar3d", pos=[-0.15 * hx, 0, c.lidar3d_height - r], size=[0.02, 0, 0])
-    spec.add_text(name="sensor:lidar", data="type=lidar2d site=lidar beams=1081 fov_deg=270 min=0.1 max=30")
+    spec.add_text(name="sensor:lidar", data=f"type=lidar2d site=lidar beams={int(lidar_beams)} fov_deg=270 min=0.1 max=30")
     spec.add_text(name="sensor:lidar3d",
                   data="type=lidar3d site=lidar3d rows=32 cols=1024 vfov_min_deg=-25 vfov_max_deg=15 min=0.3 max=80")
     return body

@@ -173,10 +173,11 @@ def _add_object(spec, name, pos, yaw, material, *, target, free=True):
     for c in info.collision:
         s = c["size"]
         vols.append(8 * s[0] * s[1] * s[2] if c["type"] == "box" else 2 * np.pi * s[0] ** 2 * s[1])
-    for k, (c, vol) in enumerate(zip(info.collision, vols)):
+    fracs = [c.get("mass_frac", v / sum(vols)) for c, v in zip(info.collision, vols)]
+    for k, (c, frac) in enumerate(zip(info.collision, fracs)):
         kw = dict(name=f"{name}_collision{k}", size=list(c["size"]) + [0] * (3 - len(c["size"])),
                   pos=list(c["pos"]), group=GROUP["collision"], rgba=[0, 0, 0, 0],
-                  contype=COLLIDE_OBJECT, conaffinity=COLLIDE_OBJECT, mass=info.mass * vol / sum(vols),
+                  contype=COLLIDE_OBJECT, conaffinity=COLLIDE_OBJECT, mass=info.mass * frac,
                   friction=[0.5, 0.005, 0.0001], condim=4)
         if c["type"] == "box":
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, **kw)

@@ -46,22 +46,32 @@ def tukey(u):
 
 
 def _normal_equations(J, r, w, m, n, y, mu):
-    """J^T W J and J^T W r of point-to-plane plus the weighted tangential point-to-point term."""
+    """J^T W J and J^T W r of point-to-plane plus the weighted tangential point-to-point term.
+
+    The point-to-point Jacobian of ``m + omega x m + v`` is ``Jp = [-hat(m), I]`` and its normal
+    component ``n^T Jp`` is the point-to-plane row, so the tangential Hessian is
+    ``sum w Jp^T Jp - sum w J^T J``; the first sum has a closed form in sum w, sum w m, sum w m m^T.
+    """
     Jw = J * w[:, None]
-    H = Jw.T @ J
+    Hpl = Jw.T @ J
     g = Jw.T @ r
-    if mu > 0:
-        e = m - y
-        e = e - n * np.einsum("ij,ij->i", e, n)[:, None]  # tangential residual (I - n n^T)(m - y)
-        # Jacobian of (m + w x m + v - y) is [-hat(m), I]; project both blocks on the tangent plane
-        Jr = np.stack([np.cross(np.eye(3)[k], m) for k in range(3)], axis=2)  # d/d omega_k: e_k x m
-        Jr = Jr - n[:, :, None] * np.einsum("ij,ijk->ik", n, Jr)[:, None, :]
-        Jt = np.broadcast_to(np.eye(3), (len(m), 3, 3)) - n[:, :, None] * n[:, None, :]
-        Jf = np.concatenate([Jr, Jt], axis=2)  # (n, 3, 6)
-        ww = (mu * mu) * w
-        H = H + np.einsum("n,nij,nik->jk", ww, Jf, Jf)
-        g = g + np.einsum("n,nij,ni->j", ww, Jf, e)
-    return H, g
+    if mu <= 0:
+        return Hpl, g
+    s0 = w.sum()
+    s1 = w @ m
+    s2 = (m * w[:, None]).T @ m
+    Hpp = np.empty((6, 6))
+    Hpp[:3, :3] = np.trace(s2) * np.eye(3) - s2
+    Hs = np.array([[0.0, -s1[2], s1[1]], [s1[2], 0.0, -s1[0]], [-s1[1], s1[0], 0.0]])
+    Hpp[:3, 3:] = Hs
+    Hpp[3:, :3] = -Hs
+    Hpp[3:, 3:] = s0 * np.eye(3)
+    e = m - y
+    e = e - n * np.einsum("ij,ij->i", e, n)[:, None]  # tangential residual (I - n n^T)(m - y)
+    ew = e * w[:, None]
+    gt = np.concatenate([np.cross(m, ew).sum(axis=0), ew.sum(axis=0)])
+    mu2 = mu * mu
+    return (1.0 - mu2) * Hpl + mu2 * Hpp, g + mu2 * gt
 
 
 def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate_floor,

@@ -60,6 +60,8 @@ class TrackResult:
     roi : (x0, y0, x1, y1) pixels processed (x1, y1 exclusive).
     gamma : weight of the appearance term this frame.
     iterations, n_inliers : ICP iterations and inliers.
+    stage_times : wall time per pipeline stage, s (validate, predict_attention, depth_likelihood,
+        appearance, registration, labels, learning, output).
     attention, appearance, silhouette : (H, W) maps (debug_maps=True only, else None): the spatial
         prior pi, the appearance probability sigmoid(log Lambda_I), the registered silhouette.
     """
@@ -81,9 +83,23 @@ class TrackResult:
     gamma: float
     iterations: int
     n_inliers: int
+    stage_times: dict | None = None
     attention: np.ndarray | None = None
     appearance: np.ndarray | None = None
     silhouette: np.ndarray | None = None
+
+
+class _Clock:
+    """Accumulates wall time per pipeline stage (perf_counter laps)."""
+
+    def __init__(self):
+        self.t = time.perf_counter()
+        self.stages = {}
+
+    def lap(self, name):
+        now = time.perf_counter()
+        self.stages[name] = self.stages.get(name, 0.0) + now - self.t
+        self.t = now
 
 
 def _rot_angle(R):
@@ -264,7 +280,11 @@ class ObjectTracker:
         # -- validated: from here on the state changes ------------------------------------------
         self._shape = rgb.shape[:2]
         self._t_prev = t if t is not None else self._t_prev
+        self._clock = _Clock()
+        self._clock.stages["validate"] = self._clock.t - t_start
         out = self._step(rgb, depth, dt)
+        self._clock.lap("output")
+        out["stage_times"] = dict(self._clock.stages)
         self._frame += 1
         self.pose_ = out["pose"]
         self.n_frames_ = self._frame
@@ -310,6 +330,7 @@ class ObjectTracker:
             pi = np.full(D.shape, 0.5, np.float32)
             logit = np.zeros(D.shape, np.float32)
 
+        self._clock.lap("predict_attention")
         # -- depth likelihood against the predicted surface ---------------------------------
         dist = self._distances(D, roi, T_bar, proj.vis)
         sig_d = (0.0012 + 0.0019 * (D - 0.4) ** 2).astype(np.float32)
@@ -320,6 +341,7 @@ class ObjectTracker:
         ld = np.where(valid, np.nan_to_num(ld, nan=0.0, neginf=-2 * _LOGIT_CLIP), 0.0)
         logit = logit + ld
 
+        self._clock.lap("depth_likelihood")
         # -- appearance ---------------------------------------------------------------------
         feats = None
         lI = None
@@ -332,6 +354,7 @@ class ObjectTracker:
         logit = np.clip(logit, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32)
         Pmap = (0.5 * (1.0 + np.tanh(0.5 * logit))).astype(np.float32)
 
+        self._clock.lap("appearance")
         # -- select the highly probable points and register -----------------------------------
         if self.registration == "plain":
             cand = np.flatnonzero(valid)
@@ -355,6 +378,7 @@ class ObjectTracker:
                                gate0=gate0, gate_floor=gate_floor, max_iterations=self.max_iterations,
                                exact=self.correspondence == "kdtree")
 
+        self._clock.lap("registration")
         # -- drift guard ----------------------------------------------------------------------
         measured = res is not None and res.ok and res.n_matched >= 6
         if measured:
@@ -371,8 +395,10 @@ class ObjectTracker:
         accepted = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
         T_hat = res.T
         O, S_hat, r_hat = self._labels(D, roi, T_hat)
+        self._clock.lap("labels")
         if accepted and self._app is not None:
             self._train(feats, O, S_hat, r_hat, D)
+        self._clock.lap("learning")
         filt.update(T_hat, res.cov, dt, inflate=1.0 if accepted else 4.0)
         self._rejections = 0 if accepted else self._rejections + 1
         lost = self._rejections >= self.lost_after

@@ -88,7 +88,8 @@ def test_mssd_and_symmetries():
     P = CUBE - 0.05
     Tr = make_pose(so3_exp([0, 0, np.pi / 2]), None)
     assert metrics.mssd(P, np.eye(4), make_pose(None, [0.01, 0, 0])) == pytest.approx(0.01)
-    assert metrics.mssd(P, np.eye(4), Tr) == pytest.approx(np.sqrt(2) * 0.1 * np.sqrt(2) / 2 * np.sqrt(2))
+    # corners at radius 0.05 sqrt(2) from the axis, turned 90 deg: chord sqrt(2) r = 0.1
+    assert metrics.mssd(P, np.eye(4), Tr) == pytest.approx(0.1)
     assert metrics.mssd(P, np.eye(4), Tr, symmetries=np.stack([np.eye(4), Tr])) == pytest.approx(0.0, abs=1e-12)
 
 
