@@ -32,8 +32,9 @@ __all__ = ["add_hand", "HandScript", "Segment", "min_jerk", "slerp", "look_at_qu
 
 HAND_SKIN = (0.87, 0.66, 0.53, 1.0)
 SLEEVE = (0.22, 0.3, 0.48, 1.0)
-# Collision bit masks (contype = conaffinity): world geometry 1, hand 2, objects 1|2. The hand
-# never collides with the table or the walls; a held object drops bit 2.
+# Collision bit masks (contype = conaffinity): world geometry and the other objects 1, hand 2,
+# the target 1|2. The hand touches only the target (never the table, the walls or a
+# distractor it sweeps past); a held target drops bit 2.
 COLLIDE_STATIC, COLLIDE_HAND, COLLIDE_OBJECT = 1, 2, 3
 
 # Hand geometry (hand frame, metres); see the module docstring.
@@ -81,8 +82,8 @@ def add_hand(spec: mujoco.MjSpec, pos, quat):
     sleeve = dict(common, rgba=list(SLEEVE))
     body.add_geom(name="hand_wrist", type=cap, size=[0.026, 0, 0],
                   fromto=[0, -0.045, 0.004, 0, -0.085, 0.022], **common)
-    body.add_geom(name="hand_forearm", type=cap, size=[0.034, 0, 0],
-                  fromto=[0, -0.10, 0.03, 0, -0.32, 0.16], **sleeve)
+    body.add_geom(name="hand_forearm", type=cap, size=[0.033, 0, 0],
+                  fromto=[0, -0.10, 0.03, 0, -0.27, 0.13], **sleeve)
     return body
 
 
@@ -242,8 +243,7 @@ class HandScript:
     def reset(self, model, data):
         self._bind(model)
         self._rng = np.random.default_rng(self.rng_seed)
-        model.geom_contype[self._obj_geoms_all] = COLLIDE_OBJECT
-        model.geom_conaffinity[self._obj_geoms_all] = COLLIDE_OBJECT
+        self._grab(model, self.target, False)
         model.light_diffuse[self._light] = self._light0
         self._segs, self._k, self._next_action, self._held = [], 0, 0, None
         self._plan_end = 0.0
@@ -297,7 +297,6 @@ class HandScript:
                                   if model.geom_bodyid[g] == b and model.geom_group[g] == GROUP["collision"]]
             j = model.body_jntadr[b]
             self._qadr[o], self._vadr[o] = model.jnt_qposadr[j], model.jnt_dofadr[j]
-        self._obj_geoms_all = np.array(sum(self._obj_geoms.values(), []), dtype=int)
         self._light = model.light(self.key_light).id
         self._light0 = model.light_diffuse[self._light].copy()
 
@@ -539,18 +538,21 @@ class HandScript:
         self._grasp_and(plan, To, moves, self._yaw(prm, "side"))
 
     def _plan_pass(self, plan, To, prm):
-        """Sweep the hand across in front of the object, between it and the camera, without
-        touching it; ``height`` sets how much of it the hand hides."""
+        """Sweep the hand sideways through the line of sight, ``frac`` of the way from the
+        object's centre to the camera, without touching anything. The fingers point along the
+        sweep and the arm trails behind it; ``height`` (m) raises the path above the line on
+        which the fingertips cross the object's centre, so it sets how much the hand hides."""
         piv, A = self._pivot(To)
         c = A[0]
         f = float(prm.get("frac", 0.3))
         Q = c + f * (self.camera_pos - c)
-        Q[2] += float(prm.get("height", 0.0))
+        Q[2] += -TIP_Z + float(prm.get("height", 0.0))
         u = self._toward_camera(To)
-        x = np.cross([u[0], u[1], 0.0], [0, 0, 1.0])
-        side = float(prm.get("dir", 1.0))
-        q = matrix_to_quat(np.stack([x, [u[0], u[1], 0.0], [0, 0, 1.0]], 1))
-        a, b = Q - side * 0.38 * x, Q + side * 0.38 * x
+        r = np.cross([0, 0, 1.0], [u[0], u[1], 0.0])  # the camera's right, horizontal
+        side = float(prm.get("dir", 1.0))  # +1: right to left
+        y = -side * r
+        q = matrix_to_quat(np.stack([np.cross(y, [0, 0, 1.0]), y, [0, 0, 1.0]], 1))
+        a, b = Q - 0.40 * y, Q + 0.40 * y
         above = a.copy()
         above[2] = max(a[2] + 0.1, self.table_z + 0.32)
         plan.reach((above, q), "reach", speed=0.25 * self.speed)

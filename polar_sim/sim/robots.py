@@ -47,7 +47,7 @@ class RoverConfig:
     chassis_half: tuple  # half sizes of the chassis box (x, y, z)
     chassis_mass: float
     camera_height: float
-    camera_fovy_deg: float
+    camera_fovy_deg: float  # vertical field of view of the front camera, degrees
     lidar_height: float
     lidar3d_height: float
     max_speed: float
@@ -61,7 +61,7 @@ ROVER_PRESETS = {
     "car": RoverConfig(
         wheel_radius=0.35, track=1.6, wheelbase=2.4, chassis_half=(1.8, 0.85, 0.25),
         chassis_mass=900.0, camera_height=1.65, camera_fovy_deg=45.0, lidar_height=1.0,
-        lidar3d_height=2.0, max_speed=10.0, max_yaw_rate=1.0, wheel_kv=600.0, wheel_torque=1500.0,
+        lidar3d_height=2.0, max_speed=12.0, max_yaw_rate=1.0, wheel_kv=600.0, wheel_torque=1500.0,
     ),
     # A lab robot that fits through doors; for office2d and the GPIS navigation worlds.
     "indoor": RoverConfig(

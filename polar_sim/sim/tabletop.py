@@ -30,7 +30,7 @@ import numpy as np
 
 from polar_sim.geometry import matrix_to_quat
 from polar_sim.sim import objects as _objects
-from polar_sim.sim.hand import (COLLIDE_OBJECT, HAND_SKIN, HandScript, add_hand, look_at_quat,
+from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandScript, add_hand, look_at_quat,
                                 matrix_to_quat as _m2q)
 from polar_sim.sim.robots import GROUP
 
@@ -174,10 +174,11 @@ def _add_object(spec, name, pos, yaw, material, *, target, free=True):
         s = c["size"]
         vols.append(8 * s[0] * s[1] * s[2] if c["type"] == "box" else 2 * np.pi * s[0] ** 2 * s[1])
     fracs = [c.get("mass_frac", v / sum(vols)) for c, v in zip(info.collision, vols)]
+    bits = COLLIDE_OBJECT if target else COLLIDE_STATIC  # the hand touches the target only
     for k, (c, frac) in enumerate(zip(info.collision, fracs)):
         kw = dict(name=f"{name}_collision{k}", size=list(c["size"]) + [0] * (3 - len(c["size"])),
                   pos=list(c["pos"]), group=GROUP["collision"], rgba=[0, 0, 0, 0],
-                  contype=COLLIDE_OBJECT, conaffinity=COLLIDE_OBJECT, mass=info.mass * frac,
+                  contype=bits, conaffinity=bits, mass=info.mass * frac,
                   friction=[0.5, 0.005, 0.0001], condim=4)
         if c["type"] == "box":
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, **kw)

@@ -130,7 +130,7 @@ def _add_texture(spec, name, img):
 
 
 def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str = "car",
-                      camera_height=None):
+                      camera_height=None, camera_fovy=None):
     """Fill a base rover spec with seeded terrain, route, zones, obstacles and the rover.
 
     Returns the scene metadata: ``route`` (n, 2), ``zones`` (names along the route),
@@ -229,9 +229,13 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
                                 pos=[px, py, zc], quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)],
                                 **common)
 
+    if rover not in ROVER_PRESETS:
+        raise ValueError(f"rover: unknown preset {rover!r}; expected one of {sorted(ROVER_PRESETS)}")
     cfg = ROVER_PRESETS[rover]
     if camera_height is not None:
         cfg = dataclasses.replace(cfg, camera_height=float(camera_height))
+    if camera_fovy is not None:
+        cfg = dataclasses.replace(cfg, camera_fovy_deg=float(camera_fovy))
     t0 = route[1] - route[-1]
     start = (route[0, 0], route[0, 1], float(np.arctan2(t0[1], t0[0])))
     add_rover(spec, cfg, start, z0=float(grid.height(start[0], start[1])))
@@ -245,12 +249,16 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     }
 
 
-def build_rover_terrain(spec, seed, *, camera_height=None, rover="car"):
-    """``rover_terrain``: hills up to about +-3 m. Options: ``camera_height`` (m above the
-    ground, default the preset's 1.65), ``rover`` preset ("car" or "indoor")."""
-    return build_rover_scene(spec, seed, flat=False, rover=rover, camera_height=camera_height)
+def build_rover_terrain(spec, seed, *, camera_height=None, camera_fovy=None, rover="car"):
+    """``rover_terrain``: rolling hills (up to 10% slopes). Options: ``camera_height`` (m above
+    the ground, default the preset's 1.65), ``camera_fovy`` (vertical field of view, degrees,
+    default 45; 29.31 gives KITTI's f = 718.9 px at 376 rows), ``rover`` preset ("car" or
+    "indoor")."""
+    return build_rover_scene(spec, seed, flat=False, rover=rover, camera_height=camera_height,
+                             camera_fovy=camera_fovy)
 
 
-def build_rover_flat(spec, seed, *, camera_height=None, rover="car"):
-    """``rover_flat``: the same route, zones and obstacles on flat ground."""
-    return build_rover_scene(spec, seed, flat=True, rover=rover, camera_height=camera_height)
+def build_rover_flat(spec, seed, *, camera_height=None, camera_fovy=None, rover="car"):
+    """``rover_flat``: the same route, zones and obstacles on flat ground (same options)."""
+    return build_rover_scene(spec, seed, flat=True, rover=rover, camera_height=camera_height,
+                             camera_fovy=camera_fovy)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["nearest_visible", "roi_distances"]
+__all__ = ["nearest_visible", "roi_distances", "icp_residuals", "icp_normal_equations"]
 
 
 @njit(cache=True, nogil=True)
@@ -74,3 +74,117 @@ def roi_distances(depth, x0, y0, fx, fy, cx, cy, R, t, origin, inv_h, knn, P, vi
             pz = R[2, 0] * xc + R[2, 1] * yc + R[2, 2] * z + t[2]
             _, d = _lookup(px, py, pz, origin, inv_h, knn, P, vis)
             out[v, u] = d
+
+
+@njit(cache=True, nogil=True)
+def icp_residuals(X, R, t, origin, inv_h, knn, P, N, vis, gate, idx, res):
+    """Correspondences of camera points X (n, 3) under T = (R, t) (T_cam_cen): for each point the
+    nearest visible model point within ``gate`` (idx, -1 if none) and the point-to-plane residual
+    ``n . (m - y)`` with y = R^T (x - t). Returns the number of matched points."""
+    n = X.shape[0]
+    cnt = 0
+    for i in range(n):
+        dx = X[i, 0] - t[0]
+        dy = X[i, 1] - t[1]
+        dz = X[i, 2] - t[2]
+        yx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+        yy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+        yz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+        j, d = _lookup(yx, yy, yz, origin, inv_h, knn, P, vis)
+        if j < 0 or d >= gate:
+            idx[i] = -1
+            res[i] = 0.0
+            continue
+        idx[i] = j
+        res[i] = N[j, 0] * (P[j, 0] - yx) + N[j, 1] * (P[j, 1] - yy) + N[j, 2] * (P[j, 2] - yz)
+        cnt += 1
+    return cnt
+
+
+@njit(cache=True, nogil=True)
+def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
+    """Accumulate H (6, 6) and g (6,) of the weighted point-to-plane term plus ``mu2`` times the
+    tangential point-to-point term (body twist about the centred frame, see icp.py)."""
+    for a in range(6):
+        g[a] = 0.0
+        for b in range(6):
+            H[a, b] = 0.0
+    s0 = 0.0
+    s1 = np.zeros(3)
+    s2 = np.zeros((3, 3))
+    gt = np.zeros(6)
+    J = np.zeros(6)
+    for i in range(X.shape[0]):
+        j = idx[i]
+        wi = w[i]
+        if j < 0 or wi <= 0.0:
+            continue
+        mx, my, mz = P[j, 0], P[j, 1], P[j, 2]
+        nx, ny, nz = N[j, 0], N[j, 1], N[j, 2]
+        J[0] = my * nz - mz * ny
+        J[1] = mz * nx - mx * nz
+        J[2] = mx * ny - my * nx
+        J[3] = nx
+        J[4] = ny
+        J[5] = nz
+        r = res[i]
+        for a in range(6):
+            wa = wi * J[a]
+            g[a] += wa * r
+            for b in range(a, 6):
+                H[a, b] += wa * J[b]
+        if mu2 > 0.0:
+            dx = X[i, 0] - t[0]
+            dy = X[i, 1] - t[1]
+            dz = X[i, 2] - t[2]
+            yx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+            yy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+            yz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+            ex, ey, ez = mx - yx, my - yy, mz - yz
+            en = ex * nx + ey * ny + ez * nz
+            ex, ey, ez = wi * (ex - en * nx), wi * (ey - en * ny), wi * (ez - en * nz)
+            gt[0] += my * ez - mz * ey
+            gt[1] += mz * ex - mx * ez
+            gt[2] += mx * ey - my * ex
+            gt[3] += ex
+            gt[4] += ey
+            gt[5] += ez
+            s0 += wi
+            s1[0] += wi * mx
+            s1[1] += wi * my
+            s1[2] += wi * mz
+            s2[0, 0] += wi * mx * mx
+            s2[0, 1] += wi * mx * my
+            s2[0, 2] += wi * mx * mz
+            s2[1, 1] += wi * my * my
+            s2[1, 2] += wi * my * mz
+            s2[2, 2] += wi * mz * mz
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    if mu2 > 0.0:
+        s2[1, 0] = s2[0, 1]
+        s2[2, 0] = s2[0, 2]
+        s2[2, 1] = s2[1, 2]
+        tr = s2[0, 0] + s2[1, 1] + s2[2, 2]
+        for a in range(6):
+            g[a] += mu2 * gt[a]
+            for b in range(6):
+                H[a, b] *= 1.0 - mu2
+        for a in range(3):
+            for b in range(3):
+                H[a, b] += mu2 * ((tr if a == b else 0.0) - s2[a, b])
+            H[3 + a, 3 + a] += mu2 * s0
+        # hat(s1) in the top right, -hat(s1) in the bottom left
+        H[0, 4] += -mu2 * s1[2]
+        H[0, 5] += mu2 * s1[1]
+        H[1, 3] += mu2 * s1[2]
+        H[1, 5] += -mu2 * s1[0]
+        H[2, 3] += -mu2 * s1[1]
+        H[2, 4] += mu2 * s1[0]
+        H[4, 0] += -mu2 * s1[2]
+        H[5, 0] += mu2 * s1[1]
+        H[3, 1] += mu2 * s1[2]
+        H[5, 1] += -mu2 * s1[0]
+        H[3, 2] += -mu2 * s1[1]
+        H[4, 2] += mu2 * s1[0]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polar_sim.geometry import se3_exp
+from polar_sim.tracking._kernels import icp_normal_equations, icp_residuals
 from polar_sim.tracking.visibility import project_model
 
 __all__ = ["ICPResult", "weighted_icp", "tukey"]
@@ -74,9 +75,28 @@ def _normal_equations(J, r, w, m, n, y, mu):
     return (1.0 - mu2) * Hpl + mu2 * Hpp, g + mu2 * gt
 
 
+def _correspond(X, T, model, vis, gate, exact):
+    """Correspondence index (n,) (-1: none within the gate) and point-to-plane residual (n,)."""
+    R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+    n = len(X)
+    idx = np.empty(n, np.int64)
+    res = np.empty(n)
+    if not exact:
+        icp_residuals(X, R, t, model.origin, model.inv_h, model.knn, model.P, model.N, vis, gate, idx, res)
+        return idx, res
+    Y = (X - t) @ R
+    j, dist = model.nearest_visible(Y, vis, exact=True)
+    j[dist >= gate] = -1
+    ok = j >= 0
+    idx[:] = j
+    res[:] = 0.0
+    res[ok] = np.einsum("ij,ij->i", model.N[j[ok]], model.P[j[ok]] - Y[ok])
+    return idx, res
+
+
 def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate_floor,
                  max_iterations=30, vis_every=5, gate_decay=0.7, tol_rot=1e-4, tol_trans=1e-5,
-                 exact=False, min_points=6, tangential_weight=0.3):
+                 exact=False, min_points=6, tangential_weight=0.3, vis_init=None):
     """Register camera-frame points X (n, 3) with prior weights w0 (n,) to the model.
 
     Parameters
@@ -92,38 +112,42 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
         ``mu^2 |(I - n n^T)(m - y)|^2``. Point-to-plane alone cannot see a slide along a face (a
         box seen face-on); the tangential term lets the boundary of the selected points pin it.
         0 gives pure point-to-plane.
+    vis_init : (M,) visibility at T_init if already known (saves one projection).
     """
+    X = np.ascontiguousarray(X, dtype=np.float64)
     T = T_init.copy()
     P, N = model.P, model.N
     sig_floor = float(np.median(sigma_d)) if len(sigma_d) else 1e-3
-    H = np.eye(6)
+    mu2 = float(tangential_weight) ** 2
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
     sigma = sig_floor
     it = 0
-    vis = None
+    vis = vis_init
     ok_any = False
-    n_outer = int(np.ceil(max_iterations / vis_every))
     done = False
-    for outer in range(n_outer):
-        vis = project_model(P, N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
+    gate = gate0
+    for outer in range(int(np.ceil(max_iterations / vis_every))):
+        if outer > 0 or vis is None:
+            vis = project_model(P, N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
         gate = max(gate0 * gate_decay**outer, gate_floor)
         for _ in range(vis_every):
             if it >= max_iterations:
                 done = True
                 break
             it += 1
-            Y = (X - T[:3, 3]) @ T[:3, :3]
-            idx, dist = model.nearest_visible(Y, vis, exact=exact)
-            sel = (idx >= 0) & (dist < gate)
+            idx, res = _correspond(X, T, model, vis, gate, exact)
+            sel = idx >= 0
             if sel.sum() < min_points:
                 ok_any = False
                 done = True
                 break
-            m, n, y = P[idx[sel]], N[idx[sel]], Y[sel]
-            r = np.einsum("ij,ij->i", n, m - y)
-            J = np.concatenate([np.cross(m, n), n], axis=1)
+            r = res[sel]
             sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), sig_floor)
-            w = w0[sel] * tukey(r / (4.685 * sigma))
-            H, g = _normal_equations(J, r, w, m, n, y, tangential_weight)
+            w = np.zeros(len(X))
+            w[sel] = w0[sel] * tukey(r / (4.685 * sigma))
+            icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                                 P, N, idx, res, w, mu2, H, g)
             tr = np.trace(H)
             if not np.isfinite(tr) or tr <= 0:
                 ok_any = False
@@ -142,19 +166,16 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
                          vis if vis is not None else np.zeros(len(P), bool))
     # final correspondences at the converged pose: fitness, RMSE, covariance
     vis = project_model(P, N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
-    Y = (X - T[:3, 3]) @ T[:3, :3]
-    idx, dist = model.nearest_visible(Y, vis, exact=exact)
-    sel = (idx >= 0) & (dist < gate)
-    m, n = P[idx[sel]], N[idx[sel]]
-    r = np.einsum("ij,ij->i", n, m - Y[sel])
-    inl = np.zeros(len(X), bool)
-    inl[np.flatnonzero(sel)[np.abs(r) < delta1[sel]]] = True
+    idx, res = _correspond(X, T, model, vis, gate, exact)
+    sel = idx >= 0
+    inl = sel & (np.abs(res) < delta1)
     sw = float(w0.sum())
     fitness = float(w0[inl].sum() / sw) if sw > 0 else 0.0
-    rmse = float(np.sqrt(np.mean(r[np.abs(r) < delta1[sel]] ** 2))) if inl.any() else np.inf
-    J = np.concatenate([np.cross(m, n), n], axis=1)
-    w = w0[sel] * tukey(r / (4.685 * sigma))
-    H, _ = _normal_equations(J, r, w, m, n, Y[sel], tangential_weight)
+    rmse = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else np.inf
+    w = np.zeros(len(X))
+    w[sel] = w0[sel] * tukey(res[sel] / (4.685 * sigma))
+    icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                         P, N, idx, res, w, mu2, H, g)
     tr = np.trace(H)
     try:
         cov = sigma**2 * np.linalg.inv(H + 1e-6 * max(tr, 1e-12) * np.eye(6))

@@ -376,7 +376,7 @@ class ObjectTracker:
             gate_floor = min(max(3.0 * float(np.median(sd)), m.spacing), gate0)
             res = weighted_icp(X, w0, m, T_bar, K, (H, W), sigma_d=sd, delta1=np.maximum(3 * sd, 0.006),
                                gate0=gate0, gate_floor=gate_floor, max_iterations=self.max_iterations,
-                               exact=self.correspondence == "kdtree")
+                               exact=self.correspondence == "kdtree", vis_init=proj.vis)
 
         self._clock.lap("registration")
         # -- drift guard ----------------------------------------------------------------------
@@ -394,7 +394,7 @@ class ObjectTracker:
                                n_points=len(cand), res=res)
         accepted = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
         T_hat = res.T
-        O, S_hat, r_hat = self._labels(D, roi, T_hat)
+        O, S_hat, r_hat = self._labels(D, roi, T_hat, vis=res.vis)
         self._clock.lap("labels")
         if accepted and self._app is not None:
             self._train(feats, O, S_hat, r_hat, D)
@@ -424,10 +424,12 @@ class ObjectTracker:
         y = (v + roi[1] - K[1, 2]) / K[1, 1] * z
         return np.stack([x, y, z], axis=1), z
 
-    def _labels(self, D, roi, T):
+    def _labels(self, D, roi, T, vis=None):
         """Labels O (h, w) int8, silhouette (h, w) uint8 and distances (h, w) at pose T (spec 3.6)."""
         m, K = self._model, self._K
-        pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing)
+        pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing, zbuffer=vis is None)
+        if vis is not None:
+            pr.vis = vis
         S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.spacing, roi)
         r = self._distances(D, roi, T, pr.vis)
         sig_d = 0.0012 + 0.0019 * (D - 0.4) ** 2

@@ -1,0 +1,60 @@
+import numpy as np
+import pytest
+
+from polar_sim.metrics.ground import (classifier_auc, classifier_iou, fit_success_curve, ground_success,
+                                      laplace_scale)
+
+
+def test_ground_success_recall_precision_f1():
+    # Two frames pooled: |I∩G| = 3, |G| = 4, |I| = 5 -> ps 0.75, precision 0.6, F1 2/3.
+    g = [np.array([1, 1, 0, 0], bool), np.array([1, 1, 0], bool)]
+    i = [np.array([1, 0, 1, 0], bool), np.array([1, 1, 1], bool)]
+    s = ground_success(g, i)
+    assert (s.ps, s.precision) == (0.75, 0.6) and s.f1 == pytest.approx(2 / 3)
+    assert ground_success(np.array([1, 0], bool), np.array([1, 0], bool)).ps == 1.0
+    with pytest.raises(ValueError):
+        ground_success(g, i[:1])
+
+
+def test_exponential_fit_recovers_parameters():
+    # ps(N) = pmax - (pmax - p0) p^N sampled with noise over 30 repetitions: parameters recovered.
+    rng = np.random.default_rng(0)
+    N = np.repeat([5, 11, 25, 55, 125], 30)
+    truth = 0.82 - (0.82 - 0.4) * 0.93**N
+    fit = fit_success_curve(N, np.clip(truth + rng.normal(0, 0.01, N.size), 0, 1))
+    assert fit.p_max == pytest.approx(0.82, abs=0.01) and fit.p_0 == pytest.approx(0.4, abs=0.05)
+    assert fit.p == pytest.approx(0.93, abs=0.01)
+    assert fit.n95 == pytest.approx(np.log(0.05 * 0.82 / 0.42) / np.log(0.93), rel=0.1)
+    assert 0 <= fit.p_0 <= fit.p_max <= 1 and 0 < fit.p < 1
+    np.testing.assert_allclose(fit([5, 125]), fit.p_max - (fit.p_max - fit.p_0) * fit.p ** np.array([5, 125]))
+
+
+def test_exponential_fit_ideal_ransac():
+    # Ideal RANSAC: pmax 1, p0 0, p = 1 - w^s.
+    N = np.arange(1, 40)
+    w, s = 0.5, 2
+    fit = fit_success_curve(N, 1 - (1 - w**s) ** N)
+    assert fit.p_max == pytest.approx(1.0, abs=1e-3) and fit.p_0 == pytest.approx(0.0, abs=1e-3)
+    assert fit.p == pytest.approx(1 - w**s, abs=1e-3)
+
+
+def test_laplace_scale_is_mean_absolute_error():
+    # The Laplace MLE scale is mean |e|; on a large Laplace sample it recovers b.
+    assert laplace_scale([1.0, -2.0, 3.0]) == 2.0
+    e = np.random.default_rng(1).laplace(0, 1.7, 200000)
+    assert laplace_scale(e) == pytest.approx(1.7, rel=0.01)
+    with pytest.raises(ValueError):
+        laplace_scale([1.0, np.nan])
+
+
+def test_classifier_iou_and_auc_hand_cases():
+    # IoU of the thresholded map; AUC 1 for a perfect ranking, 0.5 for a constant map, ties count half.
+    gt = np.array([[1, 1, 0, 0]], bool)
+    assert classifier_iou(np.array([[0.9, 0.4, 0.8, 0.1]]), gt) == pytest.approx(1 / 3)
+    assert classifier_auc(np.array([[0.9, 0.8, 0.2, 0.1]]), gt) == 1.0
+    assert classifier_auc(np.full((1, 4), 0.3), gt) == 0.5
+    assert classifier_auc(np.array([[0.9, 0.5, 0.5, 0.1]]), gt) == pytest.approx(0.875)
+    valid = np.array([[1, 0, 1, 0]], bool)
+    assert classifier_iou(np.array([[0.9, 0.4, 0.8, 0.1]]), gt, valid=valid) == 0.5
+    with pytest.raises(ValueError, match="gt_mask"):
+        classifier_iou(np.zeros((2, 2)), np.zeros((2, 3), bool))
