@@ -8,5 +8,8 @@ Heavy subpackages (``sim``, ``gpis``, ...) are imported on first use.
 __version__ = "0.1.0"
 
 from polar_sim.errors import NotUpdatedError, PolarSimError  # noqa: E402
+from polar_sim.envs import register_envs as _register_envs  # noqa: E402
+
+_register_envs()
 
 __all__ = ["__version__", "PolarSimError", "NotUpdatedError"]

@@ -51,7 +51,9 @@ class ICPLocalizer(ResetMixin):
         Point budget per scan (default 200 in 2D, 600 in 3D), spread evenly in arc length (2D).
     max_iterations : int, default=50
     tolerance : float, default=1e-4
-        Converged when an update moves less than this (m and rad).
+        Converged when an update moves less than this (m and rad). Tighter than ICP-G's default:
+        point-to-point ICP converges linearly (it slides along walls in small steps), so a looser
+        tolerance stops it early.
     max_correspondence_distance : float, default=1.0
         ``"point"`` only: farthest accepted nearest neighbour, metres.
     min_range, max_range : float, default=0.0, 30.0
@@ -156,10 +158,8 @@ class ICPLocalizer(ResetMixin):
     def _point_to_point(self, scan, initial_pose):
         dim = self.points_.shape[1]
         pose_arr = _as_float_array(initial_pose, "initial_pose")
-        if dim == 2:
-            T0 = pose2d_to_matrix(as_pose2d(pose_arr, "initial_pose"))
-        else:
-            T0 = as_pose(pose_arr, "initial_pose")
+        prior = as_pose2d(pose_arr, "initial_pose") if dim == 2 else as_pose(pose_arr, "initial_pose")
+        T0 = pose2d_to_matrix(prior) if dim == 2 else prior.copy()
         max_it = as_int(self.max_iterations, "max_iterations", minimum=1)
         tol = as_positive_float(self.tolerance, "tolerance")
         max_d = as_positive_float(self.max_correspondence_distance, "max_correspondence_distance")
@@ -171,20 +171,22 @@ class ICPLocalizer(ResetMixin):
             angles, ranges = as_scan2d(*scan)
             ok = valid_beams(ranges, self.min_range, self.max_range)
             P = beam_points(angles[ok], ranges[ok], as_sensor_offset(self.sensor_offset))
+            n_valid = len(P)
             P = P[arc_length_subsample(P, n_budget)]
         else:
             P = scan3d_points(scan, pixel_stride=4, min_range=self.min_range, max_range=self.max_range)
+            n_valid = len(P)
             if len(P) > n_budget:
                 P = P[np.round(np.linspace(0, len(P) - 1, n_budget)).astype(int)]
         out_pose = (lambda T: matrix_to_pose2d(T)) if dim == 2 else (lambda T: T.copy())
         dof = 3 if dim == 2 else 6
         no_cov = np.diag(np.full(dof, np.inf))
-        info = {"status": "ok", "iterations": 0, "n_valid": len(P), "n_points": 0, "rmse": float("nan"),
+        info = {"status": "ok", "iterations": 0, "n_valid": n_valid, "n_points": 0, "rmse": float("nan"),
                 "reason": ""}
         min_pts = dof + 1
         if len(P) < min_pts:
             info.update(status="no_data", reason=f"{len(P)} valid points")
-            return out_pose(T0), no_cov, info
+            return prior.copy(), no_cov, info
         T = T0.copy()
         for it in range(1, max_it + 1):
             R, t = T[:dim, :dim], T[:dim, dim]
@@ -194,7 +196,7 @@ class ICPLocalizer(ResetMixin):
             if m.sum() < min_pts:
                 status = "no_data" if it == 1 else "diverged"
                 info.update(status=status, iterations=it, reason="too few correspondences")
-                return out_pose(T0), no_cov, info
+                return prior.copy(), no_cov, info
             Pm, M = P[m], self.points_[idx[m]]
             T_new = _kabsch(Pm, M)
             step = np.linalg.inv(T) @ T_new
@@ -207,7 +209,7 @@ class ICPLocalizer(ResetMixin):
             cr = np.linalg.norm(so3_log(_as3(T0[:dim, :dim]).T @ _as3(T[:dim, :dim])))
             if ct > corr[0] or cr > corr[1]:
                 info.update(status="diverged", reason="moved too far from the prior")
-                return out_pose(T0), no_cov, info
+                return prior.copy(), no_cov, info
             if dt < tol and dr < tol:
                 return out_pose(T), _p2p_cov(Pm @ T[:dim, :dim].T + T[:dim, dim], T, e), info
         info.update(status="max_iter", reason=f"no convergence in {max_it} iterations")

@@ -86,6 +86,8 @@ class LikelihoodField(ResetMixin):
         self.origin_ = np.array(grid.origin_, dtype=np.float64)
         self.cell_size_ = cs
         self.log_outside_ = float(self._log_p(self.max_distance))
+        # A one-cell border holding the outside value lets lookups clip instead of masking.
+        self._log_pad_ = np.pad(self.log_field_, 1, constant_values=np.float32(self.log_outside_))
         return self
 
     def log_likelihood(self, points):
@@ -95,12 +97,12 @@ class LikelihoodField(ResetMixin):
         return self._lookup(p[:, 0], p[:, 1]).astype(np.float64)
 
     def _lookup(self, x, y):
-        """Unchecked nearest-cell lookup for arrays ``x``, ``y`` of any (equal) shape."""
+        """Unchecked nearest-cell lookup for arrays ``x``, ``y`` of any (equal) shape (float32 out)."""
         inv = 1.0 / self.cell_size_
-        ix = np.floor((x - self.origin_[0]) * inv).astype(np.intp)
-        iy = np.floor((y - self.origin_[1]) * inv).astype(np.intp)
         nx, ny = self.log_field_.shape
-        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-        out = np.full(x.shape, self.log_outside_, dtype=np.float32)
-        out[ok] = self.log_field_[ix[ok], iy[ok]]
-        return out
+        fx = (x - self.origin_[0]) * inv + 1.0  # +1: index into the padded field
+        fy = (y - self.origin_[1]) * inv + 1.0
+        np.clip(fx, 0.0, nx + 1, out=fx)  # past the edges: the border cell (outside value)
+        np.clip(fy, 0.0, ny + 1, out=fy)
+        lin = fx.astype(np.intp) * (ny + 2) + fy.astype(np.intp)  # truncation = floor, all >= 0
+        return np.take(self._log_pad_, lin)

@@ -34,6 +34,7 @@ class GPISMapBase:
     _TRAIN_R = 4.0          # training radius in units of h_c (spec §8.1)
     _UPDATE_R = 4.0         # legacy retraining box half-width in units of h_c
     _QUERY_W = None         # query search half-width; None = 4 * map_scale
+    _SURF_RES, _SURF_BAND, _SURF_VAR = 0.05, 0.3, 0.4
 
     # -- lifecycle -----------------------------------------------------------------------------
     def get_params(self):
@@ -50,7 +51,7 @@ class GPISMapBase:
     def _init_state(self):
         p = self._checked_params()
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
-                          p["max_half"], strict=not self.legacy and self.dim == 3)
+                          p["max_half"], spacing=None if self.legacy else self._spacing())
         self.slot_gen_ = np.zeros(self.tree_.node_sample.shape[0], np.int64)
         self.gps_ = GPStore(self.dim)
         self.gp_gen_ = np.zeros(0, np.int64)
@@ -99,21 +100,30 @@ class GPISMapBase:
         touched = []
         if len(cand):
             action, P, N, sp, sg = self._reeval(cand, scan)
-            old = tr.pos[cand].copy()
+            snap = (tr.pos_t[cand].copy(), tr.nrm_t[cand].copy(), tr.sp_t[cand].copy(),
+                    tr.sg_t[cand].copy())
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
             new = apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
-            moved = action >= 1
-            changed.append(old[moved])
             keep = new >= 0
-            changed.append(tr.pos[new[keep]])
             touched.append(tr.pos[new[keep]])
+            # which changes the trained GPs must see (all of them in legacy mode)
+            dirty = self._significant(action, new, snap, cand)
+            changed.append(snap[0][dirty])
+            nk = new[dirty & keep]
+            changed.append(tr.pos[nk])
+            self._snapshot(nk)
+            kd = keep & ~dirty             # carry the trained snapshot to the new index
+            for a, b in zip((tr.pos_t, tr.nrm_t, tr.sp_t, tr.sg_t), snap):
+                a[new[kd]] = b[kd]
+            self._snapshot(cand[(action == 1) & dirty])
         # stage 3: new samples
         P, ok, bad, N, sp, sg = self._new_samples(scan)
         tr.reserve(P[ok])
         self._sync_slot_arrays()
         new = apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
         kept = new[new >= 0]
+        self._snapshot(kept)
         changed.append(tr.pos[kept])
         touched.append(tr.pos[kept])
         self._sync_slot_arrays()
@@ -122,9 +132,33 @@ class GPISMapBase:
             self._retrain_legacy(np.concatenate(touched) if touched else np.zeros((0, self.dim)))
         else:
             self._retrain_dirty(np.concatenate(changed))
-        self.free_.mark(scan.origin_sensor, scan.hits)
+        self.free_.mark(scan.origin_sensor, getattr(scan, "free_hits", scan.hits))
         self.n_updates_ += 1
         self.version_ += 1
+
+    def _snapshot(self, idx):
+        tr = self.tree_
+        tr.pos_t[idx], tr.nrm_t[idx] = tr.pos[idx], tr.nrm[idx]
+        tr.sp_t[idx], tr.sg_t[idx] = tr.sp[idx], tr.sg[idx]
+
+    def _significant(self, action, new, snap, cand):
+        """Re-evaluated samples whose change the GPs must see (default mode: beyond retrain_tol).
+
+        A sample counts when it left the map, or when its position moved more than
+        ``retrain_tol``, its normal turned by more than 0.05 rad, or a noise changed by more
+        than 2x, since the values the GPs were last trained on.
+        """
+        tr = self.tree_
+        if self.legacy or self._retrain_tol() <= 0:
+            return action >= 1
+        out = (action >= 2) & (new < 0)                      # dropped or lost
+        i = np.where(new >= 0, new, cand)
+        mv = action >= 1
+        dp = np.linalg.norm(tr.pos[i] - snap[0], axis=1) > self._retrain_tol()
+        dn = np.linalg.norm(tr.nrm[i] - snap[1], axis=1) > 0.05
+        rs = (tr.sp[i] > 2 * snap[2]) | (2 * tr.sp[i] < snap[2])
+        rg = (tr.sg[i] > 2 * snap[3]) | (2 * tr.sg[i] < snap[3])
+        return out | (mv & (dp | dn | rs | rg))
 
     def _cluster_coords(self, pts):
         tr = self.tree_
@@ -257,7 +291,9 @@ class GPISMapBase:
                                         1.0 + float(self.map_noise))
         near, far = self._blend_band()
         a = np.abs(dist)
-        w = np.clip((far - a) / (far - near), 0.0, 1.0)
+        # behind surfaces the GP has no data: hand over to the surfel distance twice as early
+        sc = np.where(dist < 0, 0.5, 1.0)
+        w = np.clip((far * sc - a) / ((far - near) * sc), 0.0, 1.0)
         w = w * w * (3.0 - 2.0 * w)                   # smoothstep: C1 at both ends
         sel = np.nonzero(w > 0)[0]
         sdf, g, v = dist.copy(), grad, var_far
@@ -269,6 +305,31 @@ class GPISMapBase:
             g[sel] = ws[:, None] * out[:, 1:d + 1] + (1 - ws)[:, None] * grad[sel]
             v[sel] = ws * out[:, d + 1] + (1 - ws) * var_far[sel]
         return sdf, g, v
+
+    def surface(self, res=None, band=None):
+        """Zero level set of :meth:`query` near the observed samples.
+
+        Parameters
+        ----------
+        res : float, optional
+            Grid step, metres (default 0.05 m in 2D, 0.002 m in 3D).
+        band : float, optional
+            Only grid nodes within this distance of a sample are used (default 0.3 m in 2D,
+            0.01 m in 3D); legacy mode also drops nodes with GP variance >= 0.4 (2D) / 0.1 (3D),
+            as the published demos do.
+
+        Returns
+        -------
+        list of ndarray (k, 2) in 2D (polylines, world metres); trimesh.Trimesh in 3D.
+        """
+        from polar_sim.gpis import _surface
+
+        check_updated(self, "tree_")
+        res = self._SURF_RES if res is None else float(res)
+        band = self._SURF_BAND if band is None else float(band)
+        var_max = self._SURF_VAR if self.legacy else np.inf
+        fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
+        return fn(self, res, band, var_max)
 
     # -- samples, persistence --------------------------------------------------------------------
     def samples(self):

@@ -8,8 +8,8 @@ from polar_sim._validation import _as_float_array, as_positive_float
 
 __all__ = ["check_params", "as_directions"]
 
-_ALLOW_ZERO = {"fbias", "min_grad_noise", "map_noise", "min_range", "blend_near"}
-_OPTIONAL = {"surfel_radius", "free_res"}
+_ALLOW_ZERO = {"fbias", "min_grad_noise", "map_noise", "min_range", "blend_near", "retrain_tol"}
+_OPTIONAL = {"surfel_radius", "free_res", "retrain_tol", "sample_spacing"}
 _NOT_FLOAT = {"legacy", "sensor_offset", "angle_obs_limit", "obs_skip"}
 
 

@@ -7,8 +7,9 @@ the distance to the fused surface samples, each treated as a small disc ("surfel
 ``d = sqrt(a^2 + max(|t| - r_s, 0)^2)``. The distance is the minimum over the k nearest samples.
 
 Sign: positive where the point lies in *observed free space* (a coarse grid of cells that some ray
-crossed before its return, :class:`FreeSpace`); elsewhere the sign of ``a`` of the closest surfel,
-i.e. negative behind (on the occluded side of) the surface.
+crossed before its return, :class:`FreeSpace`) and is more than one cell diagonal from the nearest
+surfel; elsewhere the sign of ``a`` of the closest surfel, i.e. negative behind (on the occluded
+side of) the surface.
 
 Variance: in observed free space, the fused position variance of the closest sample (how well the
 surface that sets the distance is known); elsewhere, never-observed space, the GP prior variance
@@ -112,6 +113,72 @@ class FreeSpace:
         self.goff = np.asarray(st["goff"], np.int64).copy()
 
 
+@nb.njit(cache=True)
+def _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad, var):
+    n, d = pts.shape
+    k = gi.shape[1]
+    v = np.empty(d)
+    t = np.empty(d)
+    for i in range(n):
+        best = np.inf
+        bj = -1
+        ba = 0.0
+        for j in range(k):
+            s = gi[i, j]
+            nl = 0.0
+            for c in range(d):
+                v[c] = pts[i, c] - pos[s, c]
+                nl += nrm[s, c] * nrm[s, c]
+            nl = np.sqrt(nl)
+            if nl > 0.5:
+                a = 0.0
+                for c in range(d):
+                    a += v[c] * nrm[s, c] / nl
+                tl = 0.0
+                for c in range(d):
+                    e = v[c] - a * nrm[s, c] / nl
+                    tl += e * e
+                tl = np.sqrt(tl)
+                ex = max(tl - r_s, 0.0)
+                dk = np.sqrt(a * a + ex * ex)
+            else:
+                a = 0.0
+                dk = 0.0
+                for c in range(d):
+                    dk += v[c] * v[c]
+                dk = np.sqrt(dk)
+            if dk < best:
+                best, bj, ba = dk, j, a
+        s = gi[i, bj]
+        nl = 0.0
+        for c in range(d):
+            nl += nrm[s, c] * nrm[s, c]
+        nl = np.sqrt(nl)
+        rs = r_s if nl > 0.5 else 0.0
+        # closest point on the chosen surfel, and the unit direction from it
+        tl = 0.0
+        for c in range(d):
+            v[c] = pts[i, c] - pos[s, c]
+            t[c] = v[c] - (ba * nrm[s, c] / nl if nl > 0.5 else v[c])
+            tl += t[c] * t[c]
+        tl = np.sqrt(tl)
+        sc = min(tl, rs) / tl if tl > 0 else 0.0
+        gl = 0.0
+        for c in range(d):
+            v[c] = v[c] - sc * t[c]
+            gl += v[c] * v[c]
+        gl = np.sqrt(gl)
+        ok = seen[i] and best > cell_diag
+        sign = 1.0 if (ok or ba >= 0) else -1.0
+        dist[i] = sign * best
+        for c in range(d):
+            if gl > 0:
+                grad[i, c] = sign * v[c] / gl
+            else:
+                grad[i, c] = sign * (nrm[s, c] / nl if nl > 0.5 else 0.0)
+        var[i] = min(sp[s], var_unobs) if ok else var_unobs
+
+
 def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
     """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs."""
     n, d = pts.shape
@@ -119,33 +186,9 @@ def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
         return np.full(n, np.inf), np.zeros((n, d)), np.full(n, var_unobs)
     k = min(k, len(idx))
     _, nn = kd.query(pts, k=k)
-    nn = nn.reshape(n, k)
-    gi = idx[nn]                                    # (n, k) sample indices
-    P = pos[gi]
-    N = nrm[gi]
-    nlen = np.linalg.norm(N, axis=2, keepdims=True)
-    good = (nlen[..., 0] > 0.5)
-    N = np.where(good[..., None], N / np.maximum(nlen, 1e-12), 0.0)
-    v = pts[:, None, :] - P
-    a = np.einsum("nkd,nkd->nk", v, N)
-    t = v - a[..., None] * N
-    tl = np.linalg.norm(t, axis=2)
-    rs = np.where(good, r_s, 0.0)
-    excess = np.maximum(tl - rs, 0.0)
-    dk = np.sqrt(a * a + excess * excess)
-    dk = np.where(good, dk, np.linalg.norm(v, axis=2))
-    j = np.argmin(dk, axis=1)
-    r = np.arange(n)
-    dist = dk[r, j]
-    # closest point on the chosen surfel and the direction from it
-    tlj = tl[r, j]
-    scale = np.where(tlj > 0, np.minimum(tlj, rs[r, j]) / np.maximum(tlj, 1e-300), 0.0)
-    c = P[r, j] + scale[:, None] * t[r, j]
-    g = pts - c
-    gl = np.linalg.norm(g, axis=1)
-    g = np.where(gl[:, None] > 0, g / np.maximum(gl, 1e-300)[:, None], N[r, j])
-    seen = free.observed(pts)
-    aj = a[r, j]
-    sign = np.where(seen, 1.0, np.where(aj < 0, -1.0, 1.0))
-    var = np.where(seen, np.minimum(sp[gi[r, j]], var_unobs), var_unobs)
-    return sign * dist, sign[:, None] * g, var
+    gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
+    dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
+    # a free cell may straddle the surface: trust it only beyond one cell diagonal
+    _surfels(pts, gi, pos, nrm, sp, float(r_s), free.observed(pts), free.res * np.sqrt(d),
+             float(var_unobs), dist, grad, var)
+    return dist, grad, var

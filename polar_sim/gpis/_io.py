@@ -62,7 +62,11 @@ def load(cls, path):
             raise ValueError(f"path: {path} has format version {ver}; this code reads {VERSION}")
         if str(data["cls"]) != cls.__name__:
             raise ValueError(f"path: {path} holds a {data['cls']!s}, not a {cls.__name__}")
-        m = cls(**json.loads(str(data["params"])))
+        params = json.loads(str(data["params"]))
+        for k in ("sensor_offset", "angle_obs_limit"):      # JSON has no tuples
+            if isinstance(params.get(k), list):
+                params[k] = tuple(params[k])
+        m = cls(**params)
         if not bool(data["fitted"]):
             return m
         m._init_state()

@@ -7,9 +7,9 @@ import numba as nb
 import numpy as np
 
 from polar_sim.gpis._localgp import _predict_one
-from polar_sim.gpis._tree import _insert, _lin, _remove
+from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove, _too_close_neighbours
 
-__all__ = ["apply_new", "apply_reeval", "candidates", "gather_training", "query_gp"]
+__all__ = ["apply_new", "apply_reeval", "candidates", "gather_training", "query_gp", "maybe_new"]
 
 
 @nb.njit(cache=True)
@@ -265,15 +265,21 @@ def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s
     return n
 
 
-@nb.njit(cache=True, parallel=True)
-def query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape, goff,
+def query_gp(pts, *args):
+    """GP query; large batches run on all cores (numba threads), small ones serially."""
+    if pts.shape[0] >= 20000:
+        return _query_gp_par(pts, *args)
+    return _query_gp_ser(pts, *args)
+
+
+def _query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape, goff,
              node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X, kinds, alpha,
              Lbuf, mmax, out):
     """GP query of spec §9.1 per point; out rows [f, grad(d), var_f, var_grad(d)]."""
     n, dim = pts.shape
     a = np.sqrt(3.0) / scale
     nblk = 64
-    for blk in nb.prange((n + nblk - 1) // nblk):
+    for blk in nb.prange((n + nblk - 1) // nblk):  # noqa: B007
         kb = np.empty((mmax, dim + 2))
         zb = np.empty(mmax)
         best_s = np.empty(3, np.int64)
@@ -332,3 +338,54 @@ def query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, 
             wb = cvar[ia] - T
             for k in range(2 * dim + 2):
                 o[k] = (wa * cand[ia, k] + wb * cand[ib, k]) / (wa + wb)
+
+
+_query_gp_ser = nb.njit(cache=True)(_query_gp)
+_query_gp_par = nb.njit(cache=True, parallel=True)(_query_gp)
+
+
+@nb.njit(cache=True)
+def maybe_new(P, geo, root, level_off, cgrid, gshape, goff, node_sample, node_internal, pos,
+              strict):
+    """False where an insert of P would be rejected by a sample already in the tree.
+
+    In strict mode this is exact for the whole update (existing samples only move in stage 2);
+    in chain-only mode it is the test against the tree as it stands before stage 3.
+    """
+    n, dim = P.shape
+    out = np.ones(n, np.bool_)
+    w = geo[dim]
+    hmin = geo[dim + 1]
+    lo = np.empty(dim)
+    cc = np.empty(dim, np.int64)
+    for j in range(n):
+        p = P[j]
+        for k in range(dim):
+            cc[k] = int(np.floor((p[k] - geo[k]) / w))
+        if strict:
+            if _too_close_neighbours(p, cc, geo[dim + 3], dim, cgrid, gshape, goff, node_sample,
+                                     pos):
+                out[j] = False
+            continue
+        g = _lin(cc, gshape, goff)
+        if g < 0:
+            continue
+        s = cgrid[g]
+        if s < 0:
+            continue
+        for k in range(dim):
+            lo[k] = geo[k] + cc[k] * w
+        node = 0
+        lvl = 0
+        while node_internal[s, node]:
+            lvl += 1
+            node = _node_of(p, lo, w, lvl, dim, level_off)
+        q = node_sample[s, node]
+        if q >= 0:
+            d2 = 0.0
+            for k in range(dim):
+                e = pos[q, k] - p[k]
+                d2 += e * e
+            if d2 < hmin * hmin:
+                out[j] = False
+    return out

@@ -38,6 +38,36 @@ def _obs_layout(idx, nrm, sg, dim):
     return hasg, n + dim * m
 
 
+@nb.njit(cache=True, fastmath=True)
+def _dot(a, b, n):
+    s = 0.0
+    for k in range(n):
+        s += a[k] * b[k]
+    return s
+
+
+@nb.njit(cache=True)
+def _cholesky(K):
+    """Lower Cholesky factor of K (m, m), computed in place (row-oriented Crout).
+
+    Written out rather than LAPACK: no BLAS threads (which stall on a busy machine) and the
+    same bits whatever the thread settings.
+    """
+    m = K.shape[0]
+    for j in range(m):
+        rj = K[j]
+        s = rj[j] - _dot(rj, rj, j)
+        d = np.sqrt(s if s > 1e-300 else 1e-300)
+        rj[j] = d
+        for i in range(j + 1, m):
+            ri = K[i]
+            ri[j] = (ri[j] - _dot(ri, rj, j)) / d
+    for j in range(m):
+        for i in range(j + 1, m):
+            K[j, i] = 0.0
+    return K
+
+
 @nb.njit(cache=True)
 def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout):
     """kout[t] = kind (0 value, 1+c gradient c) * 2^32 + index of the sample's value obs."""
@@ -115,7 +145,7 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
                     K[qj, pi] = val
     for p in range(m):
         K[p, p] += noise[p]
-    L = np.linalg.cholesky(K)
+    L = _cholesky(K)
     # alpha = K^-1 y by two triangular solves
     z = np.empty(m)
     for p in range(m):
@@ -136,11 +166,11 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
     return m
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _train_many(csr_ptr, csr_idx, obs_off, tri_off, pos, nrm, sp, sg, dim, scale, fbias,
                 quirk_x, Lbuf, abuf, xbuf, kbuf):
     nc = csr_ptr.shape[0] - 1
-    for c in nb.prange(nc):
+    for c in range(nc):
         idx = csr_idx[csr_ptr[c]:csr_ptr[c + 1]]
         o0, o1 = obs_off[c], obs_off[c + 1]
         t0, t1 = tri_off[c], tri_off[c + 1]
@@ -289,10 +319,12 @@ class GPStore:
         live = self.gp_m > 0
         live_o = int(self.gp_m[live].sum())
         if self.n_obs + need_o > self.X.shape[0] or self.n_tri + need_t > self.Lbuf.shape[0]:
-            if self.n_obs > 2 * live_o + 64:
+            if self.n_obs > live_o:
                 self._compact(0, 0)
-            if self.n_obs + need_o > self.X.shape[0] or self.n_tri + need_t > self.Lbuf.shape[0]:
-                self._grow(self.n_obs + need_o, self.n_tri + need_t)
+            # room for a few updates before the next compaction (amortised O(1) per update)
+            if 2 * (self.n_obs + need_o) > self.X.shape[0] or \
+                    2 * (self.n_tri + need_t) > self.Lbuf.shape[0]:
+                self._grow(4 * (self.n_obs + need_o), 4 * (self.n_tri + need_t))
         obs_off = self.n_obs + np.concatenate([[0], np.cumsum(m)])
         tri_off = self.n_tri + np.concatenate([[0], np.cumsum(tri)])
         _train_many(csr_ptr, csr_idx, obs_off, tri_off, tree.pos, tree.nrm, tree.sp, tree.sg,

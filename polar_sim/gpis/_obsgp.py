@@ -48,46 +48,97 @@ class ObsGP1D:
         ranges.append((i1 + h, N - 1))
         bounds.append(x[N - 1])
         self.bounds = np.asarray(bounds)
-        M = max(b - a + 1 for a, b in ranges)
+        rg = np.asarray(ranges, np.int64)
+        M = int((rg[:, 1] - rg[:, 0]).max()) + 1
         G = len(ranges)
         X = np.zeros((G, M))
         A = np.zeros((G, M))
         Kinv = np.zeros((G, M, M))
-        mask = np.zeros((G, M), bool)
-        for g, (a, b) in enumerate(ranges):
-            n = b - a + 1
-            xs = x[a:b + 1]
-            K = np.exp(-np.abs(xs[:, None] - xs[None, :]) / scale) + noise * np.eye(n)
-            L = np.linalg.cholesky(K)
-            Li = np.linalg.inv(L)
-            Ki = Li.T @ Li
-            X[g, :n] = xs
-            mask[g, :n] = True
-            A[g, :n] = Ki @ rho[a:b + 1]
-            Kinv[g, :n, :n] = Ki
-        self.X, self.A, self.Kinv, self.mask = X, A, Kinv, mask
+        _fit_groups(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(rho, np.float64),
+                    rg, float(scale), float(noise), X, A, Kinv)
+        mask = np.arange(M)[None, :] <= (rg[:, 1] - rg[:, 0])[:, None]
+        self.X, self.A, self.Kinv = X, A, Kinv
+        self.nobs = mask.sum(1).astype(np.int64)
 
     def predict(self, phi):
         """(rho_hat, var) at angles phi (any shape)."""
         phi = np.asarray(phi, np.float64)
         shp = phi.shape
-        phi = phi.ravel()
-        rho = np.full(phi.shape, np.nan)
-        var = np.full(phi.shape, UNOBSERVABLE)
-        if self.empty:
-            return rho.reshape(shp), var.reshape(shp)
-        b = self.bounds
-        g = np.searchsorted(b, phi, side="left") - 1
-        ok = (phi >= b[0] + self.margin) & (phi <= b[-1] - self.margin) & (g >= 0) & (g < len(b) - 1)
-        gi = np.clip(g, 0, len(b) - 2)
-        ok &= phi != b[gi + 1]
-        idx = np.nonzero(ok)[0]
-        if len(idx):
-            gg = gi[idx]
-            k = np.exp(-np.abs(phi[idx, None] - self.X[gg]) / self.scale) * self.mask[gg]
-            rho[idx] = np.einsum("ij,ij->i", k, self.A[gg])
-            var[idx] = 1.0 + self.noise - np.einsum("ij,ijk,ik->i", k, self.Kinv[gg], k)
+        flat = np.ascontiguousarray(phi.ravel())
+        rho = np.full(flat.shape, np.nan)
+        var = np.full(flat.shape, UNOBSERVABLE)
+        if not self.empty:
+            _predict_1d(flat, self.bounds, self.margin, self.X, self.A, self.Kinv, self.nobs,
+                        self.scale, self.noise, rho, var)
         return rho.reshape(shp), var.reshape(shp)
+
+
+@nb.njit(cache=True)
+def _fit_groups(x, rho, ranges, scale, noise, X, A, Kinv):
+    """OU GP of each group: inverse covariance (via Cholesky) and weights K^-1 rho."""
+    for g in range(ranges.shape[0]):
+        a = ranges[g, 0]
+        n = ranges[g, 1] - a + 1
+        L = np.zeros((n, n))
+        for i in range(n):
+            for j in range(i + 1):
+                L[i, j] = np.exp(-abs(x[a + i] - x[a + j]) / scale)
+            L[i, i] += noise
+        for j in range(n):                      # in-place Cholesky (lower)
+            s = L[j, j]
+            for k in range(j):
+                s -= L[j, k] * L[j, k]
+            L[j, j] = np.sqrt(s)
+            for i in range(j + 1, n):
+                s = L[i, j]
+                for k in range(j):
+                    s -= L[i, k] * L[j, k]
+                L[i, j] = s / L[j, j]
+        Li = np.zeros((n, n))                   # L^-1 by forward substitution
+        for c in range(n):
+            for i in range(c, n):
+                s = 1.0 if i == c else 0.0
+                for k in range(c, i):
+                    s -= L[i, k] * Li[k, c]
+                Li[i, c] = s / L[i, i]
+        for i in range(n):
+            X[g, i] = x[a + i]
+            for j in range(n):
+                s = 0.0
+                for k in range(max(i, j), n):
+                    s += Li[k, i] * Li[k, j]
+                Kinv[g, i, j] = s
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += Kinv[g, i, j] * rho[a + j]
+            A[g, i] = s
+
+
+@nb.njit(cache=True, fastmath=True)
+def _predict_1d(phi, b, margin, X, A, Kinv, nobs, scale, noise, rho, var):
+    G = b.shape[0] - 1
+    k = np.empty(X.shape[1])
+    for i in range(phi.shape[0]):
+        x = phi[i]
+        if not (x >= b[0] + margin and x <= b[G] - margin):
+            continue
+        g = np.searchsorted(b, x) - 1          # b[g] < x <= b[g + 1]
+        if g < 0 or g >= G or x == b[g + 1]:
+            continue
+        n = nobs[g]
+        m = 0.0
+        for j in range(n):
+            k[j] = np.exp(-abs(x - X[g, j]) / scale)
+            m += k[j] * A[g, j]
+        q = 0.0
+        for j in range(n):
+            t = 0.0
+            for l in range(n):
+                t += Kinv[g, j, l] * k[l]
+            q += k[j] * t
+        rho[i] = m
+        var[i] = 1.0 + noise - q
 
 
 @nb.njit(cache=True)

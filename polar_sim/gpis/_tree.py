@@ -11,8 +11,8 @@ coordinates to a slot. Samples live in flat arrays with a free list, so slots ar
 Semantics follow the spec: a leaf at or below cluster level holds at most one sample; inserting
 next to a sample closer than ``h_min`` in the same leaf is rejected (the chain-only "IsNotNew"
 test); a max-depth cell never splits; removal collapses parents whose children are all empty
-leaves. ``strict_spacing=True`` (default mode in 3D) additionally rejects a point closer than
-``h_min`` to *any* sample in the 3^d neighbouring clusters, i.e. the spacing the spec intends.
+leaves. With ``spacing`` given (default mode) an insert is also rejected when closer than
+``spacing`` to *any* sample in the 3^d neighbouring clusters (the spacing the spec intends).
 """
 
 from __future__ import annotations
@@ -169,7 +169,7 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
             slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict):
     """Insert p; return (sample index, cluster slot) or (-1, -1) when rejected.
 
-    geo = [origin(d), cluster width w, h_min, h_max]. counts = [n_samples_hw, n_free_samples,
+    geo = [origin(d), cluster width w, h_min, h_max, strict spacing]. counts = [n_samples_hw, n_free_samples,
     n_slots_hw, n_free_slots]. The caller guarantees capacity and grid coverage.
     """
     dim = p.shape[0]
@@ -181,7 +181,8 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
     g = _lin(cc, gshape, goff)
     if g < 0:
         return -1, -1
-    if strict and _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos):
+    if strict and _too_close_neighbours(p, cc, geo[dim + 3], dim, cgrid, gshape, goff,
+                                        node_sample, pos):
         return -1, -1
     s = cgrid[g]
     lo = np.empty(dim)
@@ -278,7 +279,7 @@ class Tree:
     (h_c), ``min_half`` (h_min) and ``max_half`` (h_max), in metres.
     """
 
-    def __init__(self, dim, init_half, cluster_half, min_half, max_half, strict=False):
+    def __init__(self, dim, init_half, cluster_half, min_half, max_half, spacing=None):
         self.dim = dim
         ratio = init_half / cluster_half
         if ratio < 1 or abs(np.log2(ratio) - round(np.log2(ratio))) > 1e-9:
@@ -292,9 +293,12 @@ class Tree:
         self.level_off = np.array([(B**lv - 1) // (B - 1) for lv in range(L + 2)], np.int64)
         self.n_nodes = int(self.level_off[L + 1])
         w = 2.0 * cluster_half
-        self.geo = np.array([-init_half] * dim + [w, min_half, max_half], np.float64)
+        sp = 0.0 if spacing is None else float(spacing)
+        if sp > w:
+            raise ValueError("sample_spacing must not exceed the cluster cell size 2*cluster_half")
+        self.geo = np.array([-init_half] * dim + [w, min_half, max_half, sp], np.float64)
         self.root = np.array([0.0] * dim + [init_half, 0.0], np.float64)
-        self.strict = bool(strict)
+        self.strict = spacing is not None
         self.cgrid = np.full(1, -1, _I32)
         self.gshape = np.ones(dim, np.int64)
         self.goff = np.zeros(dim, np.int64)
@@ -322,6 +326,8 @@ class Tree:
         d = self.dim
         old = getattr(self, "pos", None)
         arrs = dict(pos=np.zeros((n, d)), nrm=np.zeros((n, d)), sp=np.zeros(n), sg=np.zeros(n),
+                    pos_t=np.zeros((n, d)), nrm_t=np.zeros((n, d)), sp_t=np.zeros(n),
+                    sg_t=np.zeros(n),
                     s_slot=np.full(n, -1, _I32), s_node=np.full(n, -1, _I32),
                     s_free=np.zeros(n, _I32))
         if old is not None:
@@ -411,7 +417,8 @@ class Tree:
 
     # -- persistence ---------------------------------------------------------------------------
     STATE = ("geo", "root", "cgrid", "gshape", "goff", "counts", "node_sample", "node_internal",
-             "slot_coord", "slot_free", "pos", "nrm", "sp", "sg", "s_slot", "s_node", "s_free")
+             "slot_coord", "slot_free", "pos", "nrm", "sp", "sg", "s_slot", "s_node", "s_free",
+             "pos_t", "nrm_t", "sp_t", "sg_t")
 
     def state(self):
         return {k: getattr(self, k) for k in self.STATE}

@@ -42,13 +42,21 @@ class GPISMap2D(GPISMapBase):
         growth limit, metres.
     obs_scale, obs_noise : float, default=0.5, 0.01
         Observation GP (Ornstein-Uhlenbeck) length scale in rad and noise variance.
-    blend_near, blend_far : float, default=0.1, 0.3
+    blend_near, blend_far : float, default=0.1, 0.4
         Default mode: the query is the GPIS within ``blend_near`` of the nearest surfel, the
         surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres.
     surfel_radius : float or None, default=None
         Radius of the disc each sample stands for in the far-field distance; None = min_half / 2.
     free_res : float or None, default=None
         Cell size of the observed-free-space grid (sign and variance far away); None = 0.1 m.
+    retrain_tol : float or None, default=None
+        Default mode: a re-evaluated sample triggers retraining of the GPs that use it only once
+        it has moved more than this (or its normal turned > 0.05 rad, or a noise changed > 2x)
+        since they were trained; None = 0.005 m; 0 = retrain on every change (as published).
+    sample_spacing : float or None, default=None
+        Default mode: minimum distance between samples, enforced across cell borders (the
+        published code checks only the cell chain, giving about half the intended spacing);
+        None = min_half.
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
         the query is then the published SDF f + fbias.
@@ -67,14 +75,15 @@ class GPISMap2D(GPISMapBase):
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
-               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "legacy")
+               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "legacy")
 
     def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
                  sensor_offset=(0.08, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
-                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.3,
-                 surfel_radius=None, free_res=None, legacy=False):
+                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.4,
+                 surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
+                 legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
         self.obs_var_thre = obs_var_thre
@@ -96,6 +105,8 @@ class GPISMap2D(GPISMapBase):
         self.blend_far = blend_far
         self.surfel_radius = surfel_radius
         self.free_res = free_res
+        self.retrain_tol = retrain_tol
+        self.sample_spacing = sample_spacing
         self.legacy = legacy
 
     def _checked_params(self):
@@ -106,6 +117,12 @@ class GPISMap2D(GPISMapBase):
 
     def _surfel_radius(self):
         return 0.5 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
+
+    def _spacing(self):
+        return float(self.min_half) if self.sample_spacing is None else float(self.sample_spacing)
+
+    def _retrain_tol(self):
+        return 0.005 if self.retrain_tol is None else float(self.retrain_tol)
 
     def _blend_band(self):
         return float(self.blend_near), float(self.blend_far)

@@ -8,6 +8,7 @@ Ground Vehicles* (ICRA 2015) from the spec ``shared/specs/ground.md``; numpy/Ope
 >>> e = vo.process(rgb, t)                                                  # doctest: +SKIP
 """
 
+from polar_sim.ground.models import GROUND_MODELS, GroundFit, fit_ground, ransac_iterations
 from polar_sim.ground.vo import STATUSES, GroundEstimate, GroundVO
 
-__all__ = ["GroundVO", "GroundEstimate", "STATUSES"]
+__all__ = ["GroundVO", "GroundEstimate", "STATUSES", "GROUND_MODELS", "GroundFit", "fit_ground", "ransac_iterations"]

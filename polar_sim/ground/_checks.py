@@ -10,7 +10,9 @@ __all__ = ["as_time", "as_unit_interval"]
 
 
 def as_time(t, name="t"):
-    """Return a timestamp as a finite float (seconds)."""
+    """Return a timestamp (a real number or a 0-d numeric array) as a finite float (seconds)."""
+    if isinstance(t, np.ndarray) and t.ndim == 0 and t.dtype.kind in "iuf":
+        t = t.item()
     if isinstance(t, bool) or not isinstance(t, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"{name}: expected a real number of seconds, got {type(t).__name__}")
     v = float(t)

@@ -12,6 +12,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+#: Lucas–Kanade stopping rule (iterations, step in px).
+KLT_MAX_ITER, KLT_EPS = 20, 0.01
+
 __all__ = ["track", "ground_homography", "track_ground_warped", "detect_new", "straightness_gate", "is_static"]
 
 
@@ -28,7 +31,7 @@ def track(prev_img, img, pts, guess, *, win=11, levels=3, fb_max=0.5, return_err
     if n == 0:
         out = (np.zeros((0, 2)), np.zeros(0, dtype=bool))
         return out + (np.zeros(0),) if return_err else out
-    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01)
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, KLT_MAX_ITER, KLT_EPS)
     p0 = np.ascontiguousarray(pts, dtype=np.float32).reshape(-1, 1, 2)
     p1 = np.ascontiguousarray(guess, dtype=np.float32).reshape(-1, 1, 2)
     p1, st, err = cv2.calcOpticalFlowPyrLK(prev_img, img, p0, p1.copy(), winSize=(win, win), maxLevel=levels,

@@ -13,7 +13,9 @@ N_LABELS = 216
 
 
 def reduce2x(rgb):
-    """One 2x Gaussian pyramid reduction (5-tap [1,4,6,4,1]/16, keep even rows/columns), (H,W,3) -> (⌈H/2⌉,⌈W/2⌉,3).
+    """One 2x Gaussian pyramid reduction (5-tap [1,4,6,4,1]/16, keep even rows and columns).
+
+    (H, W, 3) -> (⌈H/2⌉, ⌈W/2⌉, 3).
 
     Pixel ``i`` of the output is centred on pixel ``2i`` of the input, so intrinsics halve exactly
     in 0-based pixel-centre coordinates.

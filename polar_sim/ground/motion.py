@@ -17,8 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polar_sim.geometry import se3_exp
-
 __all__ = ["arrow_solve", "arrow_normal_equations", "estimate_motion", "central_difference_flow", "MotionResult"]
 
 
@@ -103,6 +101,22 @@ def _predict(u, v, rates, t, dbar):
     return fu, fv
 
 
+def _twist_pose(w, v):
+    """Rotation (3, 3) and translation (3,) of exp of the body twist (w, v) (closed form, no scipy)."""
+    th2 = float(w @ w)
+    W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    W2 = W @ W
+    th = np.sqrt(th2)
+    if th2 < 1e-6:  # series: exact to round-off below 1e-3 rad, where the closed forms cancel
+        A, B, C = 1.0 - th2 / 6.0 + th2 * th2 / 120.0, 0.5 - th2 / 24.0 + th2 * th2 / 720.0, 1.0 / 6.0 - th2 / 120.0
+    else:
+        A, C = np.sin(th) / th, (th - np.sin(th)) / (th2 * th)
+        B = 0.5 * (np.sin(th / 2.0) / (th / 2.0)) ** 2  # (1 - cos θ)/θ² without cancellation
+    R = np.eye(3) + A * W + B * W2
+    V = np.eye(3) + B * W + C * W2
+    return R, V @ v
+
+
 def central_difference_flow(u, v, dbar, rates, foe, tau_before, tau_after):
     """Exact centred flow of points under a constant body twist, normalised units per second.
 
@@ -117,8 +131,8 @@ def central_difference_flow(u, v, dbar, rates, foe, tau_before, tau_after):
     vel = np.array([foe[0], foe[1], 1.0])
     proj = []
     for tau in (-tau_before, tau_after):
-        T = se3_exp(np.concatenate([np.asarray(rates, dtype=np.float64) * tau, vel * tau]))
-        Y = (X - T[:3, 3]) @ T[:3, :3]
+        R, p = _twist_pose(np.asarray(rates, dtype=np.float64) * tau, vel * tau)
+        Y = (X - p) @ R
         ok &= Y[:, 2] > 1e-9
         zz = np.where(ok, Y[:, 2], 1.0)
         proj.append((Y[:, 0] / zz, Y[:, 1] / zz))
@@ -144,7 +158,8 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
     u, v : (N,) normalised image coordinates of the points at the middle frame.
     udot, vdot : (N,) normalised image velocities (1/s).
     n_global : {1, 3}
-        1: yaw rate only (text); 3: (Ωx, Ωy, Ωz) with a ridge on Ωx, Ωz (code).
+        1: yaw rate only (text); 3: (Ωx, Ωy, Ωz) with a ridge on Ωx, Ωz (code). ``estimate_foe`` adds
+        (t1, t2) to the three rates (n_g = 5).
     ridge : float
         Ridge weight on Ωx and Ωz (pitch/roll rates pulled toward 0), every iteration.
     irls_iter : int
@@ -168,7 +183,7 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
     n = len(u)
     if compat == "code":
         n_global, irls_iter, estimate_foe, span = 3, 0, False, None
-    ng_rates = 1 if n_global == 1 else 3
+    ng_rates = 1 if (n_global == 1 and not estimate_foe) else 3  # the FOE model carries all three rates
     lam_rates = np.zeros(ng_rates) if ng_rates == 1 else np.array([ridge, 0.0, ridge])
 
     # Initial plain least squares (FOE fixed at 0).

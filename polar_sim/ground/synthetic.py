@@ -36,11 +36,12 @@ def _periodic_noise(rng, size, sigmas, weights):
 def _texture(rng, size, base, amp, tint):
     lum = _periodic_noise(rng, size, (0.7, 2.0, 6.0, 20.0), (1.0, 0.8, 0.6, 0.5))
     chroma = _periodic_noise(rng, size, (8.0, 30.0), (1.0, 1.0))
-    tex = np.asarray(base, np.float64)[None, None, :] + amp * lum[..., None] + np.asarray(tint)[None, None, :] * chroma[..., None]
+    tex = (np.asarray(base, np.float64)[None, None, :] + amp * lum[..., None]
+           + np.asarray(tint)[None, None, :] * chroma[..., None])
     tex = np.clip(tex, 0, 255).astype(np.float32)
     pyr = [tex]
     while pyr[-1].shape[0] > 8:
-        pyr.append(cv2.pyrDown(pyr[-1], borderType=cv2.BORDER_WRAP if False else cv2.BORDER_REFLECT101))
+        pyr.append(cv2.pyrDown(pyr[-1], borderType=cv2.BORDER_REFLECT101))  # (no wrap border in pyrDown)
     return pyr
 
 
@@ -234,22 +235,30 @@ class CorridorScene:
 
 
 def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, yaw_rate=0.1, dt=0.1,
-                  camera_height=1.0, half_width=4.0, noise_std=1.0, seed=0):
+                  camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, seed=0):
     """Render a synthetic sequence along an exact unicycle path.
+
+    ``pitch`` (rad, > 0 down) tilts the camera about its x axis relative to the level vehicle frame
+    (the optical centre stays on the path, ``camera_height`` above the ground).
 
     Returns a dict: ``rgb`` (n, H, W, 3) uint8, ``ground_mask`` (n, H, W) bool, ``depth`` (n, H, W)
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
-    ``camera_height``, ``speed``, ``yaw_rate``.
+    ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``.
     """
     K = intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
     scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed)
-    poses = unicycle_poses(n_frames, dt, speed, yaw_rate)
+    level = unicycle_poses(n_frames, dt, speed, yaw_rate)
+    M = np.eye(4)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    M[:3, :3] = [[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]]  # camera -> level rotation
+    world_cam = level @ M  # world = level frame of camera 0
+    poses = np.linalg.inv(M) @ level @ M  # camera k in camera 0's frame
     rng = as_rng(seed + 1)
     rgb = np.empty((n_frames, height, width, 3), np.uint8)
     mask = np.empty((n_frames, height, width), bool)
     depth = np.empty((n_frames, height, width), np.float32)
-    for i, T in enumerate(poses):
+    for i, T in enumerate(world_cam):
         rgb[i], mask[i], depth[i] = scene.render(T, K, width, height, noise_std=noise_std, rng=rng)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=np.arange(n_frames) * dt, K=K,
-                camera_height=camera_height, speed=speed, yaw_rate=yaw_rate)
+                camera_height=camera_height, speed=speed, yaw_rate=yaw_rate, pitch=pitch)

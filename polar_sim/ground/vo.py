@@ -68,6 +68,12 @@ class GroundEstimate:
         ``index - 1``.
     candidate_dbar : ndarray of shape (m,)
         Their scaled inverse depths V/Z, 1/s.
+    candidate_uv : ndarray of shape (m, 2)
+        Their normalised image coordinates (u, v) in the level frame (the RANSAC data with
+        ``candidate_dbar`` and h: ``models.fit_ground(u, v, dbar, h, ...)`` re-runs the fit offline).
+    candidate_prob : ndarray of shape (m,)
+        The learned P(ground) at the candidates (map of the previous image) that weighted this frame's
+        RANSAC draws as ``candidate_prob ** weight_exponent``; NaN before the classifier's first update.
     inlier_mask : ndarray of shape (m,), bool
         RANSAC inliers among the candidates.
     status : str
@@ -89,6 +95,8 @@ class GroundEstimate:
     ground_prob: np.ndarray
     candidates: np.ndarray
     candidate_dbar: np.ndarray
+    candidate_uv: np.ndarray
+    candidate_prob: np.ndarray
     inlier_mask: np.ndarray
     status: str
     diagnostics: dict = field(default_factory=dict)
@@ -135,6 +143,8 @@ class GroundVO:
         Forward–backward tracking consistency limit, processed px.
     irls_iter : int, optional
         IRLS iterations (default 10; "code": none, B1).
+    n_global : {3, 1}, default=3
+        Global unknowns of the kinematics: (Ωx, Ωy, Ωz) as the code (B4), or the yaw rate only (text).
     ridge : float, default=1.0
         Ridge on the pitch and roll rates Ωx, Ωz.
     estimate_foe : bool, default=False
@@ -165,18 +175,24 @@ class GroundVO:
         Train non-ground also on lower-half points whose residual exceeds 3 sigma (default True;
         "code": False, B9).
     horizon_row : float, optional
-        Image row (input px) below which points are ground candidates (default the principal row).
+        Image row (input px) below which points are ground candidates (default: below the horizon of the
+        level frame, i.e. the principal row for a level camera).
+    camera_pitch : float, default=0.0
+        Known downward pitch of the camera relative to the vehicle (rad, > 0 looks down). Feature rays are
+        de-rotated into the level vehicle-aligned frame before the kinematics (spec §9.2); poses stay
+        camera poses.
     integration : {"planar", "3d"}, default="planar"
         Planar unicycle integration, or 3-D with the measured pitch/roll rates (non-flat terrain).
     """
 
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=None,
                  n_iter=None, lam=0.1, sigma=None, weight_exponent=None, downsample=2, max_features=400,
-                 klt_window=11, klt_levels=3, fb_max=0.5, irls_iter=None, ridge=1.0, estimate_foe=False,
-                 exact_flow=True, ground_warp=True, min_triplets=30, min_inliers=10, speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15,
-                 speed_r=3.0, yaw_prior=0.0, yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None,
-                 depth_r=None, depth_p_reset=None, alpha=0.7, ground_prior=0.2, ng_from_outliers=None,
-                 horizon_row=None, integration="planar"):
+                 klt_window=11, klt_levels=3, fb_max=0.5, irls_iter=None, n_global=3, ridge=1.0,
+                 estimate_foe=False, exact_flow=True, ground_warp=True, min_triplets=30, min_inliers=10,
+                 speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15, speed_r=3.0, yaw_prior=0.0,
+                 yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None, depth_r=None, depth_p_reset=None,
+                 alpha=0.7, ground_prior=0.2, ng_from_outliers=None, horizon_row=None, camera_pitch=0.0,
+                 integration="planar"):
         self.K = K
         self.camera_height = camera_height
         self.model = model
@@ -193,6 +209,7 @@ class GroundVO:
         self.klt_levels = klt_levels
         self.fb_max = fb_max
         self.irls_iter = irls_iter
+        self.n_global = n_global
         self.ridge = ridge
         self.estimate_foe = estimate_foe
         self.exact_flow = exact_flow
@@ -214,6 +231,7 @@ class GroundVO:
         self.ground_prior = ground_prior
         self.ng_from_outliers = ng_from_outliers
         self.horizon_row = horizon_row
+        self.camera_pitch = camera_pitch
         self.integration = integration
         # Fail early on the arguments the issue names; everything else is checked in _config().
         self._config()
@@ -241,7 +259,9 @@ class GroundVO:
         c["win"] = as_int(self.klt_window, "klt_window", minimum=3)
         c["levels"] = as_int(self.klt_levels, "klt_levels", minimum=0)
         c["fb_max"] = as_positive_float(self.fb_max, "fb_max")
-        c["irls_iter"] = (0 if code else 10) if self.irls_iter is None else as_int(self.irls_iter, "irls_iter", minimum=0)
+        c["irls_iter"] = ((0 if code else 10) if self.irls_iter is None
+                          else as_int(self.irls_iter, "irls_iter", minimum=0))
+        c["n_global"] = check_choice(self.n_global, (1, 3), "n_global")
         c["ridge"] = as_positive_float(self.ridge, "ridge", allow_zero=True)
         c["foe"] = bool(self.estimate_foe)
         c["exact_flow"] = bool(self.exact_flow) and not code
@@ -269,6 +289,11 @@ class GroundVO:
             c["horizon_row"] = float(as_positive_float(self.horizon_row, "horizon_row", allow_zero=True))
         else:
             c["horizon_row"] = None
+        pitch = self.camera_pitch
+        if isinstance(pitch, bool) or not isinstance(pitch, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(pitch) or abs(pitch) >= np.pi / 2:
+            raise ValueError(f"camera_pitch: expected a finite angle in (-pi/2, pi/2) rad, got {pitch!r}")
+        c["pitch"] = float(pitch)
         c["integration"] = check_choice(self.integration, ("planar", "3d"), "integration")
         return c
 
@@ -281,7 +306,11 @@ class GroundVO:
         self.fx_, self.fy_ = K[0, 0] / ds, K[1, 1] / ds
         self.cx_, self.cy_ = K[0, 2] / ds, K[1, 2] / ds
         hr = c["horizon_row"]
-        self.horizon_ = self.cy_ if hr is None else hr / ds
+        self.horizon_ = None if hr is None else hr / ds
+        cp, sp = np.cos(c["pitch"]), np.sin(c["pitch"])
+        # Rotation camera -> level frame: the optical axis of a camera pitched down by θ is (0, sin θ, cos θ).
+        self.R_lc_ = np.array([[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]])
+        self.Kp_ = np.array([[self.fx_, 0.0, self.cx_], [0.0, self.fy_, self.cy_], [0.0, 0.0, 1.0]])
         # Pixel thresholds of the spec were tuned on 621-px KITTI images (f = 359.4 px); flow scales with f.
         self.pixel_scale_ = self.fx_ / _F_REF
         hp, wp = (shape[0] + ds - 1) // ds, (shape[1] + ds - 1) // ds
@@ -348,8 +377,7 @@ class GroundVO:
             if self.times_ and not t > self.times_[-1]:
                 raise ValueError(f"t: timestamps must increase strictly; got {t!r} after {self.times_[-1]!r}")
         else:
-            self._config()  # parameters may have been changed since construction
-            self._build(rgb.shape)
+            self._build(rgb.shape)  # re-validates the parameters (they may have been set since construction)
         return self._step(rgb, t)
 
     def _step(self, rgb, t):
@@ -371,6 +399,8 @@ class GroundVO:
         rates_raw = np.full(3, np.nan)
         cand_xy = np.zeros((0, 2))
         cand_dbar = np.zeros(0)
+        cand_uv = np.zeros((0, 2))
+        cand_prob = np.zeros(0)
         inl_mask = np.zeros(0, dtype=bool)
         dt = t - self.times_[-1] if k > 0 else 0.0
         motion_done = False
@@ -378,20 +408,20 @@ class GroundVO:
         if k > 0 and len(trk["xy"]):
             # Inverse depths refer to frame k-2 (middle of the last triplet); predict them to frame k-1.
             if k >= 2 and trk["has"].any():
-                u_prev = (trk["xy"][:, 1, 0] - self.cx_) / self.fx_
+                u_prev = self._level(trk["xy"][:, 1])[0]
                 h_ = trk["has"] & np.isfinite(u_prev)
                 base = trk["dmeas"] if code else trk["d"]  # B5: the code propagates the raw measurement
                 d1, P1 = propagate(base[h_], trk["P"][h_], u_prev[h_], vf.x, yf.x, self.dt_prev_, c["depth_q"])
                 trk["d"][h_], trk["P"][h_] = d1, P1
             # KLT with the motion-predicted position as the initial guess (the fix of B6: depth-aware).
             x_prev = trk["xy"][:, 2]
-            u = (x_prev[:, 0] - self.cx_) / self.fx_
-            v = (x_prev[:, 1] - self.cy_) / self.fy_
+            u, v = self._level(x_prev)
             usable = trk["has"] & (trk["P"] < 1.0 * (_H_REF / c["h"]) ** 2) & np.isfinite(trk["d"])
             dpred = np.where(usable, trk["d"], np.maximum(v, 0.0) / c["h"])
             udot = -(1 + u * u) * yf.x + u * vf.x * dpred
             vdot = -u * v * yf.x + v * vf.x * dpred
-            guess = x_prev + dt * np.stack([udot * self.fx_, vdot * self.fy_], axis=1)
+            guess = self._image(u + dt * udot, v + dt * vdot)
+            guess[~np.isfinite(guess).all(axis=1)] = x_prev[~np.isfinite(guess).all(axis=1)]
             gh, gw = g.shape
             guess[:, 0] = np.clip(guess[:, 0], 0, gw - 1)
             guess[:, 1] = np.clip(guess[:, 1], 0, gh - 1)
@@ -400,10 +430,10 @@ class GroundVO:
             if c["ground_warp"] and vf.x > 0:
                 # Ground-stabilised tracking of points below the horizon: keep whichever of the plain and the
                 # homography-warped track matches its patch better.
-                low = np.flatnonzero(x_prev[:, 1] > self.horizon_)
+                low = np.flatnonzero(self._below(x_prev))
                 if len(low):
-                    Kp = np.array([[self.fx_, 0.0, self.cx_], [0.0, self.fy_, self.cy_], [0.0, 0.0, 1.0]])
-                    Hg = frontend.ground_homography(Kp, vf.x, yf.x, dt, c["h"])
+                    M = self.Kp_ @ self.R_lc_.T
+                    Hg = M @ frontend.ground_homography(np.eye(3), vf.x, yf.x, dt, c["h"]) @ np.linalg.inv(M)
                     qw, okw, errw = frontend.track_ground_warped(self.prev_grey_, g, x_prev[low], Hg, win=c["win"],
                                                                  levels=c["levels"], fb_max=c["fb_max"])
                     better = okw & (~ok[low] | (errw < err[low]))
@@ -440,7 +470,7 @@ class GroundVO:
                 else:
                     status, motion_done, out = self._motion_and_ground(trk, tri, t, diag, labels)
                     if out is not None:
-                        speed_raw, yaw_raw, rates_raw, cand_xy, cand_dbar, inl_mask = out
+                        speed_raw, yaw_raw, rates_raw, cand_xy, cand_dbar, inl_mask, cand_uv, cand_prob = out
 
         if k >= 2 and status == "init":
             # Nothing tracked into this frame (black or textureless image); refined below.
@@ -480,6 +510,8 @@ class GroundVO:
         if status == "no_features" and len(new) > 0:
             status = "few_triplets"  # nothing was tracked in, but this image has features to track on
         diag["status"] = status
+        if status != "ok":
+            logger.debug("frame %d (t=%.3f s): %s", k, t, status)
 
         self.prev_grey_ = g
         self.prev_labels_ = labels
@@ -495,6 +527,7 @@ class GroundVO:
         return GroundEstimate(t=t, index=k, speed=vf.x, yaw_rate=yf.x, speed_raw=float(speed_raw),
                               yaw_rate_raw=float(yaw_raw), rates_raw=rates_raw, pose=self.poses_[-1].copy(),
                               ground_prob=prob_out, candidates=cand_xy * ds, candidate_dbar=cand_dbar,
+                              candidate_uv=cand_uv, candidate_prob=cand_prob,
                               inlier_mask=inl_mask, status=status, diagnostics=diag)
 
     def _motion_and_ground(self, trk, tri, t, diag, labels):
@@ -507,19 +540,19 @@ class GroundVO:
         xy = trk["xy"][idx]
         x0, x1, x2 = xy[:, 0], xy[:, 1], xy[:, 2]
         span = t - self.times_[-2]  # t_k - t_{k-2}
-        uh = x1[:, 0] - self.cx_
-        vh = x1[:, 1] - self.cy_
-        sel = (np.abs(uh) > 3.0 * ps) & (np.abs(vh) > 3.0 * ps)
+        u, v = self._level(x1)
+        # Points near the principal axes of the (level) image carry no depth in one component (spec §3.1).
+        sel = (np.abs(u * self.fx_) > 3.0 * ps) & (np.abs(v * self.fy_) > 3.0 * ps)
         diag["n_motion_points"] = int(sel.sum())
         if len(idx) < c["min_triplets"] or sel.sum() < 10:
             return "few_triplets", False, None
-        idx, x0, x1, x2 = idx[sel], x0[sel], x1[sel], x2[sel]
-        u = (x1[:, 0] - self.cx_) / self.fx_
-        v = (x1[:, 1] - self.cy_) / self.fy_
-        udot = (x2[:, 0] - x0[:, 0]) / span / self.fx_
-        vdot = (x2[:, 1] - x0[:, 1]) / span / self.fy_
+        idx, x0, x1, x2, u, v = idx[sel], x0[sel], x1[sel], x2[sel], u[sel], v[sel]
+        u0, v0 = self._level(x0)
+        u2, v2 = self._level(x2)
+        udot = (u2 - u0) / span
+        vdot = (v2 - v0) / span
         halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
-        m = estimate_motion(u, v, udot, vdot, n_global=3, ridge=c["ridge"], irls_iter=c["irls_iter"],
+        m = estimate_motion(u, v, udot, vdot, n_global=c["n_global"], ridge=c["ridge"], irls_iter=c["irls_iter"],
                             estimate_foe=c["foe"], span=halves if c["exact_flow"] else None,
                             compat=c["compat"])
         diag["irls_iterations"] = int(m.iterations)
@@ -527,18 +560,21 @@ class GroundVO:
         yaw_raw = float(m.rates[1])
 
         # Ground candidates: valid d̄ strictly below the horizon row (spec §4.1).
-        below = x1[:, 1] > self.horizon_
+        below = self._below(x1)
         trk["gnd"][idx[~below]] -= 1
         cand = m.valid & below
         ci = np.flatnonzero(cand)
         diag["n_candidates"] = int(len(ci))
         weights = None
-        if c["sampling"] == "weighted" and self.classifier_.n_updates > 0 and len(ci):
+        prob_c = np.full(len(ci), np.nan)
+        if self.classifier_.n_updates > 0 and len(ci):
             pr = self.prev_prob_
             r = np.clip(np.rint(x1[ci, 1]).astype(np.intp), 0, pr.shape[0] - 1)
             q = np.clip(np.rint(x1[ci, 0]).astype(np.intp), 0, pr.shape[1] - 1)
-            weights = pr[r, q].astype(np.float64) ** c["p"]
-            diag["weighted"] = True
+            prob_c = pr[r, q].astype(np.float64)
+            if c["sampling"] == "weighted":
+                weights = prob_c ** c["p"]
+                diag["weighted"] = True
         fit = fit_ground(u[ci], v[ci], m.dbar[ci], c["h"], model=c["model"], weights=weights, n_iter=c["n_iter"],
                          rng=self.rng_, lam=c["lam"], sigma=c["sigma"], compat=c["compat"])
         diag["ransac_iterations"] = int(fit.iterations)
@@ -591,8 +627,32 @@ class GroundVO:
             yf.update(yaw_raw)
             self.rates_ = np.array([rates_raw[0], yf.x, rates_raw[2]])
             status = "no_ground"
-        out = (speed_raw, yaw_raw, rates_raw, x1[ci], m.dbar[ci], fit.inliers.copy())
+        out = (speed_raw, yaw_raw, rates_raw, x1[ci], m.dbar[ci], fit.inliers.copy(),
+               np.stack([u[ci], v[ci]], axis=1), prob_c)
         return status, True, out
+
+    def _level(self, xy):
+        """Normalised coordinates (u, v) in the level frame of processed-image pixels (n, 2)."""
+        r = np.stack([(xy[:, 0] - self.cx_) / self.fx_, (xy[:, 1] - self.cy_) / self.fy_, np.ones(len(xy))], axis=1)
+        if self.cfg_["pitch"] != 0.0:
+            r = r @ self.R_lc_.T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return r[:, 0] / r[:, 2], r[:, 1] / r[:, 2]
+        return r[:, 0], r[:, 1]
+
+    def _image(self, u, v):
+        """Processed-image pixels (n, 2) of level-frame normalised coordinates."""
+        r = np.stack([u, v, np.ones(len(u))], axis=1)
+        if self.cfg_["pitch"] != 0.0:
+            r = r @ self.R_lc_
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.stack([self.fx_ * r[:, 0] / r[:, 2] + self.cx_, self.fy_ * r[:, 1] / r[:, 2] + self.cy_], axis=1)
+
+    def _below(self, xy):
+        """Ground-candidate side of the horizon: below ``horizon_row``, or v > 0 in the level frame."""
+        if self.horizon_ is not None:
+            return xy[:, 1] > self.horizon_
+        return self._level(xy)[1] > 0
 
     def _step_pose(self, T, dt):
         """Compose one integration step of length dt with the filtered speed and yaw rate."""
@@ -607,7 +667,7 @@ class GroundVO:
             rates[1] = w
             step[:3, :3] = so3_exp(rates * dt)
             step[:3, 3] = so3_exp(rates * dt / 2) @ np.array([0.0, 0.0, V * dt])
-            return T @ step
+            return T @ self._to_camera(step)
         a = w * dt
         ca, sa = np.cos(a), np.sin(a)
         step[:3, :3] = [[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]]
@@ -619,7 +679,15 @@ class GroundVO:
         else:
             # Exact arc of a unicycle with constant V and ω over dt.
             step[:3, 3] = [V / w * (1.0 - ca), 0.0, V / w * sa]
-        return T @ step
+        return T @ self._to_camera(step)
+
+    def _to_camera(self, step):
+        """A motion step of the level frame expressed for the (pitched) camera frame."""
+        if self.cfg_["pitch"] == 0.0:
+            return step
+        M = np.eye(4)
+        M[:3, :3] = self.R_lc_
+        return np.linalg.inv(M) @ step @ M
 
 
 def _empty_tracks():

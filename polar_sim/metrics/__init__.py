@@ -1,11 +1,14 @@
 """Plain metric functions over numpy arrays (no file I/O, no MuJoCo).
 
 - :mod:`~polar_sim.metrics.odometry`: KITTI segment errors, ATE, RPE, trajectory file formats.
+- :mod:`~polar_sim.metrics.ground`: RANSAC ground success ps, its exponential fit, the Laplace
+  scale of the speed error, classifier IoU and AUC.
 - :mod:`~polar_sim.metrics.pose`: ADD, ADD-S, 5 cm / 5 deg, AUC, BOP VSD / MSSD / MSPD.
 - :mod:`~polar_sim.metrics.segmentation`: IoU, ROC AUC of probability maps.
 - :mod:`~polar_sim.metrics.surface`: Hausdorff, Chamfer, RMSE, SDF error.
 """
 
+from polar_sim.metrics.ground import *  # noqa: F401,F403
 from polar_sim.metrics.odometry import *  # noqa: F401,F403
 from polar_sim.metrics.pose import *  # noqa: F401,F403
 from polar_sim.metrics.segmentation import *  # noqa: F401,F403

@@ -229,7 +229,8 @@ def mspd(model_points, K, T_gt, T_est, symmetries=None):
         best = np.inf
         for s in S:
             gs = g @ s
-            best = min(best, float(np.linalg.norm(ue - _project(K, P @ gs[:3, :3].T + gs[:3, 3]), axis=1).max()))
+            ug = _project(K, P @ gs[:3, :3].T + gs[:3, 3])
+            best = min(best, float(np.linalg.norm(ue - ug, axis=1).max()))
         out[i] = best
     return _out(out, single)
 

@@ -75,7 +75,9 @@ def precision_recall(pred, gt):
 
 
 def occluder_as_target(pred, occluder):
-    """Fraction of occluder (hand) pixels labelled as target, pooled over a stack; NaN if no occluder pixel."""
+    """Fraction of occluder (hand) pixels labelled as target, pooled over a stack.
+
+    NaN if there is no occluder pixel at all."""
     p = _as_mask(pred, "pred")
     o = _as_mask(occluder, "occluder", p.shape)
     n = int(o.sum())
@@ -87,8 +89,8 @@ def roc_auc(scores, labels):
 
     Computed from ranks (Mann-Whitney U); raises if one class is absent."""
     s = np.asarray(scores, dtype=np.float64).ravel()
-    y = _as_mask(np.asarray(labels).reshape(np.shape(labels)) if np.ndim(labels) >= 2 else
-                 np.asarray(labels)[None, :], "labels").ravel()
+    lab = np.asarray(labels)
+    y = _as_mask(lab.reshape(1, -1) if lab.ndim < 2 else lab.reshape(-1, lab.shape[-1]), "labels").ravel()
     if s.shape != y.shape:
         raise ValueError(f"scores: expected {y.shape[0]} values to match labels, got {s.shape[0]}")
     if not np.isfinite(s).all():

@@ -25,7 +25,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from polar_sim.geometry import matrix_to_quat, quat_to_matrix
+
 
 __all__ = ["add_hand", "HandScript", "Segment", "min_jerk", "slerp", "look_at_quat",
            "HAND_SKIN", "COLLIDE_STATIC", "COLLIDE_HAND", "COLLIDE_OBJECT", "ACTIONS"]
@@ -45,11 +45,12 @@ FINGER_R = 0.0085
 FINGER_Y = 0.058
 FINGER_Z0 = -0.02
 THUMB_R = 0.0095
-THUMB_Y = -0.060
+THUMB_Y = -0.064
 FINGER_INNER = FINGER_Y - FINGER_R  # inner (palm-side) surface of the fingers, hand y
 FINGER_OUTER = FINGER_Y + FINGER_R
 TIP_Z = FINGER_Z0 - max(FINGER_LEN) - FINGER_R  # lowest fingertip point, hand z
-GRASP_SPAN = FINGER_INNER + (-THUMB_Y - THUMB_R)  # fingers to thumb, inner surfaces
+# Fingers to thumb, inner surfaces, at the palm's underside (the thumb slants inward above).
+GRASP_SPAN = FINGER_INNER + (0.054 - THUMB_R)
 
 #: The actions a script is made of.
 ACTIONS = ("touch", "push", "lift", "turn", "fast", "pass")
@@ -72,22 +73,62 @@ def add_hand(spec: mujoco.MjSpec, pos, quat):
     body.add_geom(name="hand_palm", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(PALM_HALF), **common)
     for k, (x, L) in enumerate(zip(FINGER_X, FINGER_LEN)):
         body.add_geom(name=f"hand_finger{k}_proximal", type=cap, size=[FINGER_R, 0, 0],
-                      fromto=[x, PALM_HALF[1] - 0.006, -0.002, x, FINGER_Y, FINGER_Z0], **common)
+                      fromto=[x, FINGER_Y - 0.004, -0.004, x, FINGER_Y, FINGER_Z0], **common)
         body.add_geom(name=f"hand_finger{k}_distal", type=cap, size=[FINGER_R, 0, 0],
                       fromto=[x, FINGER_Y, FINGER_Z0, x, FINGER_Y, FINGER_Z0 - L], **common)
     body.add_geom(name="hand_thumb_proximal", type=cap, size=[THUMB_R, 0, 0],
-                  fromto=[0.030, -0.036, -0.006, 0.020, THUMB_Y, -0.030], **common)
+                  fromto=[0.030, -0.050, -0.004, 0.020, THUMB_Y, -0.030], **common)
     body.add_geom(name="hand_thumb_distal", type=cap, size=[THUMB_R, 0, 0],
                   fromto=[0.020, THUMB_Y, -0.030, 0.012, THUMB_Y, -0.058], **common)
     sleeve = dict(common, rgba=list(SLEEVE))
-    body.add_geom(name="hand_wrist", type=cap, size=[0.026, 0, 0],
-                  fromto=[0, -0.045, 0.004, 0, -0.085, 0.022], **common)
+    # The wrist and forearm stay above the palm's underside, which rests on objects.
+    body.add_geom(name="hand_wrist", type=cap, size=[0.024, 0, 0],
+                  fromto=[0, -0.05, 0.013, 0, -0.09, 0.03], **common)
     body.add_geom(name="hand_forearm", type=cap, size=[0.033, 0, 0],
                   fromto=[0, -0.10, 0.03, 0, -0.27, 0.13], **sleeve)
     return body
 
 
 # -- trajectories ----------------------------------------------------------------------------
+
+# Quaternion helpers (w, x, y, z), in plain numpy: scipy's Rotation costs ~0.4 ms a call, too
+# much for a script that runs before each of 600 physics substeps per second.
+
+def quat_to_matrix(q):
+    """Rotation matrix (3, 3) of a quaternion (w, x, y, z) (normalised here)."""
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def matrix_to_quat(R):
+    """Quaternion (w, x, y, z) with w >= 0 of a rotation matrix (3, 3) (Shepperd's method)."""
+    R = np.asarray(R, float)
+    t = R[0, 0] + R[1, 1] + R[2, 2]
+    k = int(np.argmax([t, R[0, 0], R[1, 1], R[2, 2]]))
+    if k == 0:
+        r = np.sqrt(1.0 + t)
+        q = np.array([r, (R[2, 1] - R[1, 2]) / r, (R[0, 2] - R[2, 0]) / r, (R[1, 0] - R[0, 1]) / r]) / 2
+    elif k == 1:
+        r = np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array([(R[2, 1] - R[1, 2]) / r, r, (R[0, 1] + R[1, 0]) / r, (R[0, 2] + R[2, 0]) / r]) / 2
+    elif k == 2:
+        r = np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q = np.array([(R[0, 2] - R[2, 0]) / r, (R[0, 1] + R[1, 0]) / r, r, (R[1, 2] + R[2, 1]) / r]) / 2
+    else:
+        r = np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q = np.array([(R[1, 0] - R[0, 1]) / r, (R[0, 2] + R[2, 0]) / r, (R[1, 2] + R[2, 1]) / r, r]) / 2
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def _rotvec(R):
+    """Rotation vector (3,) of a rotation matrix."""
+    q = matrix_to_quat(R)
+    s = np.linalg.norm(q[1:])
+    return 2.0 * np.arctan2(s, q[0]) * (q[1:] / s) if s > 1e-15 else 2.0 * q[1:]
+
 
 def min_jerk(s):
     """Minimum-jerk time scaling of s in [0, 1] (clipped): 10 s^3 - 15 s^4 + 6 s^5."""
@@ -220,11 +261,17 @@ class HandScript:
         ``scale(t)`` multiplying the key light's diffuse colour.
     camera : callable or None
         ``(p, q) = pose(t)`` of the camera rig (a mocap body); None keeps it still.
+    key_light : str
+        The light that ``light`` scales.
+    speed : float
+        Multiplies the speed of the reaching and held motions.
     """
 
     def __init__(self, actions, target, objects, samples, camera_pos, home, table_z, rng_seed,
                  *, cycle=False, light=None, camera=None, key_light="key", speed=1.0):
         self.actions = [a if isinstance(a, tuple) else (a, {}) for a in actions]
+        if not self.actions or any(a[0] not in ACTIONS for a in self.actions):
+            raise ValueError(f"actions: expected a non-empty list of {', '.join(ACTIONS)}, got {actions!r}")
         self.target = target
         self.objects = list(objects)
         self.samples = samples
@@ -343,11 +390,8 @@ class HandScript:
             h = 1e-3
             T1, T0 = seg.object_pose(t + h), seg.object_pose(t - h)
             data.qvel[v : v + 3] = (T1[:3, 3] - T0[:3, 3]) / (2 * h)
-            dR = T1[:3, :3] @ T0[:3, :3].T
-            from polar_sim.geometry import so3_log
-
             # Free-joint angular velocity is in the body frame.
-            data.qvel[v + 3 : v + 6] = To[:3, :3].T @ so3_log(dR) / (2 * h)
+            data.qvel[v + 3 : v + 6] = _rotvec(T0[:3, :3].T @ T1[:3, :3]) / (2 * h)
             Th = To @ seg.grasp
             self._set_hand(data, (Th[:3, 3], matrix_to_quat(Th[:3, :3])))
         else:
@@ -438,11 +482,11 @@ class HandScript:
     # -- actions -----------------------------------------------------------------------------
     def _plan_touch(self, plan, To, prm):
         """Rest the palm on the object's top (pressing 1 mm), fingers over its front, then leave."""
-        pose = self._top_grasp(To, 0.003, -0.001, self._yaw(prm, "front"))
+        pose = self._top_grasp(To, 0.0035, -0.0003, self._yaw(prm, "front"))
         self._approach(plan, pose)
         plan.hold(prm.get("hold", 1.6), "touch")
         p = pose[0].copy()
-        p[2] += 0.0005  # ease off a little, still touching
+        p[2] += 0.0001  # ease off a little, still touching
         plan.move((p, pose[1]), 0.8, "touch")
         self._leave(plan)
 
@@ -480,10 +524,10 @@ class HandScript:
         jitter = prm.get("yaw")
         return APPROACHES[a] + (self._rng.uniform(-0.3, 0.3) if jitter is None else float(jitter))
 
-    def _grasp_and(self, plan, To, moves, yaw=0.0):
-        """Top-grasp the target, carry its pivot through ``moves`` = [(dp (3,), R (3,3) applied
-        in the world about the pivot, duration, phase)], put it back where it was, let go."""
-        hp = self._top_grasp(To, 0.0015, 0.002, yaw)
+    def _grasp_and(self, plan, To, moves, hp):
+        """Top-grasp the target with the hand at ``hp`` (p, q), carry its pivot through
+        ``moves`` = [(dp (3,), R (3, 3) applied in the world about the pivot, duration, phase)],
+        then let go (the last move should put it back on the table)."""
         self._approach(plan, hp)
         plan.hold(0.3, "grasp")
         piv, A = self._pivot(To)
@@ -497,33 +541,51 @@ class HandScript:
         plan.hold(0.3, "release")
         self._leave(plan)
 
+    def _grasp_pose(self, To, prm):
+        return self._top_grasp(To, 0.0035, 0.002, self._yaw(prm, "side"))
+
+    def _away(self, hp, To, ang_deg):
+        """``ang_deg`` with the sign that turns the forearm away from the camera, not toward it."""
+        fore = -quat_to_matrix(hp[1])[:, 1]
+        u = np.array([*self._toward_camera(To), 0.0])
+        a = abs(np.radians(ang_deg))
+        return min((a, -a), key=lambda x: float((_rot([0, 0, 1], x) @ fore) @ u))
+
     def _plan_lift(self, plan, To, prm):
         """Lift 15 cm, tilt toward the camera and turn a little, bring it back, put it down."""
+        hp = self._grasp_pose(To, prm)
         h = float(prm.get("height", 0.15))
         u = self._toward_camera(To)
         tilt = _rot(np.cross([0.0, 0.0, 1.0], [u[0], u[1], 0.0]), np.radians(prm.get("tilt_deg", 30)))
-        yaw = _rot([0, 0, 1], np.radians(prm.get("yaw_deg", 35)))
+        yaw = _rot([0, 0, 1], self._away(hp, To, prm.get("yaw_deg", 35)))
         I = np.eye(3)
         up = [0, 0, h]
         self._grasp_and(plan, To, [(up, I, 1.4, "lift"), (up, tilt, 1.2, "tilt"), (up, yaw @ tilt, 1.2, "turn"),
-                                   (up, I, 1.4, "lift"), ([0, 0, 0], I, 1.4, "place")], self._yaw(prm, "side"))
+                                   (up, I, 1.4, "lift"), ([0, 0, 0], I, 1.4, "place")], hp)
 
     def _plan_turn(self, plan, To, prm):
-        """Lift 3 cm, turn about the vertical by 70-110 deg, roll 30 deg and back, put it down."""
+        """Lift 3 cm, turn about the vertical by 70-100 deg, roll 30 deg and back, put it down.
+
+        The turn swings the forearm away from the camera, which brings the fingers round to the
+        camera's side; the grasp starts turned back by half the angle, so that the hand passes
+        the side of the object half way and never covers its front fully."""
+        yaw = self._yaw(prm, "side")
         ang = prm.get("yaw_deg")
         if ang is None:
-            ang = self._rng.uniform(70, 110) * self._rng.choice([-1, 1])
-        Rz = _rot([0, 0, 1], np.radians(ang))
+            ang = self._rng.uniform(70, 100)
+        a = self._away(self._top_grasp(To, 0.0035, 0.002, yaw), To, ang)
+        hp = self._top_grasp(To, 0.0035, 0.002, yaw - a / 2)
+        Rz = _rot([0, 0, 1], a)
         u = self._toward_camera(To)
         roll = _rot([u[0], u[1], 0.0], np.radians(prm.get("roll_deg", 30)))
         up = [0, 0, 0.03]
-        self._grasp_and(plan, To, [(up, np.eye(3), 0.8, "lift"), (up, Rz, 2.4, "turn"),
-                                   (up, roll @ Rz, 1.1, "roll"), (up, Rz, 1.1, "roll"),
-                                   ([0, 0, 0], Rz, 0.8, "place")], self._yaw(prm, "side"))
+        self._grasp_and(plan, To, [(up, np.eye(3), 0.6, "lift"), (up, Rz, 2.0, "turn"),
+                                   (up, roll @ Rz, 0.9, "roll"), (up, Rz, 0.9, "roll"),
+                                   ([0, 0, 0], Rz, 0.6, "place")], hp)
 
     def _plan_fast(self, plan, To, prm):
         """Lift 10 cm and shake: 0.5 s moves of +-7 cm and +-25 deg about changing axes
-        (peaks about 0.5 m/s and 180 deg/s), then put it back."""
+        (peaks about 0.6-0.7 m/s at the base and 190 deg/s), then put it back."""
         u = self._toward_camera(To)
         x = np.cross([u[0], u[1], 0.0], [0, 0, 1.0])
         up = np.array([0, 0, 0.10])
@@ -535,7 +597,7 @@ class HandScript:
             dp = up + s * 0.07 * x + np.array([0, 0, 0.03 * ((k // 2) % 2)])
             moves.append((dp, _rot(axes[(k // 2) % len(axes)], s * np.radians(25)), 0.5, "fast"))
         moves += [(up, np.eye(3), 0.6, "fast"), ([0, 0, 0], np.eye(3), 0.8, "place")]
-        self._grasp_and(plan, To, moves, self._yaw(prm, "side"))
+        self._grasp_and(plan, To, moves, self._grasp_pose(To, prm))
 
     def _plan_pass(self, plan, To, prm):
         """Sweep the hand sideways through the line of sight, ``frac`` of the way from the

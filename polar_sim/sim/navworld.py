@@ -63,13 +63,14 @@ def _reachable(occ, start_ij, goal_ij):
     return False
 
 
-def build_navworld(spec: mujoco.MjSpec, seed, *, rooms=3, room_size=4.0, clutter=10, door_width=1.2,
-                   min_goal_distance=5.0, lidar_beams=270):
+def build_navworld(spec: mujoco.MjSpec, seed, *, rooms=3, room_size=4.0, clutter=10, door_width=1.6,
+                   extra_doors=0.5, min_goal_distance=5.0, lidar_beams=270):
     """Rooms, doors, clutter, the indoor rover at the start and a goal marker.
 
     Options: ``rooms`` per side (int), ``room_size`` (m), ``clutter`` pieces (int),
-    ``door_width`` (m), ``min_goal_distance`` (m, straight line), ``lidar_beams`` of the 2D
-    lidar (270 deg field of view).
+    ``door_width`` (m), ``extra_doors`` (probability that a wall not on the spanning tree has a
+    door too: 0 gives a maze, 1 a door in every wall), ``min_goal_distance`` (m, straight line),
+    ``lidar_beams`` of the 2D lidar (270 deg field of view).
     """
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7003]))
     n, L = int(rooms), float(room_size)
@@ -112,7 +113,7 @@ def build_navworld(spec: mujoco.MjSpec, seed, *, rooms=3, room_size=4.0, clutter
             parent[find(a)] = find(b)
             doors.add(edges[k])
     for k in order:
-        if rng.random() < 0.3:
+        if rng.random() < extra_doors:
             doors.add(edges[k])
     door_pts = []
     for idx, (a, b) in enumerate(edges):

@@ -1,9 +1,10 @@
 """The manipulated objects of the tabletop scenes: watertight meshes made with trimesh.
 
-Each object is one closed, outward-oriented triangle mesh in metres. **Object frame: the origin
-is the centre of the base (the footprint's bounding-box centre on the plane the object stands
-on), z up**, so an object standing upright on a table at height ``h`` has its body at
-``z = h``. The meshes ship as OBJ files in ``scenes/assets/objects/`` (with texture coordinates
+Each object is one closed, outward-oriented triangle mesh in metres. **Object frame: z up, the
+origin on the plane the object stands on (its lowest point is at z = 0), under the centre of
+its main body** (the axis of the revolved mug, can and bottle; the centre of the box and the
+cube; the centre of the drill's battery; the middle of the bracket's foot), so an object
+standing upright on a table at height ``h`` has its body at ``z = h``. The meshes ship as OBJ files in ``scenes/assets/objects/`` (with texture coordinates
 into a 2x2 texture atlas, see :data:`ATLAS_TILES`); regenerate them with
 
     python -m polar_sim.sim.objects
@@ -24,7 +25,7 @@ import numpy as np
 import trimesh
 
 __all__ = ["OBJECTS", "ObjectInfo", "object_names", "object_info", "load_mesh", "make_mesh",
-           "write_assets", "asset_dir", "asset_path", "ATLAS_TILES"]
+           "write_assets", "asset_dir", "asset_path", "diameter", "ATLAS_TILES"]
 
 logger = logging.getLogger(__name__)
 
@@ -286,7 +287,6 @@ def _face_tiles(name, mesh):
     """Atlas tile per face: which part of the object a face belongs to."""
     c = mesh.triangles_center
     n = mesh.face_normals
-    H = mesh.bounds[1, 2]
     r = np.hypot(c[:, 0], c[:, 1])
     tile = np.full(len(c), ATLAS_TILES["body"])
     if name == "mug":
@@ -306,7 +306,6 @@ def _face_tiles(name, mesh):
         tile[grip] = ATLAS_TILES["dark"]
     elif name == "cube":
         tile[n[:, 2] > 0.9] = ATLAS_TILES["accent"]
-    del H
     return tile
 
 

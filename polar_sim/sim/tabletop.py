@@ -13,8 +13,8 @@ Scripts of ``tabletop`` (option ``script``):
 touch     the palm rests on the target's top, fingers over its front; twice (Mode B, contact)
 push      the fingers push the target 10 cm along +x, then 8 cm back (Mode B, physics)
 lift      grasp, lift 15 cm, tilt toward the camera, turn, put back (Mode A, kinematic)
-turn      grasp, lift 3 cm, turn 70-110 deg about the vertical, roll, put down; twice
-fast      grasp and shake: +-7 cm, +-25 deg moves of 0.5 s (peaks ~0.5 m/s, ~180 deg/s)
+turn      grasp, lift 3 cm, turn 70-100 deg about the vertical, roll, put down; twice
+fast      grasp and shake: +-7 cm, +-25 deg moves of 0.5 s (peaks ~0.7 m/s, ~190 deg/s)
 light     the key light dims to 30 % and brightens to 130 % while the hand touches and turns
 pass      the hand sweeps across in front of the target without touching it, twice
 demo      touch, pass, lift, turn, push, and again (cycles for ever)
@@ -28,10 +28,9 @@ import logging
 import mujoco
 import numpy as np
 
-from polar_sim.geometry import matrix_to_quat
 from polar_sim.sim import objects as _objects
 from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandScript, add_hand, look_at_quat,
-                                matrix_to_quat as _m2q)
+                                matrix_to_quat)
 from polar_sim.sim.robots import GROUP
 
 __all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "COLOURS", "OrbitScript", "object_texture"]
@@ -57,7 +56,8 @@ SCRIPTS = {
     "turn": [("turn", {}), ("turn", {})],
     "fast": [("fast", {})],
     "light": [("touch", {"hold": 2.0}), ("turn", {})],
-    "pass": [("pass", {"dir": 1.0, "height": 0.0}), ("pass", {"dir": -1.0, "height": -0.03})],
+    "pass": [("pass", {"dir": 1.0, "height": 0.0, "duration": 3.6}),
+             ("pass", {"dir": -1.0, "height": -0.045, "duration": 3.6})],
     "demo": ["touch", "pass", "lift", "turn", "push"],
 }
 CAMERA_MOTIONS = ("static", "sway")
@@ -189,30 +189,66 @@ def _add_object(spec, name, pos, yaw, material, *, target, free=True):
     return body
 
 
-def _footprint(mesh):
-    return float(np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 1]).max())
+def _disc(mesh, x, y, yaw):
+    """Footprint of a mesh standing at (x, y) with ``yaw``: centre (2,) and radius of the
+    smallest disc about its bounding-box centre that holds it."""
+    c = 0.5 * (mesh.bounds[0, :2] + mesh.bounds[1, :2])
+    r = float(np.linalg.norm(mesh.vertices[:, :2] - c, axis=1).max())
+    cs, sn = np.cos(yaw), np.sin(yaw)
+    return np.array([x + cs * c[0] - sn * c[1], y + sn * c[0] + cs * c[1]]), r
+
+
+#: The camera's pose in scenes/tabletop.xml (eye and look-at point, m) and vertical fov (deg).
+CAMERA_EYE, CAMERA_LOOK, CAMERA_FOVY = (0.0, -0.6106, 1.2015), (0.0, 0.0, 0.82), 44.62
+
+
+def _in_view(c, r, mesh, margin=0.04):
+    """Whether a footprint disc (centre c, radius r) and the object's height above it are inside
+    the camera's image, ``margin`` (fraction of the width) from its borders."""
+    eye, look = np.asarray(CAMERA_EYE), np.asarray(CAMERA_LOOK)
+    f = (look - eye) / np.linalg.norm(look - eye)
+    right = np.cross(f, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(f, right)
+    t = np.tan(np.radians(CAMERA_FOVY) / 2)
+    h = mesh.bounds[1, 2]
+    for dx in (-r, r):
+        for dz in (0.0, h):
+            p = np.array([c[0] + dx, c[1], TABLE_Z + dz]) - eye
+            x, y = (p @ right) / (p @ f), (p @ down) / (p @ f)
+            if abs(x) > t * 4 / 3 * (1 - 2 * margin) or abs(y) > t * (1 - 2 * margin):
+                return False
+    return True
 
 
 def _place(rng, target, others, meshes):
     """Seeded positions (x, y) and yaws. The target stands in the front half of the table; the
-    others stand in rows behind it, clear of the strips the hand uses beside and in front of it
-    (for pushing, reaching and the crossing pass)."""
-    xt, yt = rng.uniform(-0.10, 0.0), rng.uniform(-0.10, -0.04)
-    rt = _footprint(meshes[target])
-    out = {target: (xt, yt, rng.uniform(-np.pi, np.pi))}
-    placed = [(xt, yt, rt)]
+    others stand behind it, so the strips beside it (pushing) and in front of it (the pass, the
+    camera's view) stay clear. A layout that does not fit is drawn again."""
+    for _ in range(50):
+        out = _try_place(rng, target, others, meshes)
+        if out is not None:
+            return out
+    raise ValueError(f"n_objects: cannot place {len(others) + 1} objects on the table")
+
+
+def _try_place(rng, target, others, meshes):
+    xt, yt, at = rng.uniform(-0.10, 0.0), rng.uniform(-0.10, -0.04), rng.uniform(-np.pi, np.pi)
+    out = {target: (xt, yt, at)}
+    ct, rt = _disc(meshes[target], xt, yt, at)
+    placed = [(ct, rt)]
     for o in others:
-        r = _footprint(meshes[o])
-        for _ in range(2000):
-            x, y = rng.uniform(-0.42, 0.42), rng.uniform(yt + rt + r + 0.07, 0.30)
-            if abs(x - xt) < rt + r + 0.10:
+        for _ in range(1000):
+            x, y, a = rng.uniform(-0.45, 0.45), rng.uniform(-0.05, 0.36), rng.uniform(-np.pi, np.pi)
+            c, r = _disc(meshes[o], x, y, a)
+            if not (c[1] + r < 0.38 and c[1] - r > ct[1] + rt + 0.04 and _in_view(c, r, meshes[o])):
                 continue
-            if all(np.hypot(x - a, y - b) > r + c + 0.03 for a, b, c in placed):
+            if all(np.linalg.norm(c - c2) > r + r2 + 0.02 for c2, r2 in placed):
                 break
         else:
-            raise ValueError(f"n_objects: cannot place {len(others) + 1} objects on the table")
-        out[o] = (x, y, rng.uniform(-np.pi, np.pi))
-        placed.append((x, y, r))
+            return None
+        out[o] = (x, y, a)
+        placed.append((c, r))
     return out
 
 
@@ -295,7 +331,7 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
         x, y, yaw = layout[o]
         _add_object(spec, o, (x, y, TABLE_Z), yaw, f"tex_{o}", target=(o == target))
 
-    home = (np.array([0.32, 0.42, 1.32]), _m2q(np.diag([-1.0, -1.0, 1.0])))
+    home = (np.array([0.32, 0.42, 1.32]), matrix_to_quat(np.diag([-1.0, -1.0, 1.0])))
     add_hand(spec, *home)
     cam_body = spec.body("camera_rig")
     cam_pos = np.array(cam_body.pos, float)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim._validation import as_depth, as_image, as_points
+from polar_sim._validation import as_image, as_points
 
 __all__ = ["as_model_points", "as_normals", "as_rgbd"]
 

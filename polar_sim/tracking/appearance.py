@@ -108,18 +108,27 @@ class FeatureHead:
         self.mean = np.zeros(D)
         self.m2 = np.zeros(D)
         self.n_updates = 0
-        # all parameters live in one flat vector; ``params`` are views into it
+        # all parameters live in one flat vector; ``params`` gives views into it
         if head == "S":
-            shapes = [(D,), (1,)]
+            self._shapes = [(D,), (1,)]
         else:
-            shapes = [(N_LEVELS, N_CHANNELS), (N_LEVELS,), (N_LEVELS,), (1,)]
-        sizes = [int(np.prod(sh)) for sh in shapes]
-        self.theta = np.zeros(sum(sizes))
-        offs = np.cumsum([0] + sizes)
-        self.params = [self.theta[a:b].reshape(sh) for a, b, sh in zip(offs[:-1], offs[1:], shapes)]
+            self._shapes = [(N_LEVELS, N_CHANNELS), (N_LEVELS,), (N_LEVELS,), (1,)]
+        self.theta = np.zeros(sum(int(np.prod(sh)) for sh in self._shapes))
         if head == "W":
             self.params[2][:] = 1.0 / N_LEVELS
         self.opt = _Adam(len(self.theta), lr)
+
+    @property
+    def params(self):
+        """Views into ``theta``: [w (48,), b (1,)] for S; [W (4, 12), b (4,), alpha (4,), c (1,)] for W.
+
+        Views are made on access (never stored), so a pickled head stays consistent."""
+        out, a = [], 0
+        for sh in self._shapes:
+            n = int(np.prod(sh))
+            out.append(self.theta[a : a + n].reshape(sh))
+            a += n
+        return out
 
     # -- features and inference -------------------------------------------------------------
     def prepare(self, rgb):
@@ -143,7 +152,8 @@ class FeatureHead:
             W, b, alpha, c = self.params
             for s in range(N_LEVELS):
                 ws = alpha[s] * W[s] / sd[s]
-                out.append((ws, alpha[s] * (b[s] - float((W[s] / sd[s]) @ mu[s])) + (c[0] if s == 0 else 0.0)))
+                bias = alpha[s] * (b[s] - float((W[s] / sd[s]) @ mu[s])) + (c[0] if s == 0 else 0.0)
+                out.append((ws, bias))
         return out
 
     def log_ratio(self, feats):

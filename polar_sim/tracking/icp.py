@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polar_sim.geometry import se3_exp
+from polar_sim.geometry import inv_pose, se3_exp, se3_log
 from polar_sim.tracking._kernels import icp_normal_equations, icp_residuals
 from polar_sim.tracking.visibility import project_model
 
@@ -96,7 +96,8 @@ def _correspond(X, T, model, vis, gate, exact):
 
 def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate_floor,
                  max_iterations=30, vis_every=5, gate_decay=0.7, tol_rot=1e-4, tol_trans=1e-5,
-                 exact=False, min_points=6, tangential_weight=0.3, vis_init=None):
+                 exact=False, min_points=6, tangential_weight=0.6, vis_init=None, rel_decrease=1e-3,
+                 prior=None):
     """Register camera-frame points X (n, 3) with prior weights w0 (n,) to the model.
 
     Parameters
@@ -113,6 +114,14 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
         box seen face-on); the tangential term lets the boundary of the selected points pin it.
         0 gives pure point-to-plane.
     vis_init : (M,) visibility at T_init if already known (saves one projection).
+    rel_decrease : stop when the predicted cost decrease of a step is below this fraction of the
+        weighted cost (besides the spec's step-size test ``tol_rot``, ``tol_trans``).
+    prior : (T_prior (4, 4), information (6, 6)) or None
+        Makes the registration a MAP estimate: the cost gains ``e^T Lambda e`` with
+        ``e = Log(T_prior^-1 T)``, and the data term is scaled by the robust scale. Directions that the
+        points do not constrain (a sliver of one face left by an occluder) then stay at the
+        prediction instead of wandering. The returned covariance is the data's alone, for the
+        filter.
     """
     X = np.ascontiguousarray(X, dtype=np.float64)
     T = T_init.copy()
@@ -153,10 +162,23 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
                 ok_any = False
                 done = True
                 break
-            delta = -np.linalg.solve(H + 1e-6 * tr * np.eye(6), g)
+            Hs, gs = H, g
+            cost = float(w @ (res * res))
+            if prior is not None:
+                # MAP: data in units of the robust scale, plus the prediction's information
+                e = se3_log(inv_pose(prior[0]) @ T)
+                s2 = sigma * sigma
+                Hs, gs = H / s2 + prior[1], g / s2 + prior[1] @ e
+                cost = cost / s2 + float(e @ prior[1] @ e)
+            delta = -np.linalg.solve(Hs + 1e-6 * np.trace(Hs) * np.eye(6), gs)
             T = T @ se3_exp(delta)
             ok_any = True
-            if np.linalg.norm(delta[:3]) < tol_rot and np.linalg.norm(delta[3:]) < tol_trans:
+            # converged: a tiny step, or a step that no longer lowers the cost (delta^T H delta is the
+            # Gauss-Newton decrease; motion along an unobservable direction, such as a cylinder
+            # turning about its axis, is large but free, and would otherwise run to max_iterations)
+            gain = float(delta @ Hs @ delta)
+            small = np.linalg.norm(delta[:3]) < tol_rot and np.linalg.norm(delta[3:]) < tol_trans
+            if small or gain < rel_decrease * cost:
                 done = True
                 break
         if done:

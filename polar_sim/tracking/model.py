@@ -68,7 +68,8 @@ class ShapeModel:
     Attributes
     ----------
     centroid : (3,) object-frame centroid; ``P`` = points - centroid; ``N`` normals;
-    diameter, spacing (1/sqrt(points per area) = 2 x mean nearest-neighbour distance), margin (grid margin around the points), m.
+    diameter, spacing (1/sqrt(points per area) = 2 x mean nearest-neighbour distance) and
+    margin (of the lookup grid around the points), all in metres.
     """
 
     def __init__(self, points, normals, *, grid_cells=64, k=4):

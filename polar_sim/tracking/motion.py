@@ -94,12 +94,12 @@ class MotionFilter:
         P = self.P_bar - G @ self.P_bar[:6, :]
         self.P = self._cap(0.5 * (P + P.T) * inflate)
 
-    def coast(self, *, velocity_decay=1.0):
-        """No measurement: keep the prediction, damp the velocity."""
+    def coast(self, *, velocity_decay=1.0, inflate=1.0):
+        """No (usable) measurement: keep the prediction, damp the velocity, scale P by ``inflate``."""
         self.T = self.T_bar.copy()
         self.xi = self.xi * velocity_decay
         if self.mode == "ekf":
-            self.P = self._cap(self.P_bar.copy())
+            self.P = self._cap(self.P_bar * inflate)
 
     @property
     def pose_cov(self):

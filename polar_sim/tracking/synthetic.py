@@ -100,8 +100,9 @@ def make_object(name="mug"):
     return Part.from_trimesh(mesh, cols, TARGET)
 
 
-def make_hand():
-    """A skin-coloured box hand: palm 4.5 x 2 x 6 cm and two fingers, frame at the palm's back face centre."""
+def make_hand(color=(225, 170, 140)):
+    """A box hand (skin-coloured by default): palm 4.5 x 2 x 6 cm and two fingers, frame at the
+    palm's back face centre."""
     palm = trimesh.creation.box([0.045, 0.02, 0.06])
     palm.apply_translation([0, -0.01, 0])
     f1 = trimesh.creation.box([0.016, 0.016, 0.05])
@@ -109,7 +110,7 @@ def make_hand():
     f2 = trimesh.creation.box([0.016, 0.016, 0.04])
     f2.apply_translation([-0.01, -0.008, 0.05])
     mesh = trimesh.util.concatenate([palm, f1, f2])
-    return Part.from_trimesh(mesh, (225, 170, 140), HAND)
+    return Part.from_trimesh(mesh, color, HAND)
 
 
 def make_table(size=1.2, cells=12):
@@ -269,6 +270,8 @@ class Sequence:
     noise: bool = True
     hidden: frozenset = frozenset()
     occluded: frozenset = frozenset()
+    hand_color: tuple = (225, 170, 140)
+    brightness: tuple = (1.0, 1.0)
     extras: list = field(default_factory=list)
 
     def __len__(self):
@@ -285,7 +288,7 @@ class Sequence:
             parts.append(self.target)
             poses.append(self.poses[i])
         if i not in self.hidden and self.hand_poses is not None:
-            parts.append(make_hand())
+            parts.append(make_hand(self.hand_color))
             poses.append(self.hand_poses[i])
         if i in self.occluded:
             # a grey board between the camera and the object, 40% of the way: full occlusion
@@ -297,6 +300,10 @@ class Sequence:
             parts.append(part)
             poses.append(T)
         rgb, depth, labels = render(parts, poses, self.K, self.shape)
+        b0, b1 = self.brightness
+        if (b0, b1) != (1.0, 1.0):
+            gain = b0 + (b1 - b0) * i / max(len(self) - 1, 1)
+            rgb = np.clip(rgb * gain, 0, 255).astype(np.uint8)
         rng = np.random.default_rng([self.seed, i])
         out = {"depth_clean": depth, "labels": labels, "pose": self.poses[i].copy()}
         if self.noise:
@@ -307,13 +314,16 @@ class Sequence:
 
 
 def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape=(480, 640),
-                  noise=True, hidden=(), occluded=()):
+                  noise=True, hidden=(), occluded=(), hand_color=(225, 170, 140), brightness=(1.0, 1.0)):
     """A hand-held object on a table seen from 0.7 m, 30 fps.
 
-    The object slides about 8 cm, lifts 3 cm and turns +-25 deg about its vertical axis (scaled by
-    ``speed``); the hand holds its camera-facing side. Frames listed in ``hidden`` drop the object
-    and the hand from the image (as if they left the view); frames in ``occluded`` put a board
-    between the camera and the object (full occlusion): both for lost/recover tests.
+    The object starts at rest, then slides about 8 cm, lifts 3 cm and turns +-25 deg about its
+    vertical axis, peaking near 7 cm/s and 30 deg/s (both times ``speed``); the hand holds its
+    camera-facing side. Frames listed in ``hidden`` drop the object and the hand from the image
+    (as if they left the view); frames in ``occluded`` put a board between the camera and the
+    object (full occlusion): both for lost/recover tests. ``hand_color`` (RGB) makes the hand
+    match the object if wanted; ``brightness`` = (first, last) ramps the image gain linearly over
+    the sequence (a lighting change).
     """
     H, W = shape
     K = intrinsics(W, H)
@@ -326,6 +336,7 @@ def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape
     T_obj_hand = make_pose(None, [-0.03, -radius - 0.0005, 0.04])
     for i in range(n_frames):
         s = speed * i / 30.0
+        s = s * s / (s + 1.0)  # starts at rest, reaches full speed after about a second (at speed 1)
         pos = [0.08 * np.sin(0.9 * s), 0.03 * np.sin(0.6 * s), 0.03 * (1 - np.cos(0.7 * s))]
         yaw = np.deg2rad(25) * np.sin(1.1 * s)
         tilt = np.deg2rad(8) * np.sin(0.8 * s)
@@ -334,4 +345,5 @@ def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape
         poses.append(T_co)
         hposes.append(T_co @ T_obj_hand)
     return Sequence(K, (H, W), target, np.array(poses), np.array(hposes) if hand else None, T_wc,
-                    seed, noise, frozenset(hidden), frozenset(occluded))
+                    seed, noise, frozenset(hidden), frozenset(occluded), tuple(hand_color),
+                    tuple(brightness))

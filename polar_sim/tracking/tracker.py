@@ -33,6 +33,10 @@ logger = logging.getLogger(__name__)
 #: Values of the ``appearance`` parameter: the colour Naive Bayes, the S/W x u/w feature heads, none.
 APPEARANCE_VARIANTS = ("h", "su", "sw", "wu", "ww", "none")
 _LOGIT_CLIP = 8.0
+KAPPA = 3.0
+#: Pose spread assumed by the second E-step (em_refine): 3 mm and 1 degree.
+_EM_SIGMA_TR = 0.003
+_EM_SIGMA_ROT = np.deg2rad(1.0)
 
 
 @dataclass(frozen=True)
@@ -150,6 +154,9 @@ class ObjectTracker:
     min_coverage : float, default=0.1
         Inliers per valid-depth pixel of the predicted silhouette below which the frame counts as
         lost (object occluded or out of view).
+    learn_coverage : float, default=0.25
+        Drift guard: the same coverage must reach this for the frame to train the appearance model
+        (a mostly hidden object gives labels too few and too uncertain to learn from).
     max_jump : (float, float), default=(0.5, 0.1)
         Largest accepted change from the prediction: rotation (rad) and centroid translation (m).
     lost_after : int, default=10
@@ -163,6 +170,13 @@ class ObjectTracker:
         (frames), maximum positives (and negatives) sampled per frame for the feature heads.
     max_iterations : int, default=30
         ICP iterations.
+    em_refine : bool, default=True
+        When the registration lands more than 2 predicted standard deviations from the prediction,
+        redo the prediction map at the registered pose (3 mm / 1 deg spread) and register again:
+        a second EM step (spec 2) that rescues fast motion.
+    pose_prior : bool, default=True
+        Register as a MAP estimate with the motion filter's prediction as the prior (its 6x6
+        covariance): directions the visible points leave unconstrained keep the prediction.
     random_state : int, default=0
         Seed of the sampling Generator (point selection, training samples, mini-batches).
     debug_maps : bool, default=False
@@ -172,9 +186,10 @@ class ObjectTracker:
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
                  motion="ekf", spatial_prior=True, registration="weighted", correspondence="grid",
                  fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
-                 fitness_min=0.5, min_inliers=50, min_coverage=0.1, max_jump=(0.5, 0.1),
+                 fitness_min=0.5, min_inliers=50, min_coverage=0.1, learn_coverage=0.25, max_jump=(0.5, 0.1),
                  lost_after=10, lost_velocity_decay=0.5, decay=0.7, lr=1e-2, epochs=2, replay=10,
-                 n_samples=500, max_iterations=30, random_state=0, debug_maps=False):
+                 n_samples=500, max_iterations=30, em_refine=True, pose_prior=True, random_state=0,
+                 debug_maps=False):
         self.model_points = model_points
         self.K = K
         self.initial_pose = initial_pose
@@ -193,6 +208,7 @@ class ObjectTracker:
         self.fitness_min = fitness_min
         self.min_inliers = min_inliers
         self.min_coverage = min_coverage
+        self.learn_coverage = learn_coverage
         self.max_jump = max_jump
         self.lost_after = lost_after
         self.lost_velocity_decay = lost_velocity_decay
@@ -202,6 +218,8 @@ class ObjectTracker:
         self.replay = replay
         self.n_samples = n_samples
         self.max_iterations = max_iterations
+        self.em_refine = em_refine
+        self.pose_prior = pose_prior
         self.random_state = random_state
         self.debug_maps = debug_maps
         self._check_params()
@@ -221,18 +239,28 @@ class ObjectTracker:
         check_choice(self.motion, ("ekf", "alpha-beta", "none"), "motion")
         check_choice(self.registration, ("weighted", "plain"), "registration")
         check_choice(self.correspondence, ("grid", "kdtree"), "correspondence")
+        for name in ("spatial_prior", "em_refine", "pose_prior", "debug_maps"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
         for name in ("fps", "sigma_min_px", "lr"):
             as_positive_float(getattr(self, name), name)
-        for name in ("tau_y", "epsilon", "fitness_min", "min_coverage", "lost_velocity_decay",
-                     "decay"):
+        ranges = {"tau_y": (0.0, 1.0, False), "epsilon": (0.0, 0.5, False), "fitness_min": (0.0, 1.0, True),
+                  "min_coverage": (0.0, 1.0, True), "learn_coverage": (0.0, 1.0, True),
+                  "lost_velocity_decay": (0.0, 1.0, True),
+                  "decay": (0.0, 1.0, True)}
+        for name, (lo, hi, closed) in ranges.items():
             v = as_positive_float(getattr(self, name), name, allow_zero=True)
-            if v > 1.0 or (name in ("tau_y", "epsilon") and not 0 < v < 0.5 + 0.5 * (name == "tau_y")):
-                raise ValueError(f"{name}: expected a value in the valid range (0, 1), got {v}")
+            if not (lo <= v <= hi if closed else lo < v < hi):
+                br = "[]" if closed else "()"
+                raise ValueError(f"{name}: expected a value in {br[0]}{lo}, {hi}{br[1]}, got {v}")
         for name, lo in (("n_registration", 6), ("k_warm", 1), ("min_inliers", 0), ("lost_after", 1),
                          ("epochs", 0), ("replay", 1), ("n_samples", 1), ("max_iterations", 1)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        rs = self.random_state
+        if isinstance(rs, bool) or not isinstance(rs, numbers.Integral) or rs < 0:
+            raise ValueError(f"random_state: expected an integer seed >= 0, got {rs!r}")
         mj = np.asarray(self.max_jump, dtype=float)
         if mj.shape != (2,) or not np.all(np.isfinite(mj)) or np.any(mj <= 0):
             raise ValueError(f"max_jump: expected (rotation rad, translation m) > 0, got {self.max_jump!r}")
@@ -321,41 +349,106 @@ class ObjectTracker:
         y1 = int(min(H, np.ceil(uvv[:, 1].max()) + pad + 1))
         roi = (x0, y0, x1, y1)
         D = depth[y0:y1, x0:x1]
-        S = splat_silhouette(uvv, zb, f, m.spacing, roi)
+        valid = D > 0
+        self._clock.lap("predict_attention")
+        # -- appearance ---------------------------------------------------------------------
+        feats = None
+        lI = None
+        if self._app is not None:
+            feats = self._app.prepare(np.ascontiguousarray(rgb[y0:y1, x0:x1]))
+            if gamma > 0 or self.debug_maps:
+                lI = self._app.log_ratio(feats)
+        self._clock.lap("appearance")
+        # -- prediction map (E-step) and registration (M-step) ----------------------------------
+        Pmap, pi, S = self._prediction_map(D, roi, T_bar, proj, sig_pos, lI, gamma)
+        self._clock.lap("depth_likelihood")
+        res, n_sel, n_cand = self._register(D, roi, Pmap, T_bar, proj.vis, sig_pos)
+        if res is not None and res.ok and self.em_refine:
+            # a registration far outside the predicted spread was made with a prior centred on the
+            # wrong place: redo the E-step at the registered pose with a tight spread, register again
+            d_rot = _rot_angle(T_bar[:3, :3].T @ res.T[:3, :3]) / max(sig_rot, 1e-6)
+            d_tr = float(np.linalg.norm(res.T[:3, 3] - T_bar[:3, 3])) / max(sig_tr, 1e-6)
+            if d_rot**2 + d_tr**2 > 4.0:
+                proj2 = project_model(m.P, m.N, res.T[:3, :3], res.T[:3, 3], K, (H, W), m.spacing)
+                if proj2.vis.sum() >= 3:
+                    sig2 = _EM_SIGMA_TR + 0.5 * m.diameter * _EM_SIGMA_ROT
+                    Pmap2, pi2, S2 = self._prediction_map(D, roi, res.T, proj2, sig2, lI, gamma)
+                    res2, n_sel2, n_cand2 = self._register(D, roi, Pmap2, res.T, proj2.vis, sig2)
+                    if res2 is not None and res2.ok:
+                        res, n_sel, n_cand, Pmap, pi, S = res2, n_sel2, n_cand2, Pmap2, pi2, S2
+        self._clock.lap("registration")
+        # -- drift guard ----------------------------------------------------------------------
+        measured = res is not None and res.ok and res.n_matched >= 6
+        coverage = 0.0
+        if measured:
+            rot_jump = _rot_angle(T_bar[:3, :3].T @ res.T[:3, :3])
+            tr_jump = float(np.linalg.norm(res.T[:3, 3] - T_bar[:3, 3]))
+            expected = max(int(np.count_nonzero(valid & (S > 0))), 1)
+            scale = n_cand / max(n_sel, 1)
+            coverage = res.n_inliers * scale / expected
+            measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
+                        and coverage >= self.min_coverage)
+        if not measured:
+            return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, n_points=n_sel, res=res)
+        good_fit = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
+        accepted = good_fit and coverage >= self.learn_coverage
+        T_hat = res.T
+        O, S_hat, r_hat = self._labels(D, roi, T_hat, vis=res.vis)
+        self._clock.lap("labels")
+        if accepted and self._app is not None:
+            self._train(feats, O, S_hat, r_hat, D)
+        self._clock.lap("learning")
+        # a good fit updates the filter (a mostly hidden object only skips learning); a poor fit is
+        # reported (spec 3.7) but not fused: the filter coasts, widened x4, and the frame counts
+        # towards lost mode, in which the prediction is reported instead
+        if good_fit:
+            filt.update(T_hat, res.cov, dt)
+            self._rejections = 0
+        else:
+            filt.coast(inflate=4.0)
+            self._rejections += 1
+        lost = self._rejections >= self.lost_after
+        if lost:
+            T_hat = T_bar
+            O[O == 1] = -1
+        return self._emit(T_hat, roi, O, S_hat, Pmap, pi, lI, valid, gamma, res.fitness, res.rmse,
+                          n_sel, lost, accepted, res.cov, res.iterations, res.n_inliers)
+
+    # ------------------------------------------------------------------------------------------
+    def _prediction_map(self, D, roi, T, proj, sig_pos, lI, gamma):
+        """Prediction map P (h, w), prior pi (h, w) and silhouette S (h, w) around pose T (spec 3.3-3.4)."""
+        m, f = self._model, float(self._K[0, 0])
+        zb = proj.z_mean
+        S = splat_silhouette(proj.uv[proj.vis], zb, f, m.spacing, roi)
         if self.spatial_prior:
+            sigma_px = max(self.sigma_min_px, f * sig_pos / zb)
             blur = cv2.GaussianBlur(S.astype(np.float32), (0, 0), sigma_px)
             pi = self.epsilon + (1.0 - 2.0 * self.epsilon) * blur
             logit = np.log(pi / (1.0 - pi))
         else:
             pi = np.full(D.shape, 0.5, np.float32)
             logit = np.zeros(D.shape, np.float32)
-
-        self._clock.lap("predict_attention")
-        # -- depth likelihood against the predicted surface ---------------------------------
-        dist = self._distances(D, roi, T_bar, proj.vis)
+        # depth likelihood ratio against the visible surface at T: log of N(r; 0, sigma_r) / c_0,
+        # with c_0 putting the ratio at 1 for r = 2.5 sigma_r
+        dist = self._distances(D, roi, T, proj.vis, KAPPA)
         sig_d = (0.0012 + 0.0019 * (D - 0.4) ** 2).astype(np.float32)
         sr2 = sig_d * sig_d + np.float32(sig_pos * sig_pos)
-        valid = D > 0
         with np.errstate(invalid="ignore", over="ignore"):
             ld = np.float32(0.5 * 2.5**2) - dist * dist / (2.0 * sr2)
-        ld = np.where(valid, np.nan_to_num(ld, nan=0.0, neginf=-2 * _LOGIT_CLIP), 0.0)
+        ld = np.where(D > 0, np.nan_to_num(ld, nan=0.0, neginf=-2 * _LOGIT_CLIP), 0.0)
         logit = logit + ld
-
-        self._clock.lap("depth_likelihood")
-        # -- appearance ---------------------------------------------------------------------
-        feats = None
-        lI = None
-        if self._app is not None:
-            feats = self._app.prepare(rgb[y0:y1, x0:x1])
-            if gamma > 0 or self.debug_maps:
-                lI = self._app.log_ratio(feats)
-            if gamma > 0:
-                logit = logit + np.float32(gamma) * lI
+        if lI is not None and gamma > 0:
+            logit = logit + np.float32(gamma) * lI
         logit = np.clip(logit, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32)
-        Pmap = (0.5 * (1.0 + np.tanh(0.5 * logit))).astype(np.float32)
+        return (0.5 * (1.0 + np.tanh(0.5 * logit))).astype(np.float32), pi, S
 
-        self._clock.lap("appearance")
-        # -- select the highly probable points and register -----------------------------------
+    def _register(self, D, roi, Pmap, T_init, vis, sig_pos):
+        """Select the highly probable points and run the weighted ICP from T_init (spec 3.5).
+
+        Returns the ICP result (None with fewer than 6 points), the points registered and the
+        candidates before subsampling."""
+        m = self._model
+        valid = D > 0
         if self.registration == "plain":
             cand = np.flatnonzero(valid)
             w_all = np.ones(len(cand))
@@ -364,55 +457,36 @@ class ObjectTracker:
             w_all = Pmap.ravel()[cand].astype(np.float64)
         n_cand = len(cand)
         if n_cand > self.n_registration:
-            pick = np.sort(self._rng.choice(n_cand, self.n_registration, replace=False, p=w_all / w_all.sum()))
+            # weighted sampling without replacement (Efraimidis-Spirakis): the k largest
+            # log(u) / w, one uniform draw per candidate, O(n)
+            keys = np.log(self._rng.random(n_cand)) / np.maximum(w_all, 1e-12)
+            pick = np.sort(np.argpartition(-keys, self.n_registration - 1)[: self.n_registration])
             cand, w0 = cand[pick], w_all[pick]
         else:
             w0 = w_all
-        res = None
-        if len(cand) >= 6:
-            X, zc = self._backproject(D, roi, cand)
-            sd = 0.0012 + 0.0019 * (zc - 0.4) ** 2
-            gate0 = min(max(3.0 * float(np.sqrt(np.median(sd**2) + sig_pos**2)), 0.015), m.margin)
-            gate_floor = min(max(3.0 * float(np.median(sd)), m.spacing), gate0)
-            res = weighted_icp(X, w0, m, T_bar, K, (H, W), sigma_d=sd, delta1=np.maximum(3 * sd, 0.006),
-                               gate0=gate0, gate_floor=gate_floor, max_iterations=self.max_iterations,
-                               exact=self.correspondence == "kdtree", vis_init=proj.vis)
+        if len(cand) < 6:
+            return None, len(cand), n_cand
+        X, zc = self._backproject(D, roi, cand)
+        sd = 0.0012 + 0.0019 * (zc - 0.4) ** 2
+        gate0 = min(max(3.0 * float(np.sqrt(np.median(sd**2) + sig_pos**2)), 0.015), m.margin)
+        gate_floor = min(max(3.0 * float(np.median(sd)), m.spacing), gate0)
+        prior = None
+        if self.pose_prior:
+            T_pred, P_pred = self._filter.T_bar, self._filter.P_bar[:6, :6]
+            prior = (T_pred, np.linalg.inv(P_pred + 1e-12 * np.eye(6)))
+        res = weighted_icp(X, w0, m, T_init, self._K, self._shape, sigma_d=sd,
+                           delta1=np.maximum(3 * sd, 0.006), gate0=gate0, gate_floor=gate_floor,
+                           max_iterations=self.max_iterations, exact=self.correspondence == "kdtree",
+                           vis_init=vis, prior=prior)
+        return res, len(cand), n_cand
 
-        self._clock.lap("registration")
-        # -- drift guard ----------------------------------------------------------------------
-        measured = res is not None and res.ok and res.n_matched >= 6
-        if measured:
-            rot_jump = _rot_angle(T_bar[:3, :3].T @ res.T[:3, :3])
-            tr_jump = float(np.linalg.norm(res.T[:3, 3] - T_bar[:3, 3]))
-            expected = max(int(np.count_nonzero(valid & (S > 0))), 1)
-            scale = n_cand / max(len(cand), 1)
-            coverage = res.n_inliers * scale / expected
-            measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
-                        and coverage >= self.min_coverage)
-        if not measured:
-            return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, vis=proj.vis,
-                               n_points=len(cand), res=res)
-        accepted = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
-        T_hat = res.T
-        O, S_hat, r_hat = self._labels(D, roi, T_hat, vis=res.vis)
-        self._clock.lap("labels")
-        if accepted and self._app is not None:
-            self._train(feats, O, S_hat, r_hat, D)
-        self._clock.lap("learning")
-        filt.update(T_hat, res.cov, dt, inflate=1.0 if accepted else 4.0)
-        self._rejections = 0 if accepted else self._rejections + 1
-        lost = self._rejections >= self.lost_after
-        return self._emit(T_hat, roi, O, S_hat, Pmap, pi, lI, valid, gamma, res.fitness, res.rmse,
-                          len(cand), lost, accepted, res.cov, res.iterations, res.n_inliers)
-
-    # ------------------------------------------------------------------------------------------
-    def _distances(self, D, roi, T, vis):
+    def _distances(self, D, roi, T, vis, kappa=1.0):
         m, K = self._model, self._K
         Ti = np.linalg.inv(T)
         out = np.empty(D.shape, np.float32)
         roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                       np.ascontiguousarray(Ti[:3, :3]), np.ascontiguousarray(Ti[:3, 3]),
-                      m.origin, m.inv_h, m.knn, m.P, vis, out)
+                      m.origin, m.inv_h, m.knn, m.P, m.N, vis, float(kappa), out)
         return out
 
     def _backproject(self, D, roi, flat):
@@ -431,11 +505,17 @@ class ObjectTracker:
         if vis is not None:
             pr.vis = vis
         S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.spacing, roi)
-        r = self._distances(D, roi, T, pr.vis)
-        sig_d = 0.0012 + 0.0019 * (D - 0.4) ** 2
-        d1 = np.maximum(3.0 * sig_d, 0.006)
         inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
         outer = cv2.dilate(S, disc(2)) > 0
+        # distances only where they can matter: inside the dilated silhouette's bounding box
+        r = np.full(D.shape, np.inf, np.float32)
+        ys, xs = np.nonzero(outer.any(axis=1))[0], np.nonzero(outer.any(axis=0))[0]
+        if len(ys):
+            a0, a1, b0, b1 = ys[0], ys[-1] + 1, xs[0], xs[-1] + 1
+            sub = (roi[0] + b0, roi[1] + a0, roi[0] + b1, roi[1] + a1)
+            r[a0:a1, b0:b1] = self._distances(np.ascontiguousarray(D[a0:a1, b0:b1]), sub, T, pr.vis)
+        sig_d = 0.0012 + 0.0019 * (D - 0.4) ** 2
+        d1 = np.maximum(3.0 * sig_d, 0.006)
         O = np.full(D.shape, -1, np.int8)
         with np.errstate(invalid="ignore"):
             O[~outer | (r > 0.015)] = 0
@@ -474,14 +554,12 @@ class ObjectTracker:
         weights = np.concatenate([wpos, np.ones(len(neg))])
         app.update(feats, ys, xs, lab, weights, rng)
 
-    def _coast(self, T_bar, roi, gamma, *, D=None, Pmap=None, pi=None, lI=None, vis=None,
-               n_points=0, res=None):
+    def _coast(self, T_bar, roi, gamma, *, D=None, Pmap=None, pi=None, lI=None, n_points=0, res=None):
         """No usable registration: keep the prediction, damp the velocity, label at the prediction."""
         self._filter.coast(velocity_decay=self.lost_velocity_decay)
         self._rejections += 1
         cov = self._filter.pose_cov
         if D is None:
-            H, W = self._shape
             z = np.zeros((0, 0), np.float32)
             return self._emit(T_bar, (0, 0, 0, 0), np.zeros((0, 0), np.int8), z.astype(np.uint8), z,
                               None, None, z > 0, gamma, 0.0, float("nan"), 0, True, False, cov, 0, 0)

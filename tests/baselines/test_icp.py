@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 from baselines_scene import ANGLES, pose_error, world_pose
 
-from polar_sim.baselines import DiscreteSDF2D, ICPLocalizer
+from polar_sim.baselines import DiscreteSDF2D, ICPLocalizer, RoomSDF3D
 from polar_sim.errors import NotUpdatedError
+from polar_sim.geometry import se3_exp, so3_log
 from polar_sim.metrics import sample_polyline
 
 # The perturbation of the brief: 0.3 m and 10 deg.
@@ -76,3 +77,34 @@ def test_icp_bad_input_raises(room, mapped_grid):
             icp.localize((ANGLES, np.ones_like(ANGLES)), np.array([0.0, np.inf, 0.0]))
     with pytest.raises(ValueError, match="target"):
         ICPLocalizer(method="point").fit(np.zeros((5, 4)))
+
+
+def test_point_icp_in_3d_from_a_depth_image():
+    # SE(3) point-to-point ICP: a depth image registered to the clouds of two other views of the room.
+    room = RoomSDF3D()
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # optical axis along +x
+
+    def cam(yaw, pitch, t):
+        T = np.eye(4)
+        T[:3, :3] = se3_exp([0, 0, yaw, 0, 0, 0])[:3, :3] @ se3_exp([pitch, 0, 0, 0, 0, 0])[:3, :3] @ base
+        T[:3, 3] = t
+        return T
+
+    def cloud(T, K, shape):
+        d = room.depth_image(T, K, shape)
+        v, u = np.mgrid[0 : shape[0], 0 : shape[1]]
+        p = np.stack([(u - K[0, 2]) / K[0, 0] * d, (v - K[1, 2]) / K[1, 1] * d, d], -1).reshape(-1, 3)
+        return p @ T[:3, :3].T + T[:3, 3]
+
+    K_map = np.array([[240.0, 0.0, 160.0], [0.0, 240.0, 120.0], [0.0, 0.0, 1.0]])
+    K = np.array([[120.0, 0.0, 80.0], [0.0, 120.0, 60.0], [0.0, 0.0, 1.0]])
+    cloud_map = np.vstack([cloud(cam(0.1, 0.25, [0.5, 1.4, 1.3]), K_map, (240, 320)),
+                           cloud(cam(0.5, 0.1, [0.7, 1.0, 1.1]), K_map, (240, 320))])
+    T = cam(0.3, 0.2, [0.6, 1.3, 1.2])
+    axis = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+    T0 = se3_exp(np.r_[np.radians(5.0) * axis, 0.1 * np.array([0.6, -0.64, 0.48])]) @ T
+    icp = ICPLocalizer(method="point", max_iterations=100).fit(cloud_map)
+    pose, cov, info = icp.localize((room.depth_image(T, K, (120, 160)), K), T0)
+    assert info["status"] == "ok" and cov.shape == (6, 6)
+    assert np.linalg.norm(pose[:3, 3] - T[:3, 3]) < 0.01
+    assert np.degrees(np.linalg.norm(so3_log(T[:3, :3].T @ pose[:3, :3]))) < 0.5

@@ -83,6 +83,19 @@ def test_icp_g_with_range_noise_and_a_consistent_covariance(room):
     assert ((ratio > 0.6) & (ratio < 1.6)).all(), ratio
 
 
+def test_step_control_tames_an_overshooting_field(room):
+    # An SDF 2.5x too steep makes plain Gauss-Newton overshoot and diverge; halving steps converges.
+    class Steep:
+        def query(self, points):
+            d, g, v = room.query(points)
+            return 2.5 * d, g, v
+
+    truth = np.array([2.5, 1.9, 0.7])
+    pose, _, info = localize(Steep(), (ANGLES, room.scan(truth, ANGLES)), truth + PERTURB, robust="none")
+    dp, dth = _err2d(pose, truth)
+    assert info["status"] == "ok" and dp < 1e-3 and dth < 0.01
+
+
 def test_sensor_offset_from_the_map_or_the_keyword(room):
     # The base pose is recovered when the laser sits at an offset given by the map or by keyword.
     truth = np.array([3.0, 2.0, 0.4])

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from polar_sim import metrics
-from polar_sim.metrics.odometry import kitti_segment_errors, read_kitti, read_tum, scaled_lengths, write_kitti, write_tum
+from polar_sim.metrics.odometry import (kitti_segment_errors, read_kitti, read_tum, scaled_lengths, write_kitti,
+                                        write_tum)
 
 
 def _planar(n, speed, yaw_bias=0.0, dt=0.1):

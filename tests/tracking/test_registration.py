@@ -46,7 +46,7 @@ def test_icp_recovers_known_transform(name, exact):
     dR = T_true[:3, :3].T @ res.T[:3, :3]
     ang = np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))
     assert np.linalg.norm(res.T[:3, 3] - T_true[:3, 3]) < 5e-4
-    assert np.rad2deg(ang) < 0.15
+    assert np.rad2deg(ang) < 0.2
     assert res.fitness > 0.95 and res.rmse < 2e-3
 
 
@@ -100,3 +100,37 @@ def test_icp_too_few_points_fails_cleanly():
     model, X, T_true = _scene("box", _view())
     res = _run(model, X[:3], T_true)
     assert not res.ok and np.array_equal(res.T, T_true)
+
+
+def test_normal_equations_kernel_matches_brute_force():
+    # the numba accumulation (point-to-plane + tangential term) equals an explicit 3x6-Jacobian sum
+    from polar_sim.tracking._kernels import icp_normal_equations
+    from polar_sim.tracking.icp import _normal_equations
+
+    rng = np.random.default_rng(0)
+    n_ = 60
+    P = rng.normal(size=(n_, 3))
+    N = rng.normal(size=(n_, 3))
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    T = make_pose(so3_exp(rng.normal(size=3) * 0.3), rng.normal(size=3))
+    Y = P + rng.normal(size=(n_, 3)) * 0.05
+    X = Y @ T[:3, :3].T + T[:3, 3]
+    idx = np.arange(n_)
+    res = np.einsum("ij,ij->i", N, P - Y)
+    w = rng.random(n_)
+    H, g = np.zeros((6, 6)), np.zeros(6)
+    icp_normal_equations(X, T[:3, :3].copy(), T[:3, 3].copy(), P, N, idx, res, w, 0.09, H, g)
+    Hb = np.zeros((6, 6))
+    gb = np.zeros(6)
+    for i in range(n_):
+        m, nn = P[i], N[i]
+        Jpl = np.concatenate([np.cross(m, nn), nn])
+        hat = np.array([[0, -m[2], m[1]], [m[2], 0, -m[0]], [-m[1], m[0], 0]])
+        Jp = np.concatenate([-hat, np.eye(3)], 1)
+        Pi = np.eye(3) - np.outer(nn, nn)
+        Hb += w[i] * (np.outer(Jpl, Jpl) + 0.09 * Jp.T @ Pi @ Jp)
+        gb += w[i] * (Jpl * res[i] + 0.09 * Jp.T @ Pi @ (m - Y[i]))
+    Hn, gn = _normal_equations(np.stack([np.concatenate([np.cross(P[i], N[i]), N[i]]) for i in range(n_)]),
+                               res, w, P, N, Y, 0.3)
+    assert np.allclose(H, Hb, atol=1e-10) and np.allclose(g, gb, atol=1e-10)
+    assert np.allclose(Hn, Hb, atol=1e-10) and np.allclose(gn, gb, atol=1e-10)

@@ -90,7 +90,7 @@ def test_lost_when_out_of_view_then_recovers():
     seq = make_sequence(22, "mug", hidden=hidden)
     P, N = seq.model(3000)
     tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N)
-    res = [tr.process(seq.frame(i)["rgb"], seq.frame(i)["depth"]) for i in range(22)]
+    res = [tr.process(f["rgb"], f["depth"]) for f in map(seq.frame, range(22))]
     assert all(res[i].lost and not res[i].accepted for i in hidden)
     assert not any(res[i].mask.any() for i in hidden)
     add = metrics.add(P, seq.poses[16:], np.stack([r.pose for r in res[16:]]))
@@ -104,7 +104,7 @@ def test_lost_when_fully_occluded_then_recovers():
     seq = make_sequence(20, "box", occluded=occ)
     P, N = seq.model(3000)
     tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, appearance="h")
-    res = [tr.process(seq.frame(i)["rgb"], seq.frame(i)["depth"]) for i in range(20)]
+    res = [tr.process(f["rgb"], f["depth"]) for f in map(seq.frame, range(20))]
     assert all(res[i].lost for i in occ)
     add = metrics.add(P, seq.poses[15:], np.stack([r.pose for r in res[15:]]))
     assert np.all(add < 0.1 * metrics.object_diameter(P))
@@ -138,10 +138,11 @@ def _bad_inputs(seq, P):
         dict(registration="exact"),
         dict(tau_y=1.5),
         dict(n_registration=2),
+        dict(random_state=-1),
     ]
 
 
-@pytest.mark.parametrize("i", range(13))
+@pytest.mark.parametrize("i", range(14))
 def test_bad_construction_raises(mug, i):
     # bad model points, normals, K, initial pose or parameters raise ValueError at construction
     seq, P, N, _ = mug
@@ -178,3 +179,37 @@ def test_bad_frames_raise_and_leave_tracker_unchanged(mug):
         tr.process(rgb[:100], depth[:100])  # the image size is fixed by the first frame
     with pytest.raises(ValueError):
         tr.process(rgb, depth, t=float("nan"))
+
+
+def test_prediction_outside_the_image_coasts(mug):
+    # a pose that projects nowhere in the image: lost, empty outputs, no exception
+    seq, P, N, frames = mug
+    T0 = seq.poses[0].copy()
+    T0[0, 3] += 3.0
+    tr = ObjectTracker(P, seq.K, T0, model_normals=N)
+    r = tr.process(frames[0]["rgb"], frames[0]["depth"])
+    assert r.lost and not r.accepted and not r.mask.any() and not r.prob.any()
+    assert np.allclose(r.pose, T0)
+
+
+def test_pickle_round_trip_continues_identically(mug):
+    # a pickled tracker (for process pools) resumes exactly where the original is
+    import pickle
+
+    seq, P, N, frames = mug
+    a, _ = _track(seq, P, N, frames[:4])
+    b = pickle.loads(pickle.dumps(a))
+    ra = [a.process(f["rgb"], f["depth"]) for f in frames[4:7]]
+    rb = [b.process(f["rgb"], f["depth"]) for f in frames[4:7]]
+    for x, y in zip(ra, rb):
+        assert np.array_equal(x.pose, y.pose) and np.array_equal(x.labels, y.labels)
+
+
+def test_accepts_strided_views(mug):
+    # channel-reversed (BGR->RGB) views and float64 depth are accepted and give the same result
+    seq, P, N, frames = mug
+    f = frames[0]
+    bgr = np.ascontiguousarray(f["rgb"][..., ::-1])
+    a = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(bgr[..., ::-1], f["depth"].astype(float))
+    b = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(f["rgb"], f["depth"])
+    assert np.array_equal(a.pose, b.pose) and np.array_equal(a.mask, b.mask)

@@ -1,0 +1,162 @@
+"""Speed and memory of polar_sim.gpis against the targets of issue 3.
+
+Usage: python benchmarks/bench_gpis.py [--quick] [--legacy] [--out FILE]
+
+- 2D update over the gazebo1 scans (all 2879; --quick: the first 600): per-scan wall time and
+  thread CPU time (median, p99), and the last 10% of scans against the first 10%.
+- 2D query: 1000 points, (a) uniform over the map's bounding box, (b) within 0.3 m of a sample.
+- Map memory after the 2D run (sum of the map's array bytes; tracemalloc's peak over a second,
+  untimed pass).
+- 3D update: 640x480 depth frames of an analytic sphere (r = 0.1 m) orbited at 0.6 m.
+- 3D query: 1000 points within 1 cm of the sphere surface, and uniform in its bounding box.
+
+The machine is shared: wall times include time the process waited for a CPU, thread CPU time
+does not. Both are printed, with the load average. Prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "gpis"))
+
+from scenes import intrinsics, orbit_poses, render_sphere, sphere_sdf  # noqa: E402
+
+from polar_sim.datasets import load_gazebo1  # noqa: E402
+from polar_sim.gpis import GPISMap2D, GPISMap3D  # noqa: E402
+
+
+def _timed(fn, *a):
+    t0, c0 = time.perf_counter(), time.thread_time()
+    fn(*a)
+    return time.perf_counter() - t0, time.thread_time() - c0
+
+
+def _stats(x):
+    x = np.asarray(x) * 1e3
+    return np.median(x), np.percentile(x, 99)
+
+
+def _query_ms(m, pts, reps=20):
+    m.query(pts)
+    w, c = zip(*[_timed(m.query, pts) for _ in range(reps)])
+    return 1e3 * np.median(w), 1e3 * np.median(c)
+
+
+def bench_2d(n_scans, legacy):
+    g = load_gazebo1()
+    m = GPISMap2D(legacy=legacy)
+    m.update(g["thetas"], g["ranges"][0], g["poses"][0])         # compile numba kernels
+    m.reset()
+    wall, cpu = [], []
+    for k in range(n_scans):
+        w, c = _timed(m.update, g["thetas"], g["ranges"][k], g["poses"][k])
+        wall.append(w)
+        cpu.append(c)
+    # memory in a second pass: tracemalloc slows allocation-heavy code, so not while timing
+    m2 = GPISMap2D(legacy=legacy)
+    tracemalloc.start()
+    for k in range(n_scans):
+        m2.update(g["thetas"], g["ranges"][k], g["poses"][k])
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    del m2
+    res = {"n": n_scans, "wall": _stats(wall), "cpu": _stats(cpu)}
+    t = max(1, n_scans // 10)
+    res["late_early_wall"] = np.median(wall[-t:]) / np.median(wall[:t])
+    res["late_early_cpu"] = np.median(cpu[-t:]) / np.median(cpu[:t])
+    res["nbytes"] = m.nbytes()
+    res["peak"] = peak
+    res["samples"] = len(m.samples()["points"])
+    rng = np.random.default_rng(0)
+    s = m.samples()["points"]
+    lo, hi = s.min(0) - 1, s.max(0) + 1
+    uni = rng.uniform(lo, hi, (1000, 2))
+    d = rng.normal(size=(1000, 2))
+    near = s[rng.integers(0, len(s), 1000)] + d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0, 0.3, (1000, 1))
+    res["q_uniform"] = _query_ms(m, uni)
+    res["q_near"] = _query_ms(m, near)
+    return res
+
+
+def bench_3d(n_frames, legacy):
+    K = intrinsics()
+    poses = orbit_poses(n_frames)
+    frames = [render_sphere(T, K) for T in poses]
+    m = GPISMap3D(legacy=legacy)
+    m.update(frames[0], K, poses[0])                             # compile numba kernels
+    m.reset()
+    wall, cpu = [], []
+    for D, T in zip(frames, poses):
+        w, c = _timed(m.update, D, K, T)
+        wall.append(w)
+        cpu.append(c)
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(1000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    near = d * (0.1 + rng.uniform(-0.01, 0.01, (1000, 1)))
+    uni = rng.uniform(-0.15, 0.15, (1000, 3))
+    res = {"n": n_frames, "wall": _stats(wall), "cpu": _stats(cpu),
+           "wall_after_first": _stats(wall[1:]), "cpu_after_first": _stats(cpu[1:]),
+           "q_near": _query_ms(m, near), "q_uniform": _query_ms(m, uni),
+           "samples": len(m.samples()["points"])}
+    sdf, _, _ = m.query(near[near[:, 2] > -0.015])
+    res["rmse_mm"] = 1e3 * np.sqrt(np.mean((sdf - sphere_sdf(near[near[:, 2] > -0.015])) ** 2))
+    return res
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="600 scans, 6 frames")
+    ap.add_argument("--legacy", action="store_true", help="also benchmark legacy=True")
+    ap.add_argument("--out", help="append the markdown table to this file")
+    a = ap.parse_args(argv)
+    n2, n3 = (600, 6) if a.quick else (2879, 24)
+    modes = [False, True] if a.legacy else [False]
+    lines = [f"command: `python benchmarks/bench_gpis.py {' '.join(argv or sys.argv[1:])}`".strip(),
+             f"load average before: {os.getloadavg()[0]:.2f} (2 cores)", "",
+             "| measure | mode | wall (median / p99) | thread CPU (median / p99) | target |",
+             "|---|---|---|---|---|"]
+    for legacy in modes:
+        mode = "legacy" if legacy else "default"
+        r = bench_2d(n2, legacy)
+        lines += [
+            f"| 2D update, {r['n']} gazebo1 scans, ms | {mode} | {r['wall'][0]:.2f} / {r['wall'][1]:.2f}"
+            f" | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} | 8 / 30 |",
+            f"| 2D update, last 10% / first 10% (median ratio) | {mode} | {r['late_early_wall']:.2f}"
+            f" | {r['late_early_cpu']:.2f} | <= 1.5 |",
+            f"| 2D query, 1000 uniform pts, ms | {mode} | {r['q_uniform'][0]:.2f} | {r['q_uniform'][1]:.2f} | 2 |",
+            f"| 2D query, 1000 pts within 0.3 m of surface, ms | {mode} | {r['q_near'][0]:.2f}"
+            f" | {r['q_near'][1]:.2f} | 2 |",
+            f"| 2D map memory after {r['n']} scans, MB ({r['samples']} samples) | {mode}"
+            f" | arrays {r['nbytes'] / 1e6:.1f} | tracemalloc peak {r['peak'] / 1e6:.1f} | 50 |",
+        ]
+        print("\n".join(lines[-5:]), flush=True)
+        r = bench_3d(n3, legacy)
+        lines += [
+            f"| 3D update, 640x480 sphere orbit ({r['n']} frames), ms | {mode} | {r['wall'][0]:.0f} / "
+            f"{r['wall'][1]:.0f} | {r['cpu'][0]:.0f} / {r['cpu'][1]:.0f} | 150 |",
+            f"| 3D query, 1000 pts within 1 cm of surface, ms | {mode} | {r['q_near'][0]:.2f}"
+            f" | {r['q_near'][1]:.2f} | 10 |",
+            f"| 3D query, 1000 uniform pts in bbox, ms | {mode} | {r['q_uniform'][0]:.2f}"
+            f" | {r['q_uniform'][1]:.2f} | 10 |",
+            f"| 3D SDF RMSE within 1 cm, mm ({r['samples']} samples) | {mode} | {r['rmse_mm']:.2f} | | 2 |",
+        ]
+        print("\n".join(lines[-4:]), flush=True)
+    lines.append(f"\nload average after: {os.getloadavg()[0]:.2f}")
+    text = "\n".join(lines)
+    print(text)
+    if a.out:
+        with open(a.out, "a") as f:
+            f.write(text + "\n\n")
+
+
+if __name__ == "__main__":
+    main()

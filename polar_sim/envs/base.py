@@ -1,0 +1,131 @@
+"""``PolarMujocoEnv``: the shared base of polar_sim's gymnasium environments.
+
+It owns the :class:`~polar_sim.sim.World` (built lazily at ``reset``, from a layout seed drawn
+from ``self.np_random``), the control period (one ``step`` is one ``World.step``), action
+checking, rendering and ``close``. Subclasses implement ``_make_world``, ``_reset_scene``,
+``_apply_action``, ``_get_obs``, ``_get_info`` and ``_get_reward``.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import gymnasium as gym
+import numpy as np
+
+__all__ = ["PolarMujocoEnv", "check_kwargs"]
+
+
+def check_kwargs(cls, unknown):
+    """Raise ``TypeError`` listing the valid keyword arguments of ``cls`` if any are unknown."""
+    if unknown:
+        valid = [p for c in type.mro(cls) if "__init__" in c.__dict__
+                 for p, v in inspect.signature(c.__init__).parameters.items()
+                 if v.kind == v.KEYWORD_ONLY]
+        raise TypeError(f"{cls.__name__}: unknown argument(s) {sorted(unknown)}; valid: {sorted(set(valid))}")
+
+
+class PolarMujocoEnv(gym.Env):
+    """Base class: a World per episode, seeded through ``reset(seed=...)``.
+
+    Every episode's scene layout is drawn from ``self.np_random``, so ``reset(seed=s)`` rebuilds
+    the same world and replays bit for bit.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, *, render_mode=None, render_size=(480, 480)):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.render_mode = render_mode
+        self._render_size = tuple(int(v) for v in render_size)
+        self._world = None
+        self._closed = False
+        self._needs_reset = True
+
+    # -- subclass hooks -------------------------------------------------------------------
+    def _make_world(self, layout_seed):
+        raise NotImplementedError
+
+    def _reset_scene(self):
+        """Episode state after the world is built (modules, counters)."""
+
+    def _apply_action(self, action):
+        """Advance the world by one control period for a checked action."""
+        raise NotImplementedError
+
+    def _get_obs(self):
+        raise NotImplementedError
+
+    def _get_info(self):
+        raise NotImplementedError
+
+    def _get_reward(self):
+        """Return (reward, terminated, reward terms dict)."""
+        raise NotImplementedError
+
+    # -- gymnasium API --------------------------------------------------------------------
+    @property
+    def world(self):
+        """The current episode's World (None before the first reset)."""
+        return self._world
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if self._closed:
+            raise RuntimeError(f"{type(self).__name__}: reset() after close()")
+        layout_seed = int(self.np_random.integers(0, 2**31 - 1))
+        if self._world is not None:
+            self._world.close()
+        self._world = self._make_world(layout_seed)
+        self._reset_scene()
+        self._needs_reset = False
+        return self._get_obs(), self._get_info()
+
+    def step(self, action):
+        if self._closed:
+            raise RuntimeError(f"{type(self).__name__}: step() after close()")
+        if self._needs_reset:
+            raise RuntimeError(f"{type(self).__name__}: call reset() before step()")
+        a = self._check_action(action)
+        self._apply_action(a)
+        reward, terminated, terms = self._get_reward()
+        info = self._get_info()
+        info["reward_terms"] = terms
+        if terminated:
+            self._needs_reset = True
+        return self._get_obs(), float(reward), bool(terminated), False, info
+
+    def _check_action(self, action):
+        a = np.asarray(action)
+        if a.dtype == object or not np.issubdtype(a.dtype, np.number):
+            raise ValueError(f"action: expected a numeric array of shape {self.action_space.shape}, got {action!r}")
+        a = a.astype(np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"action: contains NaN or inf: {a.tolist()}")
+        lo, hi = self.action_space.low, self.action_space.high
+        if np.any(a < lo - 1e-6) or np.any(a > hi + 1e-6):
+            raise ValueError(f"action: {a.tolist()} is outside the action space [{lo.tolist()}, {hi.tolist()}]; "
+                             "it is never clipped silently")
+        return a
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render(): no render_mode was set; use gym.make(..., render_mode='rgb_array')")
+            return None
+        if self._world is None:
+            raise RuntimeError(f"{type(self).__name__}: call reset() before render()")
+        return self._render_frame()
+
+    def _render_frame(self):
+        w, h = self._render_size
+        return self._world.render_view(width=w, height=h)
+
+    def close(self):
+        if self._world is not None:
+            self._world.close()
+            self._world = None
+        self._closed = True
+        self._needs_reset = True

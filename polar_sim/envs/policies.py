@@ -1,0 +1,137 @@
+"""Scripted baseline policies for the environments (``polar-sim eval --policy MODULE:CALLABLE``).
+
+A policy is a callable ``policy(obs) -> action``; classes here keep their own state and expose
+``reset()``, which the evaluator calls at the start of every episode.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SDFReactive"]
+
+
+def _angle(v):
+    return float(np.arctan2(v[1], v[0]))
+
+
+class SDFReactive:
+    """An SDF-gradient reactive controller for ``GPISNav-v0`` (a distance-based Bug algorithm).
+
+    It reads only the SDF stencil and the goal, both in the robot frame. Each stencil point p
+    with distance d and gradient g gives a surface point estimate s = p - d g (the gradient
+    points away from the surface); the nearest of these is the nearest obstacle.
+
+    - **Go**: head for the goal, pushed away from surfaces closer than ``safe``.
+    - **Follow**: when the way to the goal is blocked, keep the obstacle at ``follow_distance``
+      and move along its tangent (the gradient turned by 90 degrees), on the side that first
+      points toward the goal. Leave when the goal is nearer than where following began (by
+      ``leave_margin``) and the way to it is clear. This escapes the dead ends that trap a pure
+      potential field. Blocked again no nearer to the goal than the previous time, it follows
+      the other way round. Like Bug algorithms it keeps only distances to the goal as memory.
+
+    Parameters
+    ----------
+    safe : float
+        Clearance (m) below which surfaces repel in go mode, and the blocked test's clearance.
+    follow_distance : float
+        Distance (m) kept from the obstacle while following it.
+    max_var : float
+        Stencil points with map variance above this are ignored (unknown space).
+    leave_margin : float
+        How much nearer to the goal (m) the robot must be before it stops following.
+    patience : int
+        Steps of following without getting nearer after which it follows the other way.
+    """
+
+    def __init__(self, safe=0.6, follow_distance=0.55, max_var=0.5, leave_margin=0.3, patience=150,
+                 stencil_rays=16, stencil_radii=(0.5, 1.0, 2.0, 3.0)):
+        from polar_sim.envs.observers import SDFStencil
+
+        self.safe = float(safe)
+        self.follow_distance = float(follow_distance)
+        self.max_var = float(max_var)
+        self.leave_margin = float(leave_margin)
+        self.patience = int(patience)
+        self._points = SDFStencil(stencil_rays, stencil_radii).points_robot
+        self.reset()
+
+    def reset(self):
+        self._mode = "go"
+        self._d_hit = np.inf
+        self._last_hit = np.inf
+        self._side = 1.0
+        self._steps = 0
+
+    def _surface_points(self, obs):
+        d = np.asarray(obs["sdf"], float)
+        g = np.asarray(obs["sdf_grad"], float)
+        ok = (np.asarray(obs["sdf_var"], float) < self.max_var) & (d < 1.5)
+        norm = np.linalg.norm(g, axis=1)
+        ok &= norm > 0.3
+        g = g / np.maximum(norm, 1e-9)[:, None]
+        return self._points[ok] - d[ok, None] * g[ok]
+
+    def _clearance(self, s, direction, half_width):
+        """Distance (m) to the nearest surface point within ``half_width`` m of the ray along
+        ``direction`` (robot frame), ahead of the robot."""
+        u = direction / max(np.linalg.norm(direction), 1e-9)
+        along = s @ u
+        across = np.abs(s @ np.array([-u[1], u[0]]))
+        hit = (along > 0) & (across < half_width)
+        return float(along[hit].min()) if hit.any() else np.inf
+
+    def __call__(self, obs):
+        goal = np.asarray(obs["goal"], float)
+        dg = float(np.linalg.norm(goal))
+        to_goal = goal / max(dg, 1e-9)
+        s = self._surface_points(obs)
+        ds = np.linalg.norm(s, axis=1) if len(s) else np.zeros(0)
+        blocked = bool(len(s)) and self._clearance(s, to_goal, 0.4) < min(self.safe + 0.2, dg)
+
+        if self._mode == "go" and blocked:
+            k = int(np.argmin(ds))
+            away = -s[k] / max(ds[k], 1e-9)
+            tangent = np.array([-away[1], away[0]])
+            side = 1.0 if tangent @ to_goal >= 0 else -1.0
+            if dg > self._last_hit - self.leave_margin:
+                # Blocked again no nearer than last time: the greedy side led back here, so try
+                # the other way round (alternating sides keeps the search from cycling).
+                side = -self._side
+            self._mode, self._d_hit, self._side, self._steps = "follow", dg, side, 0
+            self._last_hit = min(dg, self._last_hit)
+        elif self._mode == "follow":
+            self._steps += 1
+            if dg < self._d_hit - self.leave_margin and not blocked:
+                self._mode = "go"
+            elif self._steps > self.patience:
+                # Following for long without getting nearer (circling clutter): turn back.
+                self._side, self._d_hit, self._steps = -self._side, dg, 0
+
+        if self._mode == "go" or not len(s):
+            push = np.zeros(2)
+            close = ds < self.safe
+            if close.any():
+                w = (self.safe - ds[close]) / self.safe
+                push = -(w[:, None] * s[close] / ds[close, None]).sum(0)
+            direction = to_goal + 1.5 * push
+        else:
+            # The followed surface is on the robot's left for side +1, right for side -1; keep
+            # to points on that side (or nearly ahead) so a doorway's far jamb is not mistaken
+            # for the wall being followed.
+            on_side = self._side * s[:, 1] > -0.15
+            cand = np.where(on_side, ds, np.inf)
+            k = int(np.argmin(cand)) if np.isfinite(cand).any() else int(np.argmin(ds))
+            d_near = float(ds[k])
+            away = -s[k] / max(d_near, 1e-9)
+            tangent = self._side * np.array([-away[1], away[0]])
+            direction = tangent + 2.0 * (self.follow_distance - d_near) * away
+        heading = _angle(direction)
+        omega = float(np.clip(1.8 * heading, -1.0, 1.0))
+        # The chassis reaches 0.3 m ahead and the wheels 0.33 m to the side: slow down from
+        # 0.9 m ahead, stop at 0.4 m.
+        ahead = self._clearance(s, np.array([1.0, 0.0]), 0.4) if len(s) else np.inf
+        v = 0.9 * max(np.cos(heading), 0.0) ** 2 * float(np.clip((ahead - 0.4) / 0.5, 0.0, 1.0))
+        if self._mode == "go":
+            v *= min(1.0, dg)
+        return np.array([v, omega], dtype=np.float32)

@@ -1,0 +1,71 @@
+"""Zero level set of a GPIS map: polylines in 2D (marching squares), a mesh in 3D (marching cubes)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["surface_2d", "surface_3d", "grid_query"]
+
+
+def grid_query(m, axes, band, var_max, chunk=100_000):
+    """SDF on the grid spanned by ``axes`` (indexing 'ij') at nodes within ``band`` of a sample.
+
+    Returns (sdf, mask): nodes outside the band, or (legacy) with GP variance >= var_max, are
+    masked out and hold +band.
+    """
+    mesh = np.meshgrid(*axes, indexing="ij")
+    P = np.stack([g.ravel() for g in mesh], 1)
+    kd, _ = m._kd()
+    dist, _ = kd.query(P, k=1, distance_upper_bound=band)
+    idx = np.nonzero(np.isfinite(dist))[0]
+    sdf = np.full(len(P), band)
+    keep = np.zeros(len(P), bool)
+    for a in range(0, len(idx), chunk):
+        j = idx[a:a + chunk]
+        d, _, v = m.query(P[j])
+        sdf[j] = d
+        keep[j] = v < var_max
+    shape = tuple(len(x) for x in axes)
+    # cells touching an unevaluated node would see the +band filler: erode the mask by one node
+    from scipy.ndimage import binary_erosion
+
+    keep = binary_erosion(keep.reshape(shape), structure=np.ones((3,) * len(shape), bool),
+                          border_value=0)
+    return sdf.reshape(shape), keep
+
+
+def _axes(m, res, margin):
+    pts = m.samples()["points"]
+    lo = np.floor((pts.min(0) - margin) / res) * res
+    hi = np.ceil((pts.max(0) + margin) / res) * res
+    return [np.arange(a, b + 0.5 * res, res) for a, b in zip(lo, hi)]
+
+
+def surface_2d(m, res, band, var_max):
+    """List of polylines (k, 2) along the zero level of the map's query, near observed samples."""
+    from skimage.measure import find_contours
+
+    if len(m.tree_.alive()) == 0:
+        return []
+    axes = _axes(m, res, 2 * res + band)
+    sdf, mask = grid_query(m, axes, band, var_max)
+    lines = find_contours(sdf, 0.0, mask=mask)
+    x0 = np.array([a[0] for a in axes])
+    return [x0 + c * res for c in lines if len(c) >= 2]
+
+
+def surface_3d(m, res, band, var_max):
+    """trimesh.Trimesh of the zero level near observed samples (marching cubes)."""
+    import trimesh
+    from skimage.measure import marching_cubes
+
+    if len(m.tree_.alive()) == 0:
+        return trimesh.Trimesh()
+    axes = _axes(m, res, 2 * res + band)
+    sdf, mask = grid_query(m, axes, band, var_max)
+    if not ((sdf[mask] > 0).any() and (sdf[mask] < 0).any()):
+        return trimesh.Trimesh()
+    verts, faces, normals, _ = marching_cubes(sdf, 0.0, spacing=(res,) * 3, mask=mask,
+                                              gradient_direction="ascent")
+    x0 = np.array([a[0] for a in axes])
+    return trimesh.Trimesh(verts + x0, faces[:, ::-1], vertex_normals=normals, process=False)

@@ -1,0 +1,1 @@
+"""Tests of polar_sim.gpis."""
