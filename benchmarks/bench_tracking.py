@@ -1,6 +1,7 @@
 """Speed (and a sanity check of accuracy) of polar_sim.tracking on synthetic 640x480 RGB-D frames.
 
     python benchmarks/bench_tracking.py [--quick] [--objects mug,box] [--variants h,ww,...]
+    python benchmarks/bench_tracking.py --tabletop touch,push --seeds 1,2 --frames 200   # simulator
 
 Single-threaded: OpenCV, numba and the BLAS are limited to one thread before anything runs.
 Frames are rendered first (not timed); each tracker's first frame (JIT and cache warm-up) is left
@@ -77,6 +78,56 @@ def run(seq, frames, P, N, kw, symmetric=False, repeats=1):
                 roi=float(np.mean([(r.roi[2] - r.roi[0]) * (r.roi[3] - r.roi[1]) for r in res])))
 
 
+def tabletop(scripts, seeds, n, variants):
+    """Spot check on the simulator's ``tabletop`` scene (imports polar_sim.sim, i.e. MuJoCo).
+
+    Per (script, seed): the seeded target, GT initial pose, ADD / ADD-S success at 0.1 d, IoU against
+    the rendered target label, and hand pixels labelled target among the hand pixels inside the
+    target's dilated silhouette (visible target pixels dilated by 15 px)."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    from polar_sim.sim import LABELS, World
+
+    print("| script | seed | target | variant | ADD<0.1d | ADD-S<0.1d | mean ADD mm | IoU>0.5 | mean IoU | "
+          "hand as target (near object) | lost | CPU ms median |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (31, 31))
+    for script in scripts:
+        for seed in seeds:
+            w = World("tabletop", seed=seed, script=script)
+            w.reset(seed=seed)
+            name = w.truth()["target"]
+            P, N = w.object_points(name, 3000)
+            d = metrics.object_diameter(P)
+            frames = []
+            for i in range(n):
+                if i:
+                    w.step()
+                f = w.camera("rgbd")
+                T = np.linalg.inv(f.T_world_cam) @ w.truth()["objects"][name]
+                tgt = f.labels == LABELS["target"]
+                near = cv2.dilate(tgt.astype(np.uint8), ker) > 0
+                frames.append((f.rgb, f.depth, f.K, T, tgt, (f.labels == LABELS["occluder"]) & near))
+            w.close()
+            for v in variants:
+                kw = VARIANTS[v]
+                tr = ObjectTracker(P, frames[0][2], frames[0][3], model_normals=N, **kw)
+                res, cpu = [], []
+                for rgb, depth, *_ in frames:
+                    c0 = time.process_time()
+                    res.append(tr.process(rgb, depth))
+                    cpu.append(time.process_time() - c0)
+                G = np.stack([fr[3] for fr in frames])
+                E = np.stack([r.pose for r in res])
+                e, es = metrics.add(P, G, E), metrics.adds(P, G, E)
+                masks = np.stack([r.mask for r in res])
+                ious = metrics.iou(masks, np.stack([fr[4] for fr in frames]))
+                hand = metrics.occluder_as_target(masks, np.stack([fr[5] for fr in frames]))
+                print(f"| {script} | {seed} | {name} | {v} | {metrics.add_success(e, d):.3f} | "
+                      f"{metrics.add_success(es, d):.3f} | {1000 * e.mean():.1f} | {metrics.iou_success(ious):.3f} | "
+                      f"{ious.mean():.3f} | {hand:.3f} | {sum(r.lost for r in res)} | "
+                      f"{1000 * np.median(cpu[1:]):.1f} |", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="30 frames, mug only (CI size)")
@@ -86,11 +137,21 @@ def main(argv=None):
     ap.add_argument("--speed", type=float, default=1.0, help="motion speed factor of the sequence")
     ap.add_argument("--hand-color", default="225,170,140", help="R,G,B of the hand (e.g. the object's colour)")
     ap.add_argument("--brightness", default="1,1", help="first,last image gain (a lighting ramp)")
+    ap.add_argument("--tabletop", default=None,
+                    help="comma list of tabletop scripts: spot check on the simulator instead (needs MuJoCo)")
+    ap.add_argument("--seeds", default="1,2", help="tabletop seeds (with --tabletop)")
     ap.add_argument("--repeats", type=int, default=None,
                     help="runs per variant; per-frame times are the fastest run (default 3, quick 2)")
     a = ap.parse_args(argv)
     cv2.setNumThreads(1)
     n = a.frames or (30 if a.quick else 120)
+    if a.tabletop:
+        print(f"# bench_tracking --tabletop: {n} frames per sequence, load average "
+              f"{os.getloadavg()[0]:.2f} at start")
+        tabletop(a.tabletop.split(","), [int(x) for x in a.seeds.split(",")], n,
+                 (a.variants or "ww").split(","))
+        print(f"# load average {os.getloadavg()[0]:.2f} at end")
+        return
     objects = (a.objects or ("mug" if a.quick else "mug,box,cylinder")).split(",")
     variants = (a.variants or ",".join(VARIANTS)).split(",")
     repeats = a.repeats or (2 if a.quick else 3)

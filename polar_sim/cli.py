@@ -94,6 +94,22 @@ def _cmd_demo(args):
     return run_demo(Path(args.out), quick=True)
 
 
+def _cmd_eval(args):
+    import json
+
+    import polar_sim  # noqa: F401  (registers the environment ids)
+    from polar_sim.envs.evaluate import evaluate
+
+    kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
+    out = args.out or f"polar_sim_out/eval/{args.env_id.replace('/', '_')}"
+    rows, summary = evaluate(args.env_id, args.policy, episodes=args.episodes, seed=args.seed,
+                             env_kwargs=kwargs, out_dir=out)
+    for k, v in summary.items():
+        print(f"{k}: {v:.4g}" if isinstance(v, float) else f"{k}: {v}")
+    print(f"per-episode metrics: {out}/episodes.csv")
+    return 0
+
+
 def _cmd_bench(args):
     import subprocess
 
@@ -153,6 +169,15 @@ def build_parser():
     s.add_argument("--backend", choices=["local", "ray"], default="local")
     s.add_argument("--only", nargs="*", help="a subset of experiments")
     s.set_defaults(func=_cmd_reproduce)
+
+    s = sub.add_parser("eval", help="closed-loop evaluation of a policy in an environment")
+    s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v0")
+    s.add_argument("--policy", required=True, help="MODULE:CALLABLE (a class is instantiated) or 'random'")
+    s.add_argument("--episodes", type=int, default=10)
+    s.add_argument("--seed", type=int, default=10_000, help="seed of the first episode (default 10000: held out)")
+    s.add_argument("--env-kwargs", default=None, help='JSON, e.g. \'{"sdf_source": "truth"}\'')
+    s.add_argument("--out", default=None, help="output folder (default polar_sim_out/eval/ENV)")
+    s.set_defaults(func=_cmd_eval)
 
     s = sub.add_parser("bench", help="run the speed/memory benchmarks (from a repository clone)")
     s.add_argument("only", nargs="*", help="benchmark names (bench_NAME.py); default all")

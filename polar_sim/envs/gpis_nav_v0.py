@@ -16,16 +16,17 @@ SDF_BOUND = 50.0
 GRAD_BOUND = 10.0
 
 
-def stencil_observation(source, stencil, pose2d):
-    """Query an SDF source at the stencil around ``pose2d``: ``sdf`` (n,), ``sdf_grad`` (n, 2) in
-    the robot frame, ``sdf_var`` (n,), all float32 and clipped to the observation bounds."""
-    pts = stencil.world_points(pose2d)
-    d, g, v = source.query(pts)
+def stencil_observation(source, stencil, pose2d, queried=None):
+    """Query an SDF source at the stencil around ``pose2d``: ``sdf`` (n,), ``sdf_grad`` (2n,) in
+    the robot frame, interleaved (gx0, gy0, gx1, gy1, ...), ``sdf_var`` (n,); float32, clipped
+    to the observation bounds. (Flat, because learning libraries expect 1-D vector parts.)
+    ``queried`` passes an already computed ``source.query`` result at the stencil."""
+    d, g, v = queried if queried is not None else source.query(stencil.world_points(pose2d))
     c, s = np.cos(pose2d[2]), np.sin(pose2d[2])
     g_robot = np.stack([c * g[:, 0] + s * g[:, 1], -s * g[:, 0] + c * g[:, 1]], 1)
     return {
         "sdf": np.clip(d, -SDF_BOUND, SDF_BOUND).astype(np.float32),
-        "sdf_grad": np.clip(g_robot, -GRAD_BOUND, GRAD_BOUND).astype(np.float32),
+        "sdf_grad": np.clip(g_robot, -GRAD_BOUND, GRAD_BOUND).astype(np.float32).ravel(),
         "sdf_var": np.clip(np.nan_to_num(v, nan=1e6, posinf=1e6), 0, 1e6).astype(np.float32),
     }
 
@@ -44,7 +45,7 @@ class GPISNavEnv(LidarNavEnv):
     |---|---|---|---|
     | ``goal`` | (2,) | float32 | goal in the robot frame, m |
     | ``sdf`` | (n,) | float32 | map distance at the stencil, m, clipped to +-50 |
-    | ``sdf_grad`` | (n, 2) | float32 | map gradient in the robot frame, clipped to +-10 |
+    | ``sdf_grad`` | (2n,) | float32 | map gradient in the robot frame, (gx, gy) per point, clipped to +-10 |
     | ``sdf_var`` | (n,) | float32 | map variance (1e6 where the map knows nothing) |
     | ``twist`` | (2,) | float32 | forward speed (m/s), yaw rate (rad/s) |
 
@@ -88,7 +89,7 @@ class GPISNavEnv(LidarNavEnv):
         return {
             "goal": base["goal"],
             "sdf": spaces.Box(-SDF_BOUND, SDF_BOUND, (n,), np.float32),
-            "sdf_grad": spaces.Box(-GRAD_BOUND, GRAD_BOUND, (n, 2), np.float32),
+            "sdf_grad": spaces.Box(-GRAD_BOUND, GRAD_BOUND, (2 * n,), np.float32),
             "sdf_var": spaces.Box(0.0, 1e6, (n,), np.float32),
             "twist": base["twist"],
         }
@@ -103,20 +104,21 @@ class GPISNavEnv(LidarNavEnv):
 
     def _after_scan(self):
         self._source.update(self._scan.angles, self._scan.ranges, self._sensor_pose2d())
+        # One map query and one exact SDF per step, shared by the observation and the info.
+        pts = self._stencil.world_points(self._pose)
+        self._queried = self._source.query(pts)
+        self._sdf_true = self._world.sdf(pts)
 
     def _get_obs(self):
-        obs = stencil_observation(self._source, self._stencil, self._pose)
+        obs = stencil_observation(self._source, self._stencil, self._pose, self._queried)
         obs["goal"] = self._goal_robot()
         obs["twist"] = self._twist()
         return dict(sorted(obs.items()))
 
     def _get_info(self):
         info = super()._get_info()
-        pts = self._stencil.world_points(self._pose)
-        true = self._world.sdf(pts)
-        est = self._source.query(pts)[0]
-        info["sdf_true"] = true.astype(np.float32)
-        info["sdf_error"] = (est - true).astype(np.float32)
+        info["sdf_true"] = self._sdf_true.astype(np.float32)
+        info["sdf_error"] = (self._queried[0] - self._sdf_true).astype(np.float32)
         info["sdf_source"] = self._source_name
         return info
 

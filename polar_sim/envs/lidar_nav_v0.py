@@ -102,7 +102,8 @@ class LidarNavEnv(PolarMujocoEnv):
     def _reset_scene(self):
         w = self._world
         self._goal = np.asarray(w.meta["goal"], dtype=np.float64)
-        self._pose = w.truth()["robot_pose2d"]
+        self._truth = w.truth()
+        self._pose = self._truth["robot_pose2d"]
         self._prev_dist = self._goal_distance()
         self._path_length = 0.0
         self._collision = False
@@ -112,9 +113,10 @@ class LidarNavEnv(PolarMujocoEnv):
         v, om = a[0] * self._max_speed, a[1] * self._max_yaw_rate
         prev = self._pose
         self._world.step((v, om))
-        self._pose = self._world.truth()["robot_pose2d"]
+        self._truth = self._world.truth()
+        self._pose = self._truth["robot_pose2d"]
         self._path_length += float(np.hypot(*(self._pose[:2] - prev[:2])))
-        self._collision = bool(self._world.truth()["robot_collision"])
+        self._collision = bool(self._truth["robot_collision"])
         self._scan = self._world.lidar("lidar")
         self._after_scan()
 
@@ -133,7 +135,7 @@ class LidarNavEnv(PolarMujocoEnv):
         return rel[:2].astype(np.float32)
 
     def _twist(self):
-        tw = self._world.truth()["robot_twist"]
+        tw = self._truth["robot_twist"]
         lim = self.observation_space["twist"]
         return np.clip(np.array([tw[0], tw[5]], np.float32), lim.low, lim.high)
 

@@ -65,7 +65,7 @@ class SDFReactive:
 
     def _surface_points(self, obs):
         d = np.asarray(obs["sdf"], float)
-        g = np.asarray(obs["sdf_grad"], float)
+        g = np.asarray(obs["sdf_grad"], float).reshape(-1, 2)
         ok = (np.asarray(obs["sdf_var"], float) < self.max_var) & (d < 1.5)
         norm = np.linalg.norm(g, axis=1)
         ok &= norm > 0.3

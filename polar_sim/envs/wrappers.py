@@ -48,7 +48,7 @@ class GPISObservation(gym.Wrapper):
         obs = {k: v for k, v in base.spaces.items() if k != "ranges"}
         obs.update({
             "sdf": spaces.Box(-SDF_BOUND, SDF_BOUND, (n,), np.float32),
-            "sdf_grad": spaces.Box(-GRAD_BOUND, GRAD_BOUND, (n, 2), np.float32),
+            "sdf_grad": spaces.Box(-GRAD_BOUND, GRAD_BOUND, (2 * n,), np.float32),
             "sdf_var": spaces.Box(0.0, 1e6, (n,), np.float32),
         })
         self.observation_space = spaces.Dict(dict(sorted(obs.items())))

@@ -74,12 +74,17 @@ def precision_recall(pred, gt):
     return (tp / npred if npred else 1.0), (tp / ngt if ngt else 1.0)
 
 
-def occluder_as_target(pred, occluder):
+def occluder_as_target(pred, occluder, within=None):
     """Fraction of occluder (hand) pixels labelled as target, pooled over a stack.
 
-    NaN if there is no occluder pixel at all."""
+    ``within`` (same shape, optional) restricts the count to occluder pixels inside it, e.g. the
+    target's amodal silhouette, dilated: the hand pixels that actually touch or cover the object,
+    so a large hand elsewhere in the image does not dilute the figure. NaN if no occluder pixel
+    is counted."""
     p = _as_mask(pred, "pred")
     o = _as_mask(occluder, "occluder", p.shape)
+    if within is not None:
+        o = o & _as_mask(within, "within", p.shape)
     n = int(o.sum())
     return float(np.logical_and(p, o).sum() / n) if n else float("nan")
 

@@ -16,7 +16,6 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from polar_sim.geometry import quat_to_matrix
 
 __all__ = ["RoverConfig", "ROVER_PRESETS", "add_rover", "RoverController", "GROUP"]
 
@@ -165,28 +164,33 @@ class RoverController:
         self._act = np.array([model.actuator(f"wheel_{n}").id for n in ("left", "right")])
         self.body_id = model.body("rover").id
         self.qpos_adr = model.jnt_qposadr[model.joint("rover_free").id]
-        self.qvel_adr = model.jnt_dofadr[model.joint("rover_free").id]
+        self.qvel_adr = int(model.jnt_dofadr[model.joint("rover_free").id])
+        self._lo, self._hi = model.actuator_ctrlrange[self._act].T.tolist()
         self.reset()
 
     def reset(self):
-        self._integral = np.zeros(2)
+        self._iv = 0.0
+        self._iw = 0.0
 
     def body_twist(self, data):
         """Forward speed (m/s, along body x) and yaw rate (rad/s, about body z)."""
-        R = quat_to_matrix(data.qpos[self.qpos_adr + 3 : self.qpos_adr + 7])
-        v_world = data.qvel[self.qvel_adr : self.qvel_adr + 3]
-        w_body = data.qvel[self.qvel_adr + 3 : self.qvel_adr + 6]
-        return float((R.T @ v_world)[0]), float(w_body[2])
+        # Scalar arithmetic: this runs every physics substep, where numpy's per-call overhead
+        # on 3-vectors would cost more than the physics itself.
+        x = data.xmat[self.body_id]  # body x axis in world = first column (entries 0, 3, 6)
+        a = self.qvel_adr
+        qv = data.qvel
+        v = x[0] * qv[a] + x[3] * qv[a + 1] + x[6] * qv[a + 2]
+        return float(v), float(qv[a + 5])
 
     def apply(self, model, data, v, omega, dt):
         """Write the wheel actuator targets for command ``(v, omega)`` into ``data.ctrl``."""
         c = self.config
-        meas = np.array(self.body_twist(data))
-        err = np.array([v, omega]) - meas
-        self._integral = np.clip(self._integral + err * dt, -0.5, 0.5)
-        v_c, w_c = np.array([v, omega]) + self.kp * err + self.ki * self._integral
-        wl = (v_c - w_c * c.track / 2) / c.wheel_radius
-        wr = (v_c + w_c * c.track / 2) / c.wheel_radius
-        speeds = np.array([wl, wr])
-        lo, hi = model.actuator_ctrlrange[self._act].T
-        data.ctrl[self._act] = np.clip(speeds, lo, hi)
+        mv, mw = self.body_twist(data)
+        ev, ew = v - mv, omega - mw
+        self._iv = min(0.5, max(-0.5, self._iv + ev * dt))
+        self._iw = min(0.5, max(-0.5, self._iw + ew * dt))
+        v_c = v + self.kp * ev + self.ki * self._iv
+        w_c = omega + self.kp * ew + self.ki * self._iw
+        lo, hi = self._lo, self._hi
+        data.ctrl[self._act[0]] = min(hi[0], max(lo[0], (v_c - w_c * c.track / 2) / c.wheel_radius))
+        data.ctrl[self._act[1]] = min(hi[1], max(lo[1], (v_c + w_c * c.track / 2) / c.wheel_radius))

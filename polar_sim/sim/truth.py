@@ -219,6 +219,34 @@ class SceneSDF:
         return np.where(above, dist, -dist)
 
     # -- 2D section -------------------------------------------------------------------------
+    def _section_tables(self):
+        """Vertical boxes, vertical cylinders/capsules and spheres as arrays (for one broadcast
+        per shape kind), and the remaining geoms for mesh sectioning."""
+        if hasattr(self, "_tables"):
+            return self._tables
+        boxes, discs, other = [], [], []
+        for g, t, s, R, x, name in self._items:
+            if _is_ground(self._model, g) or t == _G.mjGEOM_PLANE:
+                continue
+            vertical = abs(abs(R[2, 2]) - 1.0) < 1e-9
+            if t == _G.mjGEOM_BOX and vertical:
+                boxes.append((x, R[:2, :2], s))
+            elif t == _G.mjGEOM_SPHERE:
+                discs.append((x, s[0], 0.0, 2))
+            elif t in (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE) and vertical:
+                discs.append((x, s[0], s[1], 0 if t == _G.mjGEOM_CYLINDER else 1))
+            else:
+                other.append((g, R, x))
+        bt = None
+        if boxes:
+            bt = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]), np.array([b[2] for b in boxes]))
+        dt = None
+        if discs:
+            dt = (np.array([c[0] for c in discs]), np.array([c[1] for c in discs]),
+                  np.array([c[2] for c in discs]), np.array([c[3] for c in discs]))
+        self._tables = (bt, dt, other)
+        return self._tables
+
     def section(self, points2d, z):
         """Signed distance (n,) within the horizontal plane at height ``z`` of points (n, 2).
 
@@ -226,36 +254,38 @@ class SceneSDF:
         Vertical boxes, cylinders and capsules and all spheres are exact closed forms; any
         other shape is sectioned as a mesh (exact for meshes, 96-gon for tilted cylinders).
         """
+        boxes, discs, other = self._section_tables()
         out = np.full(len(points2d), np.inf)
-        for g, t, s, R, x, name in self._items:
-            if _is_ground(self._model, g):
-                continue
-            dz = z - x[2]
-            vertical = abs(abs(R[2, 2]) - 1.0) < 1e-9
-            p = points2d - x[:2]
-            if t == _G.mjGEOM_SPHERE:
-                if abs(dz) >= s[0]:
-                    continue
-                d = _sdf.sdf_circle2d(p, np.sqrt(s[0] ** 2 - dz ** 2))
-            elif t == _G.mjGEOM_BOX and vertical:
-                if abs(dz) >= s[2]:
-                    continue
-                d = _sdf.sdf_rect2d(p @ R[:2, :2], s[:2])
-            elif t in (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE) and vertical:
-                reach = s[1] + (s[0] if t == _G.mjGEOM_CAPSULE else 0.0)
-                if abs(dz) >= reach:
-                    continue
-                r = s[0]
-                if t == _G.mjGEOM_CAPSULE and abs(dz) > s[1]:
-                    r = np.sqrt(s[0] ** 2 - (abs(dz) - s[1]) ** 2)
-                d = _sdf.sdf_circle2d(p, r)
-            elif t == _G.mjGEOM_PLANE:
-                continue
-            else:
-                d = self._mesh_section(g, R, x, z, points2d)
-                if d is None:
-                    continue
-            np.minimum(out, d, out=out)
+        if boxes is not None:
+            c, R2, half = boxes
+            cut = np.abs(z - c[:, 2]) < half[:, 2]
+            if cut.any():
+                # Local coordinates of every point in every cut box: (n, k, 2).
+                rel = points2d[:, None, :] - c[None, cut, :2]
+                q = np.abs(np.einsum("nkj,kji->nki", rel, R2[cut])) - half[None, cut, :2]
+                d = np.linalg.norm(np.maximum(q, 0.0), axis=2) + np.minimum(q.max(axis=2), 0.0)
+                np.minimum(out, d.min(axis=1), out=out)
+        if discs is not None:
+            c, r, hl, kind = discs
+            dz = np.abs(z - c[:, 2])
+            radius = np.full(len(r), -1.0)
+            cyl = (kind == 0) & (dz < hl)
+            radius[cyl] = r[cyl]
+            cap = kind == 1
+            body = cap & (dz <= hl)
+            radius[body] = r[body]
+            end = cap & (dz > hl) & (dz - hl < r)
+            radius[end] = np.sqrt(r[end] ** 2 - (dz[end] - hl[end]) ** 2)
+            sph = (kind == 2) & (dz < r)
+            radius[sph] = np.sqrt(r[sph] ** 2 - dz[sph] ** 2)
+            cut = radius > 0
+            if cut.any():
+                d = np.linalg.norm(points2d[:, None, :] - c[None, cut, :2], axis=2) - radius[None, cut]
+                np.minimum(out, d.min(axis=1), out=out)
+        for g, R, x in other:
+            d = self._mesh_section(g, R, x, z, points2d)
+            if d is not None:
+                np.minimum(out, d, out=out)
         return out
 
     def _mesh_section(self, g, R, x, z, points2d):

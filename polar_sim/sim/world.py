@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 
 from polar_sim._validation import as_int, as_rng
-from polar_sim.geometry import make_pose, quat_to_matrix, matrix_to_quat, T_to_pose2d
+from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat
 from polar_sim.sim import truth as _truth
 from polar_sim.sim.robots import GROUP, RoverController
 from polar_sim.sim.scenes import load_scene
@@ -85,6 +85,13 @@ class World:
         for name, model_ in (noise or {}).items():
             self.set_noise(name, model_)
         self._labels = _truth.label_table(m, self.meta.get("target"))
+        self._robot_geom = self._labels == _truth.LABELS["robot"]
+        self._ground_geom = self._labels == _truth.LABELS["ground"]
+        self._ids = {"rover": m.body("rover").id if self._has_rover else -1,
+                     "hand": m.body("hand").id if _has_body(m, "hand") else -1,
+                     "cameras": {c: m.camera(c).id for c in self.cameras},
+                     "sites": {k: m.site(s.spec.site).id for k, s in self._lidars.items()},
+                     "objects": {o: m.body(o).id for o in self.meta.get("objects", ())}}
         self._sdf = None
         self.reset(self.seed)
 
@@ -311,40 +318,36 @@ class World:
         exists.
         """
         m, d = self.model, self.data
+        ids = self._ids
         out = {"time": self.time, "target": self.meta.get("target")}
         if self._has_rover:
-            b = m.body("rover").id
+            b = ids["rover"]
             T = _truth.body_pose(d, b)
             out["robot_pose"] = T
             out["robot_pose2d"] = T_to_pose2d(T)
             out["robot_twist"] = _truth.body_twist(m, d, b)
             out["robot_collision"] = self._robot_collision()
-        out["cameras"] = {c: camera_pose(d, m.camera(c).id) for c in self.cameras}
-        out["lidars"] = {k: make_pose(d.site_xmat[m.site(s.spec.site).id].reshape(3, 3).copy(),
-                                      d.site_xpos[m.site(s.spec.site).id].copy())
-                         for k, s in self._lidars.items()}
-        objs, tw = {}, {}
-        for name in self.meta.get("objects", ()):
-            bid = m.body(name).id
-            objs[name] = _truth.body_pose(d, bid)
-            tw[name] = _truth.body_twist(m, d, bid)
-        out["objects"] = objs
-        out["object_twists"] = tw
-        if _has_body(m, "hand"):
-            out["hand_pose"] = _truth.body_pose(d, m.body("hand").id)
+        out["cameras"] = {c: camera_pose(d, i) for c, i in ids["cameras"].items()}
+        out["lidars"] = {k: make_pose(d.site_xmat[i].reshape(3, 3).copy(), d.site_xpos[i].copy())
+                         for k, i in ids["sites"].items()}
+        out["objects"] = {name: _truth.body_pose(d, i) for name, i in ids["objects"].items()}
+        out["object_twists"] = {name: _truth.body_twist(m, d, i) for name, i in ids["objects"].items()}
+        if ids["hand"] >= 0:
+            out["hand_pose"] = _truth.body_pose(d, ids["hand"])
         if self._script is not None:
             out.update(self._script.truth(m, d))
         return out
 
     def _robot_collision(self):
-        m, d = self.model, self.data
-        robot = self._labels == _truth.LABELS["robot"]
-        ground = self._labels == _truth.LABELS["ground"]
-        for i in range(d.ncon):
-            g1, g2 = d.contact.geom1[i], d.contact.geom2[i]
-            if (robot[g1] and not ground[g2] and not robot[g2]) or (robot[g2] and not ground[g1] and not robot[g1]):
-                return True
-        return False
+        d = self.data
+        n = d.ncon
+        if n == 0:
+            return False
+        g1 = np.asarray(d.contact.geom1[:n])
+        g2 = np.asarray(d.contact.geom2[:n])
+        r1, r2 = self._robot_geom[g1], self._robot_geom[g2]
+        hit = (r1 & ~r2 & ~self._ground_geom[g2]) | (r2 & ~r1 & ~self._ground_geom[g1])
+        return bool(hit.any())
 
     def geom_labels(self):
         """Label of every geom id, (ngeom,) int (see ``truth.LABELS``)."""

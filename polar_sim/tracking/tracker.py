@@ -399,13 +399,13 @@ class ObjectTracker:
             self._train(feats, O, S_hat, r_hat, D)
         self._clock.lap("learning")
         # a good fit updates the filter (a mostly hidden object only skips learning); a poor fit is
-        # reported (spec 3.7) but not fused: the filter coasts, widened x4, and the frame counts
+        # reported (spec 3.7) but not fused: the filter coasts (widened x4, velocity damped), the frame counts
         # towards lost mode, in which the prediction is reported instead
         if good_fit:
             filt.update(T_hat, res.cov, dt)
             self._rejections = 0
         else:
-            filt.coast(inflate=4.0)
+            filt.coast(velocity_decay=self.lost_velocity_decay, inflate=4.0)
             self._rejections += 1
         lost = self._rejections >= self.lost_after
         if lost:

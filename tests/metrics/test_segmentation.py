@@ -47,6 +47,8 @@ def test_occluder_as_target():
     pred = _rect(0, 1, 0, 3)
     assert metrics.occluder_as_target(pred, hand) == pytest.approx(0.25)
     assert np.isnan(metrics.occluder_as_target(pred, np.zeros_like(hand)))
+    # restricted to the first hand row (4 pixels, 3 labelled target)
+    assert metrics.occluder_as_target(pred, hand, within=_rect(0, 1, 0, 10)) == pytest.approx(0.75)
 
 
 def test_roc_auc_matches_pair_counting():
