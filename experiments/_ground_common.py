@@ -49,12 +49,20 @@ def single_thread():
     cv2.setNumThreads(1)
 
 
+_ROUTE_MEMO = {}
+
+
 def route(name, frames=None):
     """The recording of route ``name`` (its first ``frames`` frames if given), from the route cache
-    (``$POLAR_SIM_CACHE``) or recorded now (deterministic from the route's seed)."""
+    (``$POLAR_SIM_CACHE``) or recorded now (deterministic from the route's seed). The last one loaded is
+    kept in memory, so consecutive trials on one route in a worker decode it once."""
     from polar_sim.sim.rover_sequences import load_route  # imports MuJoCo only when recording
 
-    return load_route(name, max_frames=frames, progress=False)
+    key = (name, frames)
+    if key not in _ROUTE_MEMO:
+        _ROUTE_MEMO.clear()
+        _ROUTE_MEMO[key] = load_route(name, max_frames=frames, progress=False)
+    return _ROUTE_MEMO[key]
 
 
 def route_truth(rec):
@@ -113,7 +121,6 @@ def run_vo(rec, cond, seed=0, *, keep_candidates=False, iou=False, keep_prob=(),
     for k in ("middle", "n_candidates", "n_inliers"):
         out[k] = np.zeros(n, dtype=np.int64)
     cands, probs = [], {}
-    masks = None
     for i in range(n):
         f = rec[i]
         c0 = time.process_time()
@@ -132,8 +139,6 @@ def run_vo(rec, cond, seed=0, *, keep_candidates=False, iou=False, keep_prob=(),
             probs[i] = e.ground_prob.copy()
         if keep_candidates:
             m = int(e.diagnostics["middle_index"])
-            if masks is None:
-                masks = {}
             lab = (candidate_labels(rec[m]["ground_mask"], e.candidates) if m >= 0 and len(e.candidates)
                    else np.zeros(0, dtype=bool))
             cands.append(dict(u=e.candidate_uv[:, 0].copy(), v=e.candidate_uv[:, 1].copy(),
@@ -229,26 +234,44 @@ def _frames_of(run_c, n_pick):
     return [ok[i] for i in pick]
 
 
-def candidate_set(routes, frames=None, n_pick=None, cache_root=None):
+def _source_tag():
+    """Short hash of the sources a candidate set depends on (the ground module, the route recorder and
+    this file), so a cached set is never replayed after any of them changed."""
+    import hashlib
+
+    import polar_sim
+
+    root = Path(polar_sim.__file__).parent
+    files = sorted((root / "ground").glob("*.py")) + [root / "sim" / "rover_sequences.py", root / "control.py",
+                                                       Path(__file__)]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def candidate_set(routes, frames=None, n_pick=None):
     """RANSAC candidates of one online w6 pass (seed 0) over each route, with their P_G weights, true
     ground labels and the true speed of their middle frame, for re-fitting every RANSAC condition on
     the same data (spec §8.2).
 
     ``routes``: route names; ``frames``: recording length (None = the full route); ``n_pick``: frames
     kept per route (equally spaced after :data:`WARMUP_FRAMES`; None = all). Memoised per process and
-    saved as ``.npz`` under ``cache_root`` (a run folder), so the trials of one run share one pass.
-    Returns a list of per-frame dicts (route, frame, u, v, dbar, prob, label, speed_cd, speed).
+    cached as ``.npz`` beside the route cache (``ground_candidates/``, keyed by a hash of the sources it
+    depends on), so the trials of the RANSAC experiments share one pass.
+    Returns a list of per-frame dicts (route, frame, u, v, dbar, prob, label, speed_cd, speed, h).
     """
+    from polar_sim.sim.rover_sequences import cache_dir
+
     key = (tuple(routes), frames, n_pick)
     if key in _MEMO:
         return _MEMO[key]
-    path = None
-    if cache_root is not None:
-        tag = "-".join(routes) if len(routes) <= 3 else f"{len(routes)}routes"
-        path = Path(cache_root) / f"candidates_{tag}_{frames or 'full'}_{n_pick or 'all'}_v{_CANDIDATE_FORMAT}.npz"
-        if path.is_file():
-            _MEMO[key] = _load_candidates(path, key)
-            return _MEMO[key]
+    tag = "-".join(routes) if len(routes) <= 3 else f"{len(routes)}routes"
+    path = (cache_dir().parent / "ground_candidates"
+            / f"{tag}_{frames or 'full'}_{n_pick or 'all'}_{_source_tag()}.npz")
+    if path.is_file():
+        _MEMO[key] = _load_candidates(path, key)
+        return _MEMO[key]
     out = []
     for name in routes:
         rec = route(name, frames)
@@ -261,8 +284,7 @@ def candidate_set(routes, frames=None, n_pick=None, cache_root=None):
                             label=c["label"], speed_cd=float(tr["speed_cd"][m]), speed=float(tr["speed"][m]),
                             h=tr["h"]))
         del rec, r
-    if path is not None:
-        _save_candidates(path, out, key)
+    _save_candidates(path, out, key)
     _MEMO[key] = out
     return out
 
@@ -300,12 +322,6 @@ def _load_candidates(path, key):
     return out
 
 
-def run_folder(ctx):
-    """The run folder of a trial (``<run>/trials/<trial>``), for artefacts shared by its trials."""
-    d = Path(ctx.out_dir)
-    return d.parent.parent if d.parent.name == "trials" else d
-
-
 def refit(data, *, model, sampling, n_iter, lam, seed):
     """Re-fit every frame of a candidate set with one RANSAC condition.
 
@@ -327,6 +343,11 @@ def refit(data, *, model, sampling, n_iter, lam, seed):
             speeds[j] = f.speed
     return labels, inliers, speeds
 
+
+#: Candidate data sets of the RANSAC experiments: (routes, recording length, frames kept per route).
+#: "routes10": 100 equally spaced frames of each of the ten routes (the dissertation used 100 KITTI
+#: images); "quick": every frame after the warm-up of the CI route.
+DATASETS = {"routes10": (ALL_ROUTES, None, 100), "quick": ((QUICK_ROUTE,), QUICK_FRAMES, None)}
 
 #: Iteration grids of the RANSAC experiments (spec §8.2, dissertation Fig. 4.7).
 ITERATIONS = {"2param": (1, 2, 4, 8, 16), "6param": (5, 11, 25, 55, 125)}

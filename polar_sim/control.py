@@ -65,10 +65,12 @@ class PurePursuit:
             gap = (s - self._progress % self.length) % self.length
             d = d + 0.05 * np.minimum(gap, self.length - gap)
         i = int(np.argmin(d))
-        base = self._progress - self._progress % self.length if self.closed else 0.0
-        s_i = base + s[i]
-        if self.closed and s_i < self._progress - self.length / 2:
-            s_i += self.length
+        s_i = s[i]
+        if self.closed:
+            # The lap of the nearest point is the one that puts it closest to the previous progress. (Taking
+            # the lap of the previous progress jumped a whole lap ahead when the pose was just past the start
+            # and the nearest point still just behind it, which ended multi-lap routes a lap early.)
+            s_i += self.length * np.round((self._progress - s_i) / self.length)
         return s_i, float(d[i] if not self.closed else np.linalg.norm(a[i] + t[i] * ab[i] - xy))
 
     def progress(self, pose2d):

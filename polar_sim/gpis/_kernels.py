@@ -272,21 +272,21 @@ def query_gp(pts, *args):
     return _query_gp_ser(pts, *args)
 
 
-def _query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape, goff,
+@nb.njit(cache=True)
+def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape, goff,
              node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X, kinds, alpha,
              Lbuf, mmax, out):
-    """GP query of spec §9.1 per point; out rows [f, grad(d), var_f, var_grad(d)]."""
-    n, dim = pts.shape
+    """GP query of spec §9.1 for points i0..i1-1; out rows [f, grad(d), var_f, var_grad(d)]."""
+    dim = pts.shape[1]
     a = np.sqrt(3.0) / scale
-    nblk = 64
-    for blk in nb.prange((n + nblk - 1) // nblk):  # noqa: B007
+    if True:
         kb = np.empty((mmax, dim + 2))
         zb = np.empty(mmax)
         best_s = np.empty(3, np.int64)
         best_d = np.empty(3)
         cand = np.empty((3, 2 * dim + 2))
         cvar = np.empty(3)
-        for i in range(blk * nblk, min(n, (blk + 1) * nblk)):
+        for i in range(i0, i1):
             o = out[i]
             o[:] = 0.0
             o[dim + 1] = default_var
@@ -340,8 +340,28 @@ def _query_gp(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid,
                 o[k] = (wa * cand[ia, k] + wb * cand[ib, k]) / (wa + wb)
 
 
-_query_gp_ser = nb.njit(cache=True)(_query_gp)
-_query_gp_par = nb.njit(cache=True, parallel=True)(_query_gp)
+# Two entry points with distinct names: numba's cache index does not key on the ``parallel``
+# flag, so one Python function jitted twice with cache=True shares one cache entry, and the
+# "serial" dispatcher could load the threaded build (which stalls on a loaded machine).
+@nb.njit(cache=True)
+def _query_gp_ser(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape,
+                  goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X,
+                  kinds, alpha, Lbuf, mmax, out):
+    _query_rows(0, pts.shape[0], pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo,
+                cgrid, gshape, goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs,
+                gp_tri, X, kinds, alpha, Lbuf, mmax, out)
+
+
+@nb.njit(cache=True, parallel=True)
+def _query_gp_par(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape,
+                  goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X,
+                  kinds, alpha, Lbuf, mmax, out):
+    n = pts.shape[0]
+    nblk = 64
+    for blk in nb.prange((n + nblk - 1) // nblk):
+        _query_rows(blk * nblk, min(n, (blk + 1) * nblk), pts, W, T, legacy, scale, var_f0,
+                    var_g0, default_var, geo, cgrid, gshape, goff, node_sample, node_internal,
+                    slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X, kinds, alpha, Lbuf, mmax, out)
 
 
 @nb.njit(cache=True)

@@ -27,7 +27,7 @@ import numpy as np
 
 
 
-__all__ = ["add_hand", "HandScript", "Segment", "min_jerk", "slerp", "look_at_quat",
+__all__ = ["add_hand", "HandScript", "ReachScript", "Segment", "min_jerk", "slerp", "look_at_quat",
            "HAND_SKIN", "COLLIDE_STATIC", "COLLIDE_HAND", "COLLIDE_OBJECT", "ACTIONS"]
 
 HAND_SKIN = (0.87, 0.66, 0.53, 1.0)
@@ -621,3 +621,189 @@ class HandScript:
         plan.move((a, q), 0.7, "reach")
         plan.move((b, q), float(prm.get("duration", 2.6)) / self.speed, "pass")
         self._leave(plan)
+
+
+class ReachScript:
+    """The tabletop script ``reach``: the hand is driven from outside, a scripted disturbance
+    slides the target.
+
+    The hand keeps its palm down (hand z = world z) and follows a velocity command set with
+    :meth:`command`: a world-frame linear velocity (m/s) and a yaw rate about world z (rad/s),
+    integrated at every physics substep. The palm centre stays inside ``workspace`` (a box,
+    metres): a command that would leave it stops at the boundary along that axis. The hand collides
+    with the target only, as in the other scripts, so it can push it.
+
+    The target rests for 0.3-1.0 s, then slides along the table by 4-10 cm in a seeded direction
+    while turning by up to +-0.5 rad about the vertical, in 0.8-1.4 s (minimum-jerk), rests for
+    0.8-2.0 s, slides again, and so on. Each slide starts from the target's actual pose (the hand may
+    have pushed it) and keeps its base centre inside ``region`` (x0, x1, y0, y1), m. While it
+    slides the target is moved kinematically (free-joint position and velocity written, as a held
+    object in Mode A) and does not collide with the hand; physics takes over when it stops.
+
+    Parameters
+    ----------
+    target : str
+        The body the disturbance moves.
+    objects : list of str
+        Movable object bodies (free joints).
+    home : (p, q)
+        The hand's starting pose (palm down; its yaw is read from q).
+    table_z : float
+        Height of the table top, m.
+    rng_seed : int
+        Seed of the disturbance (times, directions, distances, turns).
+    region : (4,) floats
+        Box (x0, x1, y0, y1) the target's base centre stays in while it slides, m.
+    workspace : (6,) floats
+        Box (x0, x1, y0, y1, z0, z1) the palm centre stays in, m.
+    """
+
+    def __init__(self, target, objects, home, table_z, rng_seed, *, region, workspace):
+        self.target = target
+        self.objects = list(objects)
+        self.home = (np.asarray(home[0], float), np.asarray(home[1], float))
+        self.table_z = float(table_z)
+        self.rng_seed = int(rng_seed)
+        self.region = np.asarray(region, float)
+        self.workspace = np.asarray(workspace, float)
+        self._ids = None
+        self._cmd = (np.zeros(3), 0.0)
+
+    def command(self, velocity, yaw_rate):
+        """Set the hand's velocity (3,) m/s (world frame) and yaw rate (rad/s, about world z) until
+        the next call. Raises ``ValueError`` on non-finite values."""
+        v = np.asarray(velocity, dtype=np.float64).reshape(-1)
+        w = float(yaw_rate)
+        if v.shape != (3,) or not np.isfinite(v).all() or not np.isfinite(w):
+            raise ValueError(f"velocity, yaw_rate: expected finite (3,) and a finite number, got {velocity!r}, {yaw_rate!r}")
+        self._cmd = (v.copy(), w)
+
+    # -- World's script protocol -----------------------------------------------------------
+    def reset(self, model, data):
+        if self._ids is None:
+            self._ids = True
+            self._mocap = model.body_mocapid[model.body("hand").id]
+            self._hand_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body("hand").id]
+            from polar_sim.sim.robots import GROUP
+
+            b = model.body(self.target).id
+            self._tgt_geoms = [g for g in range(model.ngeom)
+                               if model.geom_bodyid[g] == b and model.geom_group[g] == GROUP["collision"]]
+            j = model.body_jntadr[b]
+            self._qadr, self._vadr = model.jnt_qposadr[j], model.jnt_dofadr[j]
+        self._rng = np.random.default_rng(self.rng_seed)
+        self._cmd = (np.zeros(3), 0.0)
+        self._p = self.home[0].copy()
+        R = quat_to_matrix(self.home[1])
+        self._yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+        self._set_collide(model, True)
+        self._slide = None
+        self._phase = "rest"
+        self._write_hand(data)
+        # Let the objects settle on the table so that t = 0 starts at rest.
+        for _ in range(int(round(0.25 / model.opt.timestep))):
+            mujoco.mj_step(model, data)
+        data.time = 0.0
+        data.qvel[:] = 0.0
+        self._t = 0.0
+        self._next_slide = float(self._rng.uniform(0.3, 1.0))
+        mujoco.mj_forward(model, data)
+
+    def apply(self, model, data):
+        self._update(model, data)
+
+    def after_step(self, model, data):
+        self._update(model, data)
+        mujoco.mj_forward(model, data)
+
+    def truth(self, model, data):
+        hand, tgt = set(self._hand_geoms), set(self._tgt_geoms)
+        contact = False
+        for i in range(data.ncon):
+            g1, g2 = data.contact.geom1[i], data.contact.geom2[i]
+            if (g1 in hand and g2 in tgt) or (g2 in hand and g1 in tgt):
+                contact = True
+                break
+        return {"in_contact": contact, "grasped": False, "held": None, "phase": self._phase,
+                "light_scale": 1.0}
+
+    # -- internals -------------------------------------------------------------------------
+    def _write_hand(self, data):
+        data.mocap_pos[self._mocap] = self._p
+        data.mocap_quat[self._mocap] = [np.cos(self._yaw / 2), 0.0, 0.0, np.sin(self._yaw / 2)]
+
+    def _set_collide(self, model, hand_too):
+        bits = COLLIDE_OBJECT if hand_too else COLLIDE_STATIC
+        model.geom_contype[self._tgt_geoms] = bits
+        model.geom_conaffinity[self._tgt_geoms] = bits
+
+    def _update(self, model, data):
+        t = float(data.time)
+        dt = t - self._t
+        self._t = t
+        if dt > 0:
+            v, w = self._cmd
+            ws = self.workspace
+            self._p = np.clip(self._p + v * dt, ws[0::2], ws[1::2])
+            self._yaw = float((self._yaw + w * dt + np.pi) % (2 * np.pi) - np.pi)
+        self._write_hand(data)
+        if self._slide is None and t >= self._next_slide:
+            self._plan_slide(model, data, t)
+        if self._slide is not None:
+            self._move_target(model, data, t)
+
+    def _target_pose(self, data):
+        a = self._qadr
+        return _pose(data.qpos[a : a + 3], data.qpos[a + 3 : a + 7])
+
+    def _plan_slide(self, model, data, t):
+        rng = self._rng
+        To = self._target_pose(data)
+        dur = float(rng.uniform(0.8, 1.4))
+        dist = float(rng.uniform(0.04, 0.10))
+        turn = float(rng.uniform(-0.5, 0.5))
+        x0, x1, y0, y1 = self.region
+        p = To[:2, 3]
+        d = None
+        for _ in range(16):
+            phi = rng.uniform(-np.pi, np.pi)
+            q = p + dist * np.array([np.cos(phi), np.sin(phi)])
+            if x0 <= q[0] <= x1 and y0 <= q[1] <= y1:
+                d = q - p
+                break
+        if d is None:  # pushed out of the region: slide back toward its centre
+            c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+            d = (c - p) * min(1.0, dist / max(np.linalg.norm(c - p), 1e-9))
+        self._slide = (t, t + dur, To, np.array([d[0], d[1], 0.0]), turn)
+        self._phase = "slide"
+        self._set_collide(model, False)
+
+    def _move_target(self, model, data, t):
+        t0, t1, To, dp, turn = self._slide
+        a, v = self._qadr, self._vadr
+        if t >= t1:
+            T = self._slide_pose(1.0)
+            data.qpos[a : a + 3] = T[:3, 3]
+            data.qpos[a + 3 : a + 7] = matrix_to_quat(T[:3, :3])
+            data.qvel[v : v + 6] = 0.0
+            self._slide = None
+            self._phase = "rest"
+            self._set_collide(model, True)
+            self._next_slide = t + float(self._rng.uniform(0.8, 2.0))
+            return
+        T = self._slide_pose(min_jerk((t - t0) / (t1 - t0)))
+        data.qpos[a : a + 3] = T[:3, 3]
+        data.qpos[a + 3 : a + 7] = matrix_to_quat(T[:3, :3])
+        h = 1e-3
+        T1 = self._slide_pose(min_jerk((t + h - t0) / (t1 - t0)))
+        T0 = self._slide_pose(min_jerk((t - h - t0) / (t1 - t0)))
+        data.qvel[v : v + 3] = (T1[:3, 3] - T0[:3, 3]) / (2 * h)
+        # Free-joint angular velocity is in the body frame.
+        data.qvel[v + 3 : v + 6] = _rotvec(T0[:3, :3].T @ T1[:3, :3]) / (2 * h)
+
+    def _slide_pose(self, s):
+        _, _, To, dp, turn = self._slide
+        T = To.copy()
+        T[:3, :3] = _rot([0.0, 0.0, 1.0], s * turn) @ To[:3, :3]
+        T[:3, 3] = To[:3, 3] + s * dp
+        return T

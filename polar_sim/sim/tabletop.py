@@ -18,6 +18,9 @@ fast      grasp and shake: +-7 cm, +-25 deg moves of 0.5 s (peaks ~0.7 m/s, ~190
 light     the key light dims to 30 % and brightens to 130 % while the hand touches and turns
 pass      the hand sweeps across in front of the target without touching it, twice
 demo      touch, pass, lift, turn, push, and again (cycles for ever)
+reach     the hand is driven from outside (``meta["script"].command(velocity, yaw_rate)``) and a
+          scripted disturbance slides the target about the front of the table
+          (:class:`polar_sim.sim.hand.ReachScript`; used by the ``ObjectTrack-v0`` environment)
 ========  =====================================================================================
 """
 
@@ -29,11 +32,11 @@ import mujoco
 import numpy as np
 
 from polar_sim.sim import objects as _objects
-from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandScript, add_hand, look_at_quat,
-                                matrix_to_quat)
+from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandScript, ReachScript, add_hand,
+                                look_at_quat, matrix_to_quat)
 from polar_sim.sim.robots import GROUP
 
-__all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "COLOURS", "OrbitScript", "object_texture"]
+__all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "AGENT_SCRIPTS", "COLOURS", "OrbitScript", "object_texture"]
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +64,11 @@ SCRIPTS = {
     "demo": ["touch", "pass", "lift", "turn", "push"],
 }
 CAMERA_MOTIONS = ("static", "sway")
+#: Scripts where the hand is driven from outside (not by a list of actions).
+AGENT_SCRIPTS = ("reach",)
+#: ``reach``: the box the palm centre stays in (x0, x1, y0, y1, z0, z1), m; z0 keeps the
+#: fingertips above the table top.
+REACH_WORKSPACE = (-0.55, 0.55, -0.45, 0.55, 0.83, 1.45)
 
 
 def _check(value, choices, name):
@@ -287,7 +295,7 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
                    target_colour=None, distractor_like_target=False, camera_motion="static"):
     """``tabletop``: 4-6 objects on a table, a scripted mocap hand, a static RGB-D camera.
 
-    Options: ``script`` (one of :data:`SCRIPTS`), ``target`` (an object name from
+    Options: ``script`` (one of :data:`SCRIPTS` or :data:`AGENT_SCRIPTS`), ``target`` (an object name from
     :func:`polar_sim.sim.objects.object_names`, default chosen from the seed), ``n_objects``
     (4-6), ``target_colour`` (a name of :data:`COLOURS`, e.g. ``"skin"`` for an object the colour
     of the hand; default seeded), ``distractor_like_target`` (give one other object the
@@ -297,7 +305,7 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
     Returns the metadata: ``objects``, ``target``, ``control_dt``, ``script`` (a
     :class:`polar_sim.sim.hand.HandScript`), ``script_name``, ``colours``, ``table_z``.
     """
-    _check(script, tuple(SCRIPTS), "script")
+    _check(script, tuple(SCRIPTS) + AGENT_SCRIPTS, "script")
     names = _objects.object_names()
     if target is not None:
         _check(target, tuple(names), "target")
@@ -335,6 +343,16 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
     add_hand(spec, *home)
     cam_body = spec.body("camera_rig")
     cam_pos = np.array(cam_body.pos, float)
+    if script in AGENT_SCRIPTS:
+        if camera_motion != "static":
+            raise ValueError(f"camera_motion: {camera_motion!r} is not available with script={script!r}; use 'static'")
+        x0, y0 = layout[target][:2]
+        region = (max(x0 - 0.12, -0.25), min(x0 + 0.12, 0.2), y0 - 0.08, y0 + 0.01)
+        hs = ReachScript(target, [target] + others, home, TABLE_Z, int(rng.integers(2 ** 31)),
+                         region=region, workspace=REACH_WORKSPACE)
+        return {"objects": [target] + others, "target": target, "control_dt": CONTROL_DT, "script": hs,
+                "script_name": script, "colours": {o: list(c) for o, c in colours.items()},
+                "table_z": TABLE_Z}
     actions = SCRIPTS[script]
     light = None
     if script == "light":

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from polar_sim._validation import as_intrinsics, as_pose, as_positive_float, check_choice
-from polar_sim.geometry import make_pose
+from polar_sim.geometry import inv_pose, make_pose, se3_log
 from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
 from polar_sim.tracking._kernels import roi_distances
 from polar_sim.tracking.appearance import make_appearance
@@ -159,6 +159,11 @@ class ObjectTracker:
         (a mostly hidden object gives labels too few and too uncertain to learn from).
     max_jump : (float, float), default=(0.5, 0.1)
         Largest accepted change from the prediction: rotation (rad) and centroid translation (m).
+    max_mahalanobis : float, default=50
+        Largest squared Mahalanobis distance of the registration from the prediction, under the
+        predicted covariance (6 dof; about 7 sigma along one axis). A registration that jumps
+        further (onto the hand after a full occlusion, say) is not used; the filter's covariance
+        grows while it coasts, so the gate widens for re-acquisition. ``np.inf`` disables it.
     lost_after : int, default=10
         Rejected frames in a row after which the appearance term is switched off until a frame is
         accepted.
@@ -187,6 +192,7 @@ class ObjectTracker:
                  motion="ekf", spatial_prior=True, registration="weighted", correspondence="grid",
                  fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
                  fitness_min=0.5, min_inliers=50, min_coverage=0.1, learn_coverage=0.25, max_jump=(0.5, 0.1),
+                 max_mahalanobis=50.0,
                  lost_after=10, lost_velocity_decay=0.5, decay=0.7, lr=1e-2, epochs=2, replay=10,
                  n_samples=500, max_iterations=30, em_refine=True, pose_prior=True, random_state=0,
                  debug_maps=False):
@@ -210,6 +216,7 @@ class ObjectTracker:
         self.min_coverage = min_coverage
         self.learn_coverage = learn_coverage
         self.max_jump = max_jump
+        self.max_mahalanobis = max_mahalanobis
         self.lost_after = lost_after
         self.lost_velocity_decay = lost_velocity_decay
         self.decay = decay
@@ -242,7 +249,7 @@ class ObjectTracker:
         for name in ("spatial_prior", "em_refine", "pose_prior", "debug_maps"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
-        for name in ("fps", "sigma_min_px", "lr"):
+        for name in ("fps", "sigma_min_px", "lr", "max_mahalanobis"):
             as_positive_float(getattr(self, name), name)
         ranges = {"tau_y": (0.0, 1.0, False), "epsilon": (0.0, 0.5, False), "fitness_min": (0.0, 1.0, True),
                   "min_coverage": (0.0, 1.0, True), "learn_coverage": (0.0, 1.0, True),
@@ -386,8 +393,11 @@ class ObjectTracker:
             expected = max(int(np.count_nonzero(valid & (S > 0))), 1)
             scale = n_cand / max(n_sel, 1)
             coverage = res.n_inliers * scale / expected
+            e = se3_log(inv_pose(T_bar) @ res.T)
+            S = self._filter.P_bar[:6, :6] + np.diag(self._filter.floor)
+            d2 = float(e @ np.linalg.solve(S, e))
             measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
-                        and coverage >= self.min_coverage)
+                        and d2 < self.max_mahalanobis and coverage >= self.min_coverage)
         if not measured:
             return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, n_points=n_sel, res=res)
         good_fit = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
