@@ -258,3 +258,55 @@ def angle_deg(a, b):
     nb = np.linalg.norm(b, axis=1)
     c = np.einsum("ij,ij->i", a, b) / np.maximum(na * nb, 1e-300)
     return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def corners(world):
+    """Corner points (m, 2) of the scene's section in the lidar plane: the vertices of every
+    vertical box that the plane cuts (walls, desks, cabinets, shelves). Where boxes join (a wall
+    junction), the concave corner lies within a wall thickness of such a vertex."""
+    import mujoco
+
+    from polar_sim.sim.truth import static_geoms
+
+    m, dat = world.model, world.data
+    z = world.lidar_plane_height()
+    out = []
+    for g in static_geoms(m):
+        if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX:
+            continue
+        R = dat.geom_xmat[g].reshape(3, 3)
+        x = dat.geom_xpos[g]
+        s = m.geom_size[g]
+        if abs(abs(R[2, 2]) - 1.0) > 1e-9 or abs(z - x[2]) >= s[2]:
+            continue
+        loc = np.array([[s[0], s[1]], [s[0], -s[1]], [-s[0], s[1]], [-s[0], -s[1]]])
+        out.append(loc @ R[:2, :2].T + x[:2])
+    return np.vstack(out) if out else np.zeros((0, 2))
+
+
+def scan_counts(d: Drive, cell=0.05):
+    """Per 5 cm cell of the plane, how many scans of the drive hit it: a function
+    ``count(points (n, 2)) -> (n,)`` giving the largest count over the 3 x 3 cells around each
+    point (so "hit by k scans" means within about 7 cm)."""
+    keys = []
+    for p, r in zip(d.poses, d.clean):
+        ok = np.isfinite(r)
+        a = d.angles[ok] + p[2]
+        h = np.column_stack([p[0] + r[ok] * np.cos(a), p[1] + r[ok] * np.sin(a)])
+        c = np.floor(h / cell).astype(np.int64)
+        keys.append(np.unique(c[:, 0] * 1_000_003 + c[:, 1]))
+    uk, cnt = np.unique(np.concatenate(keys) if keys else np.zeros(0, np.int64), return_counts=True)
+
+    def count(points):
+        c = np.floor(np.asarray(points) / cell).astype(np.int64)
+        best = np.zeros(len(c), np.int64)
+        if len(uk) == 0:
+            return best
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                key = (c[:, 0] + dx) * 1_000_003 + (c[:, 1] + dy)
+                j = np.clip(np.searchsorted(uk, key), 0, len(uk) - 1)
+                best = np.maximum(best, np.where(uk[j] == key, cnt[j], 0))
+        return best
+
+    return count

@@ -1,0 +1,14 @@
+"""The README's main command: `polar-sim demo` runs every part and writes its pictures."""
+
+import pytest
+
+from polar_sim.demo import DEMOS, run_demo
+
+
+# The whole demo runs headless, every part succeeds and writes its PNGs.
+@pytest.mark.slow
+def test_demo_runs(tmp_path):
+    assert run_demo(tmp_path) == 0
+    names = {p.name for p in tmp_path.glob("*.png")}
+    assert {"gpis_office2d.png", "ground_prob.png", "env_gpisnav.png", "office2d_front_rgb.png"} <= names
+    assert len(DEMOS) >= 4
