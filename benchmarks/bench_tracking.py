@@ -123,7 +123,8 @@ def tabletop(scripts, seeds, n, variants):
                 ious = metrics.iou(masks, np.stack([fr[4] for fr in frames]))
                 hand = metrics.occluder_as_target(masks, np.stack([fr[5] for fr in frames]))
                 print(f"| {script} | {seed} | {name} | {v} | {metrics.add_success(e, d):.3f} | "
-                      f"{metrics.add_success(es, d):.3f} | {1000 * e.mean():.1f} | {metrics.iou_success(ious):.3f} | "
+                      f"{metrics.add_success(es, d):.3f} | {1000 * e.mean():.1f} | "
+                      f"{metrics.iou_success(ious):.3f} | "
                       f"{ious.mean():.3f} | {hand:.3f} | {sum(r.lost for r in res)} | "
                       f"{1000 * np.median(cpu[1:]):.1f} |", flush=True)
 
@@ -178,7 +179,8 @@ def main(argv=None):
             med = float(np.median(t))
             split[v] = r["stages"]
             print(f"| {v} | {med:.1f} | {t.mean():.1f} | {np.percentile(t, 95):.1f} | {1000 / med:.0f} | "
-                  f"{med / ICG_MS:.0f} | {np.median(r['t']):.1f} | {r['add_ok']:.3f} | {r['add_mm']:.2f} | {r['auc']:.3f} | {r['iou_ok']:.3f} | "
+                  f"{med / ICG_MS:.0f} | {np.median(r['t']):.1f} | {r['add_ok']:.3f} | {r['add_mm']:.2f} | "
+                  f"{r['auc']:.3f} | {r['iou_ok']:.3f} | "
                   f"{r['iou']:.3f} | {r['hand']:.3f} | {r['lost']} | {r['roi']:.0f} |", flush=True)
         print("\nmedian ms per stage:\n")
         print("| variant | " + " | ".join(STAGES) + " |")

@@ -4,7 +4,8 @@ keeps it out of ``polar-sim list``).
 - :func:`route` plans a seeded drive through ``office2d`` rooms via the doors, on the exact
   clearance map (``World.sdf``), and :func:`drive` follows it with the kinematic rover, recording
   true sensor poses, noisy scans and the noise-free scans of the same instants.
-- :func:`observed_sets` defines what "observed" means for the accuracy figures (see its docstring).
+- :class:`Observation` defines what "observed" means for the 2D figures (see its docstring);
+  :func:`score_sdf_2d`, :func:`score_surface_2d` and :func:`classify_worst` score a map with it.
 - :func:`exact_grad` is the gradient of the exact SDF by central differences.
 
 Everything is seeded; the same arguments give the same arrays bit for bit.
@@ -19,8 +20,9 @@ import numpy as np
 
 from polar_sim.geometry import T_to_pose2d
 
-__all__ = ["Drive", "route", "drive", "office_world", "observed_sets", "exact_grad", "load_now",
-           "Follower", "clearance_map"]
+__all__ = ["Drive", "route", "drive", "office_world", "exact_grad", "load_now",
+           "Follower", "clearance_map", "Observation", "corners", "scan_counts", "orbit_capture", "score_3d",
+           "eval_points_2d", "score_sdf_2d", "score_surface_2d", "classify_worst", "polyline_points"]
 
 LIDAR_SIGMA = 0.01          # issue 3: 2D lidar noise sigma 1 cm
 ROBOT_CLEARANCE = 0.45      # m, hard clearance of planned routes (doors leave 0.6 m)
@@ -209,38 +211,166 @@ def _known(grid, P):
     return out
 
 
-def observed_sets(d: Drive, P, gt, *, tol=0.03, behind=0.3):
-    """Masks of evaluation points P (n, 2) with exact SDF ``gt`` (n,), from the noise-free beams.
+class Observation:
+    """What the noise-free beams of a drive observed; defines "observed" for every 2D figure.
 
-    "Observed" is defined from what the beams did, never from the map:
+    The definition uses the beams only, never a map:
 
-    - ``crossed``: P lies in a 2 cm cell that a beam crossed or ended in;
-    - ``reached``: the same with every beam lengthened by ``behind`` (0.3 m): P is in observed free
-      space or at most 0.3 m behind an observed surface, along a beam;
-    - ``nearest_hit``: the true surface point nearest to P was hit by a beam: some beam end point
-      lies within ``|gt| + tol`` of P (``tol`` 3 cm covers the spacing of the 0.25 deg beams up
-      to about 12 m). This drops, e.g., points inside or beyond a wall whose far face nobody saw.
+    - ``crossed(P)``: P lies in a 2 cm cell that a beam crossed or ended in (observed free space
+      and the observed surface);
+    - ``reached(P)``: the same with every beam lengthened by ``behind`` (0.3 m): P is observed
+      free space or at most 0.3 m behind an observed surface point, along a beam;
+    - ``nearest_hit(P, gt)``: the true surface point nearest to P was hit by a beam: some beam end
+      point lies within ``|gt| + tol`` of P (``tol`` = 3 cm covers the gap between 0.25 deg beams
+      up to about 12 m). This drops, e.g., points inside or beyond a wall whose far face no beam
+      reached;
+    - ``hits``: the noise-free beam end points, a dense sampling of the observed true surface;
+    - ``count(Q)``: how many scans hit within about 7 cm of surface points Q (:func:`scan_counts`).
+    """
 
-    Returns a dict of masks: ``near`` = reached & nearest_hit & |gt| < 0.3 (the SDF and gradient
-    set "within 0.3 m of observed walls", both sides); ``far`` = crossed & nearest_hit &
-    0.3 < gt < 2 ("observed free space 0.3-2 m from the nearest wall"); and the raw masks.
+    def __init__(self, d: Drive, *, tol=0.03, behind=0.3):
+        from scipy.spatial import cKDTree
+
+        self.tol, self.behind = float(tol), float(behind)
+        self.hits = hit_points(d.angles, d.poses, d.clean)
+        b = d.poses[:, :2]
+        lo = np.minimum(self.hits.min(0), b.min(0)) - behind - 0.1
+        hi = np.maximum(self.hits.max(0), b.max(0)) + behind + 0.1
+        bounds = (lo[0], lo[1], hi[0], hi[1])
+        self._crossed = beam_grid(d.angles, d.poses, d.clean, bounds=bounds)
+        self._reached = beam_grid(d.angles, d.poses, d.clean, extend=behind, bounds=bounds)
+        self._kd = cKDTree(self.hits)
+        self.count = scan_counts(d)
+
+    def crossed(self, P):
+        return _known(self._crossed, P)
+
+    def reached(self, P):
+        return _known(self._reached, P)
+
+    def nearest_hit(self, P, gt):
+        return self._kd.query(P)[0] <= np.abs(gt) + self.tol
+
+    def sets(self, P, gt):
+        """Masks ``near`` = reached & nearest_hit & |gt| < 0.3 m (the SDF and gradient set
+        "within 0.3 m of the observed walls", both sides) and ``far`` = crossed & nearest_hit &
+        0.3 < gt < 2 m ("observed free space 0.3-2 m from the nearest wall")."""
+        nh = self.nearest_hit(P, gt)
+        return {"near": self.reached(P) & nh & (np.abs(gt) < 0.3),
+                "far": self.crossed(P) & nh & (gt > 0.3) & (gt < 2.0)}
+
+
+def eval_points_2d(world, obs: Observation, n, seed, margin=0.5):
+    """``n`` uniform points over the box of the observed surface (plus ``margin``), with the exact
+    SDF ``gt``, its exact gradient ``G`` and the masks ``near``/``far`` (:meth:`Observation.sets`)."""
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 3131]))
+    lo, hi = obs.hits.min(0) - margin, obs.hits.max(0) + margin
+    P = rng.uniform(lo, hi, (int(n), 2))
+    gt = world.sdf(P)
+    out = {"P": P, "gt": gt}
+    out.update(obs.sets(P, gt))
+    G = np.zeros_like(P)
+    sel = out["near"] | out["far"]
+    G[sel] = exact_grad(world, P[sel])   # the angles and the near-set split need it there only
+    out["G"] = G
+    return out
+
+
+def score_sdf_2d(m, E):
+    """SDF and gradient errors of a map ``m`` (anything with ``query``) on evaluation points
+    :func:`eval_points_2d`: RMSE / median / p90 of |SDF error| on ``near``, mean on ``far``, the
+    median gradient angle on each (medial-axis points, where the exact gradient has norm < 0.5 by
+    central differences, are left out of the angles)."""
+    sd, g, _ = m.query(E["P"])
+    e = sd - E["gt"]
+    near, far = E["near"], E["far"]
+    ok = np.linalg.norm(E["G"], axis=1) > 0.5
+    ang = angle_deg(g, E["G"])
+    a = np.abs(e)
+    return {"near_rmse_m": float(np.sqrt(np.mean(e[near] ** 2))), "near_median_abs_m": float(np.median(a[near])),
+            "near_p90_abs_m": float(np.percentile(a[near], 90)), "far_mae_m": float(a[far].mean()),
+            "far_median_abs_m": float(np.median(a[far])),
+            "grad_near_median_deg": float(np.median(ang[near & ok])), "grad_far_median_deg": float(np.median(ang[far & ok])),
+            "n_near": int(near.sum()), "n_far": int(far.sum())}, e
+
+
+def polyline_points(lines, spacing=0.01):
+    """Points every ``spacing`` metres along a list of polylines (k, 2)."""
+    from polar_sim.metrics import sample_polyline
+
+    pts = [sample_polyline(ln, spacing) for ln in lines if len(ln) >= 2]
+    return np.vstack(pts) if pts else np.zeros((0, 2))
+
+
+def score_surface_2d(world, est, obs: Observation, well_k=None):
+    """Surface errors of estimated surface points ``est`` (m, 2) against the exact geometry.
+
+    - surface -> truth: |exact SDF| at the estimated points inside the observed area
+      (``obs.reached``); its RMS is the *surface RMSE*, its max the directed Hausdorff distance;
+    - truth -> surface: distance from every observed true surface point (noise-free beam end
+      point) to the nearest estimated point;
+    - *Hausdorff* = the larger of the two maxima;
+    - with ``well_k``: ``hausdorff_wellseen_m``, the same restricted to the part of the surface hit
+      by at least ``well_k`` scans (true points, and estimated points within ~7 cm of such).
+
+    Returns (metrics, details) where details holds the per-point errors for
+    :func:`classify_worst`.
     """
     from scipy.spatial import cKDTree
 
-    b = d.poses
-    # The grids only need to span what the beams reached.
-    hits = hit_points(d.angles, d.poses, d.clean)
-    lo = np.minimum(hits.min(0), b[:, :2].min(0)) - behind - 0.1
-    hi = np.maximum(hits.max(0), b[:, :2].max(0)) + behind + 0.1
-    bounds = (lo[0], lo[1], hi[0], hi[1])
-    crossed = _known(beam_grid(d.angles, d.poses, d.clean, bounds=bounds), P)
-    reached = _known(beam_grid(d.angles, d.poses, d.clean, extend=behind, bounds=bounds), P)
-    d_hit = cKDTree(hits).query(P)[0]
-    nearest_hit = d_hit <= np.abs(gt) + tol
-    near = reached & nearest_hit & (np.abs(gt) < 0.3)
-    far = crossed & nearest_hit & (gt > 0.3) & (gt < 2.0)
-    return {"near": near, "far": far, "crossed": crossed, "reached": reached, "nearest_hit": nearest_hit,
-            "hits": hits}
+    est = est[obs.reached(est)] if len(est) else est
+    if len(est) == 0:
+        nan = float("nan")
+        return {"surface_rmse_m": nan, "hausdorff_m": nan, "h_est_to_true_m": nan, "h_true_to_est_m": nan,
+                "n_surface_points": 0}, None
+    dA = np.abs(world.sdf(est))
+    dB = cKDTree(est).query(obs.hits)[0]
+    m = {"surface_rmse_m": float(np.sqrt(np.mean(dA ** 2))), "h_est_to_true_m": float(dA.max()),
+         "h_true_to_est_m": float(dB.max()), "hausdorff_m": float(max(dA.max(), dB.max())),
+         "p99_est_to_true_m": float(np.percentile(dA, 99)), "p99_true_to_est_m": float(np.percentile(dB, 99)),
+         "n_surface_points": int(len(est))}
+    if well_k is not None:
+        # the same on the well-seen part: surface within ~7 cm of true points hit by >= well_k scans
+        wa = obs.count(est) >= well_k
+        wb = obs.count(obs.hits) >= well_k
+        ha = float(dA[wa].max()) if wa.any() else 0.0
+        hb = float(dB[wb].max()) if wb.any() else 0.0
+        m.update(hausdorff_wellseen_m=max(ha, hb), surface_rmse_wellseen_m=float(np.sqrt(np.mean(dA[wa] ** 2)))
+                 if wa.any() else float("nan"))
+    return m, {"est": est, "dA": dA, "dB": dB}
+
+
+def classify_worst(world, details, obs: Observation, corner_pts, *, top=0.01, corner_r=0.3, sparse_k=3):
+    """Where the worst surface errors are: the top ``top`` fraction of both directed errors of
+    :func:`score_surface_2d`, each located at its true surface point (an estimated point is
+    moved onto the true surface along the exact gradient; an observed true point is itself) and
+    classified as ``corner`` (within ``corner_r`` of a true corner, :func:`corners`), ``sparse``
+    (hit by fewer than ``sparse_k`` scans) or ``wall`` (a well-seen flat stretch).
+
+    Returns the shares of each class and the located worst points (k, 2) with their class.
+    """
+    from scipy.spatial import cKDTree
+
+    if details is None:
+        return {"worst_corner_share": float("nan"), "worst_sparse_share": float("nan"),
+                "worst_wall_share": float("nan")}, (np.zeros((0, 2)), np.zeros(0, int))
+    est, dA, dB = details["est"], details["dA"], details["dB"]
+    kA = max(1, int(np.ceil(top * len(dA))))
+    kB = max(1, int(np.ceil(top * len(dB))))
+    ia = np.argsort(-dA)[:kA]
+    ib = np.argsort(-dB)[:kB]
+    qa = est[ia]
+    sd = world.sdf(qa)
+    g = exact_grad(world, qa)
+    g /= np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
+    qa = qa - sd[:, None] * g
+    q = np.vstack([qa, obs.hits[ib]])
+    dc = cKDTree(corner_pts).query(q)[0] if len(corner_pts) else np.full(len(q), np.inf)
+    cnt = obs.count(q)
+    cls = np.where(dc < corner_r, 0, np.where(cnt < sparse_k, 1, 2))
+    n = len(cls)
+    return {"worst_corner_share": float(np.mean(cls == 0)), "worst_sparse_share": float(np.mean(cls == 1)),
+            "worst_wall_share": float(np.mean(cls == 2))}, (q, cls)
 
 
 def exact_grad(world, P, h=1e-4):
@@ -310,3 +440,117 @@ def scan_counts(d: Drive, cell=0.05):
         return best
 
     return count
+
+
+# -- 3D: an RGB-D orbit around one object ----------------------------------------------------------
+@dataclasses.dataclass
+class Orbit:
+    """Masked depth frames of one object: per frame the noisy depth (inf off the object), K, the
+    camera pose, and the noise-free back-projected object points (the observed true surface)."""
+
+    name: str
+    depths: list
+    Ks: list
+    poses: list
+    observed: np.ndarray        # (m, 3) noise-free object points seen by some pixel, world frame
+    mesh: object                # trimesh.Trimesh of the object in the world frame
+    render_s: float
+
+
+def orbit_capture(world, n_frames, seed, *, turns=1.0):
+    """Render ``n_frames`` RGB-D frames spread over ``turns`` orbits of ``object_orbit``.
+
+    The depth is masked to the object with the exact labels (as the published BigBird demo uses
+    masked depth) and corrupted with Kinect-like :class:`DepthNoise`, seeded by ``seed``.
+    """
+    import time
+
+    from polar_sim.sim import LABELS
+    from polar_sim.sim.sensors import DepthNoise
+
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 5151]))
+    noise = DepthNoise()
+    name = world.meta["target"]
+    period = float(world.meta["script"].period)
+    steps = max(1, int(round(turns * period / world.dt / n_frames)))
+    depths, Ks, poses, obs = [], [], [], []
+    t_render = 0.0
+    for k in range(n_frames):
+        if k:
+            for _ in range(steps):
+                world.step()
+        t0 = time.perf_counter()
+        f = world.camera("rgbd")
+        t_render += time.perf_counter() - t0
+        mask = f.labels == LABELS["target"]
+        _, dn = noise.apply(f.rgb, f.depth, f.K[0, 0], rng)
+        depths.append(np.where(mask, dn, np.inf).astype(np.float64))
+        Ks.append(f.K.copy())
+        poses.append(f.T_world_cam.copy())
+        z = np.where(mask, f.depth, np.inf).astype(np.float64)
+        H, W = z.shape
+        v, u = np.mgrid[0:H, 0:W]
+        ok = np.isfinite(z)
+        pc = np.stack([(u - f.K[0, 2]) / f.K[0, 0] * z, (v - f.K[1, 2]) / f.K[1, 1] * z, z], -1)[ok]
+        obs.append(pc @ f.T_world_cam[:3, :3].T + f.T_world_cam[:3, 3])
+    mesh = world.object_mesh(name)
+    mesh.apply_transform(world.truth()["objects"][name])
+    return Orbit(name, depths, Ks, poses, np.vstack(obs), mesh, t_render)
+
+
+def score_3d(world, m, orbit, *, n_eval=4000, seed=0, seen_tol=0.002):
+    """Accuracy of a 3D map ``m`` of the orbited object against the exact geometry.
+
+    - SDF: points within 1 cm of the true surface, offset along the true normal from uniform
+      samples of the object's mesh, whose mesh point was observed (a noise-free object pixel
+      within ``seen_tol`` = 2 mm), and whose nearest static surface is the object itself
+      (``World.nearest_surface``); ground truth ``World.sdf``.
+    - Surface: ``m.surface()`` (marching cubes), on its observed part: the vertices whose
+      nearest true mesh point was seen (within ``seen_tol``; the unseen underside is closed by
+      the map with a guess). Directed mean distance surface -> true mesh (exact point-to-mesh
+      distance of each such vertex), and observed true mesh -> surface (uniform mesh samples to
+      dense samples of the reconstruction); Chamfer = their mean (``metrics.chamfer``'s
+      definition). ``surface_to_mesh_all_m`` is the first figure over every vertex.
+    - Normals: angle between the map's gradient at each observed reconstructed vertex and the
+      true face normal at its nearest true mesh point.
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from polar_sim.sim import LABELS
+
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 6161]))
+    mesh = orbit.mesh
+    pts, fi = trimesh.sample.sample_surface(mesh, n_eval, seed=int(rng.integers(2**31)))
+    nrm = mesh.face_normals[fi]
+    seen = cKDTree(orbit.observed).query(pts)[0] <= seen_tol
+    P = pts + rng.uniform(-0.01, 0.01, len(pts))[:, None] * nrm
+    gt = world.sdf(P)
+    own = world.nearest_surface(P) == LABELS["target"]
+    sel = seen & own & (np.abs(gt) < 0.01)
+    d, g, _ = m.query(P[sel])
+    e = d - gt[sel]
+    S = m.surface()
+    out = {"n_sdf_points": int(sel.sum()), "seen_fraction": float(seen.mean()),
+           "sdf_rmse_m": float(np.sqrt(np.mean(e * e))) if len(e) else float("nan"),
+           "sdf_median_abs_m": float(np.median(np.abs(e))) if len(e) else float("nan"),
+           "sdf_p90_abs_m": float(np.percentile(np.abs(e), 90)) if len(e) else float("nan")}
+    if len(S.faces) == 0:
+        out.update(n_vertices=0, chamfer_m=float("nan"), surface_to_mesh_m=float("nan"),
+                   mesh_to_surface_m=float("nan"), normal_median_deg=float("nan"), normal_mean_deg=float("nan"))
+        return out, S
+    V = np.asarray(S.vertices)
+    cp, dA_all, tri = trimesh.proximity.closest_point(mesh, V)
+    # the observed part of the reconstruction: vertices whose nearest true point was seen
+    vis = cKDTree(orbit.observed).query(cp)[0] <= seen_tol
+    dA = dA_all[vis]
+    dense = np.vstack([V, np.asarray(trimesh.sample.sample_surface(S, 100_000, seed=1)[0])])
+    dB = cKDTree(dense).query(pts[seen])[0]
+    gv = m.query(V[vis])[1]
+    ang = angle_deg(gv, mesh.face_normals[tri[vis]])
+    out.update(n_vertices=int(len(V)), n_vertices_observed=int(vis.sum()), surface_to_mesh_m=float(dA.mean()),
+               mesh_to_surface_m=float(dB.mean()), chamfer_m=float(0.5 * (dA.mean() + dB.mean())),
+               surface_to_mesh_max_m=float(dA.max()), surface_to_mesh_all_m=float(dA_all.mean()),
+               normal_median_deg=float(np.median(ang)), normal_mean_deg=float(np.mean(ang)),
+               normal_p90_deg=float(np.percentile(ang, 90)))
+    return out, S

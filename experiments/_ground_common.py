@@ -52,16 +52,40 @@ def single_thread():
 _ROUTE_MEMO = {}
 
 
+class _Lock:
+    """An advisory file lock (``fcntl.flock``) around work that parallel workers should do once: the
+    second worker waits, then finds the first one's result in the cache. Without ``fcntl`` it is a no-op."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.fh = open(self.path, "w")
+        try:
+            import fcntl
+
+            fcntl.flock(self.fh, fcntl.LOCK_EX)
+        except ImportError:
+            pass
+        return self
+
+    def __exit__(self, *exc):
+        self.fh.close()  # closing releases the lock
+
+
 def route(name, frames=None):
     """The recording of route ``name`` (its first ``frames`` frames if given), from the route cache
     (``$POLAR_SIM_CACHE``) or recorded now (deterministic from the route's seed). The last one loaded is
     kept in memory, so consecutive trials on one route in a worker decode it once."""
-    from polar_sim.sim.rover_sequences import load_route  # imports MuJoCo only when recording
+    from polar_sim.sim.rover_sequences import cache_dir, load_route  # imports MuJoCo only when recording
 
     key = (name, frames)
     if key not in _ROUTE_MEMO:
         _ROUTE_MEMO.clear()
-        _ROUTE_MEMO[key] = load_route(name, max_frames=frames, progress=False)
+        # Parallel trials or test workers that need the same missing route wait for one recorder.
+        with _Lock(cache_dir() / f".{name}_{frames or 'full'}.lock"):
+            _ROUTE_MEMO[key] = load_route(name, max_frames=frames, progress=False)
     return _ROUTE_MEMO[key]
 
 
@@ -269,9 +293,14 @@ def candidate_set(routes, frames=None, n_pick=None):
     tag = "-".join(routes) if len(routes) <= 3 else f"{len(routes)}routes"
     path = (cache_dir().parent / "ground_candidates"
             / f"{tag}_{frames or 'full'}_{n_pick or 'all'}_{_source_tag()}.npz")
-    if path.is_file():
-        _MEMO[key] = _load_candidates(path, key)
-        return _MEMO[key]
+    with _Lock(path.with_suffix(".lock")):
+        if not path.is_file():
+            _save_candidates(path, _collect(routes, frames, n_pick), key)
+    _MEMO[key] = _load_candidates(path, key)
+    return _MEMO[key]
+
+
+def _collect(routes, frames, n_pick):
     out = []
     for name in routes:
         rec = route(name, frames)
@@ -284,8 +313,6 @@ def candidate_set(routes, frames=None, n_pick=None):
                             label=c["label"], speed_cd=float(tr["speed_cd"][m]), speed=float(tr["speed"][m]),
                             h=tr["h"]))
         del rec, r
-    _save_candidates(path, out, key)
-    _MEMO[key] = out
     return out
 
 

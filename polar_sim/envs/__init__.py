@@ -11,6 +11,10 @@ __all__ = ["ENV_IDS", "register_envs"]
 ENV_IDS = {
     "polar_sim/LidarNav-v0": ("polar_sim.envs.lidar_nav_v0:LidarNavEnv", 600),
     "polar_sim/GPISNav-v0": ("polar_sim.envs.gpis_nav_v0:GPISNavEnv", 600),
+    "polar_sim/RoverDrive-v0": ("polar_sim.envs.rover_drive_v0:RoverDriveEnv", 1000),
+    "polar_sim/GroundVO-v0": ("polar_sim.envs.ground_vo_v0:GroundVOEnv", 1000),
+    "polar_sim/TabletopReach-v0": ("polar_sim.envs.tabletop_reach_v0:TabletopReachEnv", 300),
+    "polar_sim/ObjectTrack-v0": ("polar_sim.envs.object_track_v0:ObjectTrackEnv", 300),
 }
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SDFReactive"]
+__all__ = ["SDFReactive", "PurePursuitVO", "VisualServoReach"]
 
 
 def _angle(v):
@@ -135,3 +135,108 @@ class SDFReactive:
         if self._mode == "go":
             v *= min(1.0, dg)
         return np.array([v, omega], dtype=np.float32)
+
+
+class PurePursuitVO:
+    """Pure pursuit on visual odometry for ``GroundVO-v0``: steer onto the waypoint.
+
+    It reads only ``waypoint`` (the route point a fixed distance ahead of the estimated position,
+    in the estimated robot frame) and ``twist`` (the VO's speed): the arc through the waypoint has
+    curvature kappa = 2 y / d^2, the yaw rate is kappa times the speed, and the speed set-point is
+    ``speed``, lowered where the arc is tight so the lateral acceleration stays under
+    ``max_lateral_accel``. From rest the set-point ramps up at ``accel``: a monocular VO's speed
+    and yaw-rate filters lag a hard start, and the lag stays in the estimated pose for the rest of
+    the route.
+
+    Parameters
+    ----------
+    speed : float
+        Cruise speed set-point, m/s.
+    accel : float
+        Ramp of the set-point from rest, m/s^2 (counted in steps of ``dt``).
+    max_lateral_accel : float
+        m/s^2; v <= sqrt(a / |kappa|).
+    max_speed, max_yaw_rate : float
+        The environment's ``max_speed`` (m/s) and ``max_yaw_rate`` (rad/s), to normalise the action.
+    dt : float
+        The environment's step, s.
+    """
+
+    def __init__(self, speed=6.0, accel=1.0, max_lateral_accel=2.0, max_speed=10.0, max_yaw_rate=1.0, dt=0.1):
+        self.speed = float(speed)
+        self.accel = float(accel)
+        self.max_lateral_accel = float(max_lateral_accel)
+        self.max_speed = float(max_speed)
+        self.max_yaw_rate = float(max_yaw_rate)
+        self.dt = float(dt)
+        self.reset()
+
+    def reset(self):
+        self._steps = 0
+
+    def __call__(self, obs):
+        x, y = (float(c) for c in obs["waypoint"])
+        d2 = max(x * x + y * y, 1e-6)
+        kappa = 2.0 * y / d2
+        self._steps += 1
+        v = min(self.speed, self.accel * self._steps * self.dt,
+                np.sqrt(self.max_lateral_accel / max(abs(kappa), 1e-9)))
+        # The yaw rate follows the speed the rover has (the VO's), not the set-point it is
+        # still accelerating toward, so the arc is the one through the waypoint.
+        v_now = float(np.clip(obs["twist"][0], 0.5, v)) if v > 0.5 else v
+        omega = kappa * v_now
+        return np.array([np.clip(v / self.max_speed, -1, 1), np.clip(omega / self.max_yaw_rate, -1, 1)],
+                        dtype=np.float32)
+
+
+class VisualServoReach:
+    """A position-based visual servo for ``ObjectTrack-v0``: move the hand to the pre-grasp pose
+    the tracker estimates.
+
+    It reads ``pregrasp`` (the estimated pre-grasp pose minus the hand's: dx, dy, dz in the world,
+    m, and the yaw still to turn, rad) and ``object_std`` (the tracker's uncertainty). The hand
+    velocity is proportional to the error (``gain``, 1/s), capped at the environment's
+    ``max_speed``; while the hand is still far off sideways it stays up to ``approach_height`` m
+    above the pre-grasp height, so it comes down onto the object from above instead of sweeping
+    into it. When the tracker is unsure (translation 1-sigma above ``max_std`` m) it moves at
+    ``unsure_scale`` of the speed.
+
+    Parameters
+    ----------
+    gain, yaw_gain : float
+        Proportional gains, 1/s.
+    approach_height : float
+        m above the pre-grasp height kept while the horizontal error is large.
+    max_std, unsure_scale : float
+        Tracker uncertainty (m) above which to slow down, and the speed factor then.
+    max_speed, max_yaw_rate : float
+        The environment's ``max_speed`` (m/s) and ``max_yaw_rate`` (rad/s), to normalise the action.
+    """
+
+    def __init__(self, gain=4.0, yaw_gain=3.0, approach_height=0.08, max_std=0.02, unsure_scale=0.3,
+                 max_speed=0.3, max_yaw_rate=1.5):
+        self.gain = float(gain)
+        self.yaw_gain = float(yaw_gain)
+        self.approach_height = float(approach_height)
+        self.max_std = float(max_std)
+        self.unsure_scale = float(unsure_scale)
+        self.max_speed = float(max_speed)
+        self.max_yaw_rate = float(max_yaw_rate)
+
+    def reset(self):
+        pass
+
+    def __call__(self, obs):
+        d = np.asarray(obs["pregrasp"], dtype=np.float64)
+        e = d[:3].copy()
+        lateral = float(np.hypot(e[0], e[1]))
+        e[2] += min(self.approach_height, 1.5 * lateral)
+        v = self.gain * e
+        speed = float(np.linalg.norm(v))
+        cap = self.max_speed
+        if float(np.max(np.asarray(obs["object_std"], dtype=np.float64)[3:])) > self.max_std:
+            cap *= self.unsure_scale
+        if speed > cap:
+            v *= cap / speed
+        w = float(np.clip(self.yaw_gain * d[3], -self.max_yaw_rate, self.max_yaw_rate))
+        return np.clip(np.append(v / self.max_speed, w / self.max_yaw_rate), -1.0, 1.0).astype(np.float32)

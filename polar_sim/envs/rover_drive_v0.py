@@ -8,9 +8,10 @@ import numpy as np
 from gymnasium import spaces
 
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
+from polar_sim.envs.observers import RoutePath
 from polar_sim.geometry import inv_pose
 
-__all__ = ["RoverDriveEnv", "RouteTask", "RoutePath"]
+__all__ = ["RoverDriveEnv", "RouteTask"]
 
 PROGRESS_WEIGHT = 0.1  # reward per metre of progress along the route
 CROSS_TRACK_WEIGHT = 0.02  # cost per metre of cross-track error, per step
@@ -45,39 +46,6 @@ class RouteTask:
     T_body_cam: np.ndarray
     dt: float
     seed: int
-
-
-class RoutePath:
-    """An open polyline with arc length: local projection and interpolation.
-
-    ``project(xy, s_near)`` searches only segments within ``[s_near - back, s_near + ahead]`` m,
-    so a route that passes near itself (or repeats a loop) is followed segment by segment.
-    """
-
-    def __init__(self, points, back=10.0, ahead=40.0):
-        self.points = np.asarray(points, dtype=np.float64)
-        seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
-        self.s = np.concatenate([[0.0], np.cumsum(seg)])
-        self.back, self.ahead = float(back), float(ahead)
-
-    @property
-    def length(self):
-        return float(self.s[-1])
-
-    def project(self, xy, s_near):
-        """(arc length (m), distance (m)) of the nearest path point to ``xy`` near ``s_near``."""
-        i0 = max(int(np.searchsorted(self.s, s_near - self.back)) - 1, 0)
-        i1 = min(int(np.searchsorted(self.s, s_near + self.ahead)) + 1, len(self.points) - 1)
-        a, b = self.points[i0:i1], self.points[i0 + 1 : i1 + 1]
-        ab = b - a
-        t = np.clip(((xy - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-12), 0.0, 1.0)
-        d = np.linalg.norm(a + t[:, None] * ab - xy, axis=1)
-        k = int(np.argmin(d))
-        return float(self.s[i0 + k] + t[k] * (self.s[i0 + k + 1] - self.s[i0 + k])), float(d[k])
-
-    def point_at(self, s):
-        """Point (2,) at arc length ``s`` (clamped to the path)."""
-        return np.array([np.interp(s, self.s, self.points[:, 0]), np.interp(s, self.s, self.points[:, 1])])
 
 
 class RoverDriveEnv(PolarMujocoEnv):
@@ -134,7 +102,7 @@ class RoverDriveEnv(PolarMujocoEnv):
     ## Truth in ``info``
     ``robot_pose2d`` (x, y, yaw), ``speed`` (m/s), ``yaw_rate`` (rad/s), ``progress`` (m, true,
     monotone), ``route_length``, ``cross_track_error`` (m), ``collision``, ``path_length`` (m),
-    ``is_success``, ``layout_seed``.
+    ``is_success``, ``layout_seed``, ``time`` (s, of the image in the observation).
 
     ## Version History
     - v0: first release.
@@ -142,11 +110,11 @@ class RoverDriveEnv(PolarMujocoEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, *, render_mode=None, route_length=300.0, scene="rover_terrain", max_speed=10.0,
-                 max_yaw_rate=1.0, max_accel=3.0, max_cross_track=6.0, camera_size=(621, 188),
+    def __init__(self, *, render_mode=None, render_size=(640, 360), route_length=300.0, scene="rover_terrain",
+                 max_speed=10.0, max_yaw_rate=1.0, max_accel=3.0, max_cross_track=6.0, camera_size=(621, 188),
                  supersample=False, **unknown):
         check_kwargs(type(self), unknown)
-        super().__init__(render_mode=render_mode, render_size=(640, 360))
+        super().__init__(render_mode=render_mode, render_size=render_size)
         if scene not in SCENES:
             raise ValueError(f"scene: expected one of {SCENES}, got {scene!r}")
         self._route_length = _positive(route_length, "route_length")
@@ -265,7 +233,7 @@ class RoverDriveEnv(PolarMujocoEnv):
                 "cross_track_error": self._cross_track(), "collision": self._collision,
                 "path_length": self._path_length,
                 "is_success": bool(done and not self._collision and self._cross_track() <= self._max_cte),
-                "layout_seed": self._layout_seed}
+                "layout_seed": self._layout_seed, "time": self._world.time}
 
     def _get_reward(self):
         cte = self._cross_track()

@@ -13,7 +13,7 @@ import numpy as np
 
 from polar_sim._validation import as_points, check_updated
 from polar_sim.gpis import _io
-from polar_sim.gpis._distance import FreeSpace, far_field
+from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
 from polar_sim.gpis._kernels import apply_new, apply_reeval, candidates, gather_training, query_gp
 from polar_sim.gpis._localgp import GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
@@ -286,25 +286,21 @@ class GPISMapBase:
         d = self.dim
         kd, idx = self._kd()
         tr = self.tree_
-        dist, grad, var_far = far_field(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
-                                        self._surfel_radius(), self.free_,
-                                        1.0 + float(self.map_noise))
+        if kd is None:
+            dist, grad, var_far = far_field(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
+                                            self._surfel_radius(), self.free_,
+                                            1.0 + float(self.map_noise))
+            return dist, grad, var_far
         near, far = self._blend_band()
-        a = np.abs(dist)
-        # behind surfaces the GP has no data: hand over to the surfel distance twice as early
-        sc = np.where(dist < 0, 0.5, 1.0)
-        w = np.clip((far * sc - a) / ((far - near) * sc), 0.0, 1.0)
-        w = w * w * (3.0 - 2.0 * w)                   # smoothstep: C1 at both ends
-        sel = np.nonzero(w > 0)[0]
-        sdf, g, v = dist.copy(), grad, var_far
+        dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp,
+                                         self._surfel_radius(), self.free_,
+                                         1.0 + float(self.map_noise), near, far)
+        sel = np.flatnonzero(w > 0)
         if len(sel):
             out = self._gp_query(pts[sel])
-            has = out[:, d + 1] < 1.0 + float(self.map_noise) - 1e-12   # a cluster answered
-            ws = np.where(has, w[sel], 0.0)
-            sdf[sel] = ws * (out[:, 0] + self.fbias) + (1 - ws) * dist[sel]
-            g[sel] = ws[:, None] * out[:, 1:d + 1] + (1 - ws)[:, None] * grad[sel]
-            v[sel] = ws * out[:, d + 1] + (1 - ws) * var_far[sel]
-        return sdf, g, v
+            blend_gp(sel, out, w, float(self.fbias), 1.0 + float(self.map_noise) - 1e-12, dist,
+                     grad, var)
+        return dist, grad, var
 
     def surface(self, res=None, band=None):
         """Zero level set of :meth:`query` near the observed samples.

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["FreeSpace", "far_field"]
+__all__ = ["FreeSpace", "far_field", "far_weights", "blend_gp"]
 
 
 @nb.njit(cache=True)
@@ -192,3 +192,72 @@ def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
     _surfels(pts, gi, pos, nrm, sp, float(r_s), free.observed(pts), free.res * np.sqrt(d),
              float(var_unobs), dist, grad, var)
     return dist, grad, var
+
+
+@nb.njit(cache=True)
+def _observed(pts, grid, gshape, goff, res, seen):
+    """``FreeSpace.observed`` in one pass (same cells, same answer)."""
+    n, d = pts.shape
+    for i in range(n):
+        seen[i] = False
+        if grid.shape[0] == 0:
+            continue
+        flat = 0
+        stride = 1
+        inside = True
+        for k in range(d):
+            c = np.int64(np.floor(pts[i, k] / res)) - goff[k]
+            if c < 0 or c >= gshape[k]:
+                inside = False
+            flat += c * stride
+            stride *= gshape[k]
+        seen[i] = inside and grid[flat] > 0
+
+
+@nb.njit(cache=True)
+def _far_weights(pts, gi, pos, nrm, sp, r_s, grid, gshape, goff, res, cell_diag, var_unobs,
+                 near, far, dist, grad, var, w):
+    """Surfel distance, gradient, variance (``far_field``) and the GPIS blend weight (0..1)."""
+    n = pts.shape[0]
+    seen = np.empty(n, np.bool_)
+    _observed(pts, grid, gshape, goff, res, seen)
+    _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad, var)
+    nsel = 0
+    for i in range(n):
+        a = abs(dist[i])
+        # behind surfaces the GP has no data: hand over to the surfel distance twice as early
+        sc = 0.5 if dist[i] < 0 else 1.0
+        x = (far * sc - a) / ((far - near) * sc)
+        x = min(max(x, 0.0), 1.0)
+        x = x * x * (3.0 - 2.0 * x)               # smoothstep: C1 at both ends
+        w[i] = x
+        if x > 0:
+            nsel += 1
+    return nsel
+
+
+def far_weights(pts, kd, idx, pos, nrm, sp, r_s, free, var_unobs, near, far, k=4):
+    """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None)."""
+    n, d = pts.shape
+    k = min(k, len(idx))
+    _, nn = kd.query(pts, k=k)
+    gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
+    dist, grad, var, w = np.empty(n), np.empty((n, d)), np.empty(n), np.empty(n)
+    _far_weights(pts, gi, pos, nrm, sp, float(r_s), free.grid, free.gshape, free.goff,
+                 float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),
+                 float(far), dist, grad, var, w)
+    return dist, grad, var, w
+
+
+@nb.njit(cache=True)
+def blend_gp(sel, out, w, fbias, has_thr, dist, grad, var):
+    """Blend the GPIS rows ``out`` (one per selected point) into the surfel answer in place."""
+    d = grad.shape[1]
+    for j in range(sel.shape[0]):
+        i = sel[j]
+        o = out[j]
+        ws = w[i] if o[d + 1] < has_thr else 0.0     # a cluster answered
+        dist[i] = ws * (o[0] + fbias) + (1 - ws) * dist[i]
+        for k in range(d):
+            grad[i, k] = ws * o[1 + k] + (1 - ws) * grad[i, k]
+        var[i] = ws * o[d + 1] + (1 - ws) * var[i]

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from polar_sim.gpis._localgp import _predict_one
-from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove, _too_close_neighbours
+from polar_sim.gpis._localgp import _dot4
+from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove
 
 __all__ = ["apply_new", "apply_reeval", "candidates", "gather_training", "query_gp", "maybe_new"]
 
@@ -219,8 +219,102 @@ def gather_training(slots, R, geo, cgrid, gshape, goff, node_sample, slot_coord,
 
 
 @nb.njit(cache=True)
-def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s, best_d):
-    """Up to 3 nearest non-empty clusters (by centre) whose box meets the box of half W at x."""
+def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s, best_d,
+              best_k, iw):
+    """Up to 3 nearest non-empty clusters (by centre) whose box meets the box of half W at x.
+
+    Ties in distance go to the cluster that comes first in grid order (last axis slowest), as
+    in a plain scan of the box. The cells are visited in rings around x's own cell, and the
+    search stops once no further ring can hold a nearer centre. ``best_k`` (3,) and ``iw``
+    (6 * dim,) are int64 work arrays (no allocation per point).
+    """
+    dim = x.shape[0]
+    w = geo[dim]
+    hc = w / 2
+    lo = iw[0:dim]
+    hi = iw[dim:2 * dim]
+    c0 = iw[2 * dim:3 * dim]
+    cc = iw[3 * dim:4 * dim]
+    a0 = iw[4 * dim:5 * dim]
+    a1 = iw[5 * dim:6 * dim]
+    rmax = 0
+    for k in range(dim):
+        lo[k] = max(int(np.ceil((x[k] - W - hc - geo[k]) / w - 0.5)), goff[k])
+        hi[k] = min(int(np.floor((x[k] + W + hc - geo[k]) / w - 0.5)), goff[k] + gshape[k] - 1)
+        if hi[k] < lo[k]:
+            return 0
+        c0[k] = int(np.floor((x[k] - geo[k]) / w))
+        rmax = max(rmax, abs(c0[k] - lo[k]), abs(hi[k] - c0[k]))
+    n = 0
+    for r in range(rmax + 1):
+        if n == 3 and r >= 1:
+            lb = (r - 0.5) * w
+            if lb * lb > best_d[2] * (1.0 + 1e-9):
+                break
+        # the cells at Chebyshev distance r from c0, inside the box
+        total = 1
+        empty = False
+        for k in range(1, dim):
+            a0[k] = max(c0[k] - r, lo[k])
+            a1[k] = min(c0[k] + r, hi[k])
+            if a1[k] < a0[k]:
+                empty = True
+            total *= a1[k] - a0[k] + 1
+        if empty:
+            continue
+        for flat in range(total):
+            f = flat
+            edge = False
+            for k in range(1, dim):
+                span = a1[k] - a0[k] + 1
+                cc[k] = a0[k] + f % span
+                f //= span
+                if abs(cc[k] - c0[k]) == r:
+                    edge = True
+            xs = c0[0] - r
+            step = 1 if (edge or r == 0) else 2 * r
+            while xs <= c0[0] + r:
+                cx = xs
+                xs += step
+                if cx < lo[0] or cx > hi[0]:
+                    continue
+                cc[0] = cx
+                s = cgrid[_lin(cc, gshape, goff)]
+                if s < 0 or (node_sample[s, 0] < 0 and not node_internal[s, 0]):
+                    continue
+                d2 = 0.0
+                for k in range(dim):
+                    e = geo[k] + (cc[k] + 0.5) * w - x[k]
+                    d2 += e * e
+                # position in a scan of the box (first axis fastest): the tie-break
+                key = 0
+                stride = 1
+                for k in range(dim):
+                    key += (cc[k] - lo[k]) * stride
+                    stride *= hi[k] - lo[k] + 1
+                if n < 3:
+                    j = n
+                    n += 1
+                elif d2 < best_d[2] or (d2 == best_d[2] and key < best_k[2]):
+                    j = 2
+                else:
+                    continue
+                while j > 0 and (best_d[j - 1] > d2 or (best_d[j - 1] == d2
+                                                         and best_k[j - 1] > key)):
+                    best_d[j] = best_d[j - 1]
+                    best_s[j] = best_s[j - 1]
+                    best_k[j] = best_k[j - 1]
+                    j -= 1
+                best_d[j] = d2
+                best_s[j] = s
+                best_k[j] = key
+    return n
+
+
+@nb.njit(cache=True)
+def _nearest3_scan(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s, best_d,
+                   best_k, iw):
+    """Reference for ``_nearest3``: a plain scan of the whole box (tests)."""
     dim = x.shape[0]
     w = geo[dim]
     hc = w / 2
@@ -248,7 +342,6 @@ def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s
         for k in range(dim):
             e = geo[k] + (cc[k] + 0.5) * w - x[k]
             d2 += e * e
-        # insertion into the sorted top 3 (stable: earlier scan order wins ties)
         if n < 3:
             j = n
             n += 1
@@ -273,71 +366,260 @@ def query_gp(pts, *args):
 
 
 @nb.njit(cache=True)
-def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape, goff,
-             node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X, kinds, alpha,
-             Lbuf, mmax, out):
-    """GP query of spec §9.1 for points i0..i1-1; out rows [f, grad(d), var_f, var_grad(d)]."""
+def _ks_mean(x, alpha, X, kinds, a, dim, ks, rbuf, out):
+    """Cross-covariances ks (m, dim + 2) of one GP at x and the mean [f, grad] into out.
+
+    Same arithmetic, in the same order, as ``_localgp._predict_one``.
+    """
+    m = X.shape[0]
+    a2 = a * a
+    nv = 0
+    while nv < m and (kinds[nv] >> 32) == 0:
+        nv += 1
+    for p in range(nv):
+        r2 = 0.0
+        for k in range(dim):
+            e = x[k] - X[p, k]
+            r2 += e * e
+        r = np.sqrt(r2)
+        ex = np.exp(-a * r)
+        rbuf[p] = r
+        ks[p, dim + 1] = ex
+        ks[p, 0] = (1.0 + a * r) * ex
+        for k in range(dim):
+            ks[p, 1 + k] = -a2 * (x[k] - X[p, k]) * ex
+    for p in range(nv, m):
+        c = (kinds[p] >> 32) - 1
+        u = kinds[p] & 0xFFFFFFFF
+        r = rbuf[u]
+        ex = ks[u, dim + 1]
+        dc = x[c] - X[p, c]
+        ks[p, 0] = a2 * dc * ex
+        inv_r = 1.0 / r if r > 0.0 else 0.0
+        for k in range(dim):
+            v = (1.0 if k == c else 0.0) - a * (x[k] - X[p, k]) * dc * inv_r
+            ks[p, 1 + k] = a2 * v * ex
+    # the dim + 1 sums run side by side (independent chains), each in the original order
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    if dim == 2:
+        for p in range(m):
+            ap = alpha[p]
+            s0 += ks[p, 0] * ap
+            s1 += ks[p, 1] * ap
+            s2 += ks[p, 2] * ap
+    else:
+        for p in range(m):
+            ap = alpha[p]
+            s0 += ks[p, 0] * ap
+            s1 += ks[p, 1] * ap
+            s2 += ks[p, 2] * ap
+            s3 += ks[p, 3] * ap
+    out[0] = s0
+    out[1] = s1
+    out[2] = s2
+    if dim == 3:
+        out[3] = s3
+
+
+@nb.njit(cache=True)
+def _tri_sq4(Lp, Z, m, acc):
+    """acc[b] = |L^-1 z_b|^2 for the four rows z_b of Z (4, >= m), overwritten.
+
+    Forward substitution on the packed lower factor, four right-hand sides at once: each factor
+    row is read once for the four dot products. Every lane goes through the same operations,
+    so a point's result does not depend on the other three (nor on the batch it came in).
+    """
+    z0 = Z[0]
+    z1 = Z[1]
+    z2 = Z[2]
+    z3 = Z[3]
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    o = 0
+    for p in range(m):
+        t0, t1, t2, t3 = _dot4(z0, z1, z2, z3, Lp[o:o + p], p)
+        d = Lp[o + p]
+        v0 = (z0[p] - t0) / d
+        v1 = (z1[p] - t1) / d
+        v2 = (z2[p] - t2) / d
+        v3 = (z3[p] - t3) / d
+        z0[p] = v0
+        z1[p] = v1
+        z2[p] = v2
+        z3[p] = v3
+        a0 += v0 * v0
+        a1 += v1 * v1
+        a2 += v2 * v2
+        a3 += v3 * v3
+        o += p + 1
+    acc[0] = a0
+    acc[1] = a1
+    acc[2] = a2
+    acc[3] = a3
+
+
+@nb.njit(cache=True)
+def _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri, X,
+                kinds, alpha, Lbuf, ks, rbuf, Z, acc, cand):
+    """Predict [f, grad, var_f] of cluster s at the points of evaluations order[g0:g1].
+
+    Means one point at a time; variances four points at a time (``_tri_sq4``; a short last
+    quad repeats its last point).
+    """
+    m0 = gp_m[s]
+    ob = gp_obs[s]
+    Lp = Lbuf[gp_tri[s]:]
+    Xs = X[ob:ob + m0]
+    ks_ = kinds[ob:ob + m0]
+    al = alpha[ob:ob + m0]
+    for c0 in range(g0, g1, 4):
+        c1 = min(g1, c0 + 4)
+        for t in range(c0, c0 + 4):
+            b = t - c0
+            if t < c1:
+                e = order[t]
+                _ks_mean(pts[ev_pt[e]], al, Xs, ks_, a, dim, ks, rbuf,
+                         cand[ev_pt[e], ev_out[e]])
+                zb = Z[b]
+                for p in range(m0):
+                    zb[p] = ks[p, 0]
+            else:
+                Z[b, :m0] = Z[c1 - 1 - c0, :m0]
+        _tri_sq4(Lp, Z, m0, acc)
+        for t in range(c0, c1):
+            e = order[t]
+            cand[ev_pt[e], ev_out[e], dim + 1] = var_f0 - acc[t - c0]
+
+
+@nb.njit(cache=True)
+def _run_evals(ne, ev_pt, ev_out, ev_s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
+               alpha, Lbuf, ks, rbuf, Z, acc, cand):
+    """Evaluate the ne (point, cluster) pairs, grouped by cluster (stable, so deterministic)."""
+    if ne == 0:
+        return
+    order = np.argsort(ev_s[:ne], kind="mergesort")
+    g0 = 0
+    while g0 < ne:
+        s = ev_s[order[g0]]
+        g1 = g0 + 1
+        while g1 < ne and ev_s[order[g1]] == s:
+            g1 += 1
+        _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri,
+                    X, kinds, alpha, Lbuf, ks, rbuf, Z, acc, cand)
+        g0 = g1
+
+
+@nb.njit(cache=True)
+def _lt(x, y):
+    """x < y with NaN last (numpy's sort order)."""
+    if np.isnan(x):
+        return False
+    return np.isnan(y) or x < y
+
+
+@nb.njit(cache=True)
+def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid,
+                gshape, goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri,
+                X, kinds, alpha, Lbuf, mmax, out):
+    """GP query of spec §9.1 for points i0..i1-1; out rows [f, grad(d), var_f, var_grad(d)].
+
+    Per point: the nearest cluster's GP; when its var_f exceeds T, also the other (up to two)
+    nearest clusters', then the lowest-variance one or a variance-weighted blend of the best
+    two. The evaluations are grouped by cluster so that the variance solves run as blocks.
+    """
     dim = pts.shape[1]
+    n = i1 - i0
     a = np.sqrt(3.0) / scale
-    if True:
-        kb = np.empty((mmax, dim + 2))
-        zb = np.empty(mmax)
-        best_s = np.empty(3, np.int64)
-        best_d = np.empty(3)
-        cand = np.empty((3, 2 * dim + 2))
-        cvar = np.empty(3)
-        for i in range(i0, i1):
-            o = out[i]
-            o[:] = 0.0
-            o[dim + 1] = default_var
-            for k in range(dim):
-                o[dim + 2 + k] = np.nan
-            nc = _nearest3(pts[i], W, geo, cgrid, gshape, goff, node_sample, node_internal,
-                           best_s, best_d)
-            if not legacy:
-                # keep only clusters that have a current GP
-                m = 0
-                for j in range(nc):
-                    s = best_s[j]
-                    if gp_m[s] > 0 and gp_gen[s] == slot_gen[s]:
-                        best_s[m] = s
-                        m += 1
-                nc = m
-            if nc == 0:
-                continue
-            s = best_s[0]
-            if gp_m[s] == 0 or gp_gen[s] != slot_gen[s]:
-                continue
-            m0 = gp_m[s]
-            ob = gp_obs[s]
-            _predict_one(pts[i], Lbuf[gp_tri[s]:], alpha[ob:ob + m0], X[ob:ob + m0],
-                         kinds[ob:ob + m0], a, dim, var_f0, var_g0, False, cand[0], kb, zb)
-            if nc == 1 or cand[0, dim + 1] <= T:
-                o[:] = cand[0]
-                continue
-            nn = 1
-            for j in range(1, nc):
-                s = best_s[j]
-                if gp_m[s] == 0 or gp_gen[s] != slot_gen[s]:
-                    continue
-                m0 = gp_m[s]
-                ob = gp_obs[s]
-                _predict_one(pts[i], Lbuf[gp_tri[s]:], alpha[ob:ob + m0], X[ob:ob + m0],
-                             kinds[ob:ob + m0], a, dim, var_f0, var_g0, False, cand[nn], kb, zb)
-                nn += 1
-            for j in range(nn):
-                cvar[j] = cand[j, dim + 1]
-            # order the candidates by var_f (stable)
-            order = np.argsort(cvar[:nn], kind="mergesort")
-            ia = order[0]
-            if cvar[ia] < T or nn == 1:
-                o[:] = cand[ia]
-                continue
-            ib = order[1]
-            wa = cvar[ib] - T
-            wb = cvar[ia] - T
-            for k in range(2 * dim + 2):
-                o[k] = (wa * cand[ia, k] + wb * cand[ib, k]) / (wa + wb)
+    ncol = 2 * dim + 2
+    cs = np.empty((n, 3), np.int64)          # clusters with a usable GP, nearest first
+    nv = np.zeros(n, np.int64)
+    cand = np.empty((n, 3, ncol))
+    ev_pt = np.empty(3 * n, np.int64)
+    ev_out = np.empty(3 * n, np.int64)
+    ev_s = np.empty(3 * n, np.int64)
+    best_s = np.empty(3, np.int64)
+    best_d = np.empty(3)
+    best_k = np.empty(3, np.int64)
+    iw = np.empty(6 * dim, np.int64)
+    ks = np.empty((mmax, dim + 2))
+    rbuf = np.empty(mmax)
+    Z = np.empty((4, mmax))
+    acc = np.empty(4)
+    ne = 0
+    for t in range(n):
+        i = i0 + t
+        o = out[i]
+        o[:] = 0.0
+        o[dim + 1] = default_var
+        for k in range(dim):
+            o[dim + 2 + k] = np.nan
+        nc = _nearest3(pts[i], W, geo, cgrid, gshape, goff, node_sample, node_internal,
+                       best_s, best_d, best_k, iw)
+        k = 0
+        for j in range(nc):
+            s = best_s[j]
+            if gp_m[s] > 0 and gp_gen[s] == slot_gen[s]:
+                cs[t, k] = s
+                k += 1
+            elif j == 0 and legacy:
+                k = 0                         # nearest cluster without a current GP: no answer
+                break
+        nv[t] = k
+        for j in range(3):
+            for c in range(dim + 2, ncol):
+                cand[t, j, c] = np.nan
+        if k > 0:
+            ev_pt[ne] = t
+            ev_out[ne] = 0
+            ev_s[ne] = cs[t, 0]
+            ne += 1
+    sub = pts[i0:i1]
+    _run_evals(ne, ev_pt, ev_out, ev_s, sub, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
+               alpha, Lbuf, ks, rbuf, Z, acc, cand)
+    # second round: the other clusters of points whose nearest GP is not confident enough
+    ne = 0
+    for t in range(n):
+        if nv[t] > 1 and cand[t, 0, dim + 1] > T:
+            for j in range(1, nv[t]):
+                ev_pt[ne] = t
+                ev_out[ne] = j
+                ev_s[ne] = cs[t, j]
+                ne += 1
+    _run_evals(ne, ev_pt, ev_out, ev_s, sub, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
+               alpha, Lbuf, ks, rbuf, Z, acc, cand)
+    for t in range(n):
+        k = nv[t]
+        if k == 0:
+            continue
+        o = out[i0 + t]
+        c0 = cand[t, 0]
+        if k == 1 or c0[dim + 1] <= T:
+            o[:] = c0
+            continue
+        # order the candidates by var_f (stable, NaN last, as numpy's mergesort)
+        ia, ib, ic = 0, 1, 2
+        v = cand[t, :, dim + 1]
+        if _lt(v[1], v[0]):
+            ia, ib = 1, 0
+        if k == 3:
+            if _lt(v[2], v[ib]):
+                ic = ib
+                ib = 2
+                if _lt(v[2], v[ia]):
+                    ib = ia
+                    ia = 2
+        if v[ia] < T:
+            o[:] = cand[t, ia]
+            continue
+        wa = v[ib] - T
+        wb = v[ia] - T
+        for c in range(ncol):
+            o[c] = (wa * cand[t, ia, c] + wb * cand[t, ib, c]) / (wa + wb)
 
 
 # Two entry points with distinct names: numba's cache index does not key on the ``parallel``
@@ -357,11 +639,62 @@ def _query_gp_par(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cg
                   goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X,
                   kinds, alpha, Lbuf, mmax, out):
     n = pts.shape[0]
-    nblk = 64
+    nblk = 4096
     for blk in nb.prange((n + nblk - 1) // nblk):
         _query_rows(blk * nblk, min(n, (blk + 1) * nblk), pts, W, T, legacy, scale, var_f0,
                     var_g0, default_var, geo, cgrid, gshape, goff, node_sample, node_internal,
                     slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X, kinds, alpha, Lbuf, mmax, out)
+
+
+@nb.njit(cache=True)
+def _slot_samples(node_sample, nslots):
+    """CSR (ptr, idx) of the samples of each cluster slot, in node order."""
+    ptr = np.zeros(nslots + 1, np.int64)
+    for s in range(nslots):
+        c = 0
+        row = node_sample[s]
+        for j in range(row.shape[0]):
+            if row[j] >= 0:
+                c += 1
+        ptr[s + 1] = ptr[s] + c
+    idx = np.empty(ptr[nslots], np.int64)
+    for s in range(nslots):
+        o = ptr[s]
+        row = node_sample[s]
+        for j in range(row.shape[0]):
+            if row[j] >= 0:
+                idx[o] = row[j]
+                o += 1
+    return ptr, idx
+
+
+@nb.njit(cache=True)
+def _too_close_csr(p, cc, hmin, dim, cgrid, gshape, goff, sptr, sidx, pos, q):
+    """``_tree._too_close_neighbours`` over a CSR of the clusters' samples (same answer)."""
+    nb_ = 1
+    for _ in range(dim):
+        nb_ *= 3
+    h2 = hmin * hmin
+    for t in range(nb_):
+        r = t
+        for k in range(dim):
+            q[k] = cc[k] + (r % 3) - 1
+            r //= 3
+        g = _lin(q, gshape, goff)
+        if g < 0:
+            continue
+        s = cgrid[g]
+        if s < 0:
+            continue
+        for j in range(sptr[s], sptr[s + 1]):
+            i = sidx[j]
+            d2 = 0.0
+            for k in range(dim):
+                e = pos[i, k] - p[k]
+                d2 += e * e
+            if d2 < h2:
+                return True
+    return False
 
 
 @nb.njit(cache=True)
@@ -378,13 +711,17 @@ def maybe_new(P, geo, root, level_off, cgrid, gshape, goff, node_sample, node_in
     hmin = geo[dim + 1]
     lo = np.empty(dim)
     cc = np.empty(dim, np.int64)
+    qw = np.empty(dim, np.int64)
+    if strict:
+        sptr, sidx = _slot_samples(node_sample, node_sample.shape[0])
+    else:
+        sptr, sidx = np.zeros(1, np.int64), np.zeros(0, np.int64)
     for j in range(n):
         p = P[j]
         for k in range(dim):
             cc[k] = int(np.floor((p[k] - geo[k]) / w))
         if strict:
-            if _too_close_neighbours(p, cc, geo[dim + 3], dim, cgrid, gshape, goff, node_sample,
-                                     pos):
+            if _too_close_csr(p, cc, geo[dim + 3], dim, cgrid, gshape, goff, sptr, sidx, pos, qw):
                 out[j] = False
             continue
         g = _lin(cc, gshape, goff)

@@ -46,12 +46,29 @@ def _dot(a, b, n):
     return s
 
 
+@nb.njit(cache=True, fastmath=True)
+def _dot4(r0, r1, r2, r3, b, n):
+    """Four dot products against one vector b (shares the loads of b)."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for k in range(n):
+        bk = b[k]
+        s0 += r0[k] * bk
+        s1 += r1[k] * bk
+        s2 += r2[k] * bk
+        s3 += r3[k] * bk
+    return s0, s1, s2, s3
+
+
 @nb.njit(cache=True)
 def _cholesky(K):
-    """Lower Cholesky factor of K (m, m), computed in place (row-oriented Crout).
+    """Lower Cholesky factor of K (m, m) in place; reads and writes the lower triangle only.
 
-    Written out rather than LAPACK: no BLAS threads (which stall on a busy machine) and the
-    same bits whatever the thread settings.
+    Left-looking by columns, four rows at a time (each row's dot product against the pivot
+    row shares its loads). Written out rather than LAPACK: no BLAS threads (which stall on a
+    busy machine) and the same bits whatever the thread settings.
     """
     m = K.shape[0]
     for j in range(m):
@@ -59,12 +76,17 @@ def _cholesky(K):
         s = rj[j] - _dot(rj, rj, j)
         d = np.sqrt(s if s > 1e-300 else 1e-300)
         rj[j] = d
-        for i in range(j + 1, m):
-            ri = K[i]
-            ri[j] = (ri[j] - _dot(ri, rj, j)) / d
-    for j in range(m):
-        for i in range(j + 1, m):
-            K[j, i] = 0.0
+        i = j + 1
+        while i + 4 <= m:
+            s0, s1, s2, s3 = _dot4(K[i], K[i + 1], K[i + 2], K[i + 3], rj, j)
+            K[i, j] = (K[i, j] - s0) / d
+            K[i + 1, j] = (K[i + 1, j] - s1) / d
+            K[i + 2, j] = (K[i + 2, j] - s2) / d
+            K[i + 3, j] = (K[i + 3, j] - s3) / d
+            i += 4
+        while i < m:
+            K[i, j] = (K[i, j] - _dot(K[i], rj, j)) / d
+            i += 1
     return K
 
 
@@ -111,58 +133,60 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
             if hasg[u]:
                 col[u, 1 + c] = t
                 t += 1
+    P = np.empty((n, dim))                  # training positions, gathered once
+    for u in range(n):
+        for k in range(dim):
+            P[u, k] = pos[idx[u], k]
+    # lower triangle of the joint covariance; blocks cov(obs_i at x_u, obs_j at x_v)
     K = np.empty((m, m))
     a2 = a * a
     dv = np.empty(dim)
     for u in range(n):
+        gu = hasg[u]
         for v in range(u + 1):
             r2 = 0.0
             for k in range(dim):
-                dv[k] = pos[idx[u], k] - pos[idx[v], k]
+                dv[k] = P[u, k] - P[v, k]
                 r2 += dv[k] * dv[k]
             r = np.sqrt(r2)
             ex = np.exp(-a * r)
             inv_r = 1.0 / r if r > 0.0 else 0.0
-            # blocks cov(obs_i at x_u, obs_j at x_v), i, j in {value, d_1 .. d_dim}
-            for i in range(dim + 1):
-                pi = col[u, i]
-                if pi < 0:
-                    continue
-                for j in range(dim + 1):
-                    qj = col[v, j]
-                    if qj < 0:
-                        continue
-                    if i == 0 and j == 0:
-                        val = (1.0 + a * r) * ex
-                    elif i == 0:
-                        val = a2 * dv[j - 1] * ex
-                    elif j == 0:
-                        val = -a2 * dv[i - 1] * ex
-                    else:
-                        val = (1.0 if i == j else 0.0) - a * dv[i - 1] * dv[j - 1] * inv_r
-                        val *= a2 * ex
-                    K[pi, qj] = val
-                    K[qj, pi] = val
+            K[u, v] = (1.0 + a * r) * ex                     # value, value
+            if hasg[v]:                                      # value at u, gradient at v
+                for j in range(1, dim + 1):
+                    K[col[v, j], u] = a2 * dv[j - 1] * ex
+            if gu:
+                for i in range(1, dim + 1):
+                    pi = col[u, i]
+                    K[pi, v] = -a2 * dv[i - 1] * ex          # gradient at u, value at v
+                    if hasg[v]:
+                        for j in range(1, dim + 1):
+                            qj = col[v, j]
+                            val = (1.0 if i == j else 0.0) - a * dv[i - 1] * dv[j - 1] * inv_r
+                            val *= a2 * ex
+                            if pi >= qj:
+                                K[pi, qj] = val
+                            else:
+                                K[qj, pi] = val
     for p in range(m):
         K[p, p] += noise[p]
     L = _cholesky(K)
-    # alpha = K^-1 y by two triangular solves
+    # alpha = K^-1 y by two triangular solves (row dot products, then row updates)
     z = np.empty(m)
     for p in range(m):
-        s = y[p]
-        for q in range(p):
-            s -= L[p, q] * z[q]
-        z[p] = s / L[p, p]
+        z[p] = (y[p] - _dot(L[p], z, p)) / L[p, p]
     for p in range(m - 1, -1, -1):
-        s = z[p]
-        for q in range(p + 1, m):
-            s -= L[q, p] * aout[q]
-        aout[p] = s / L[p, p]
+        ap = z[p] / L[p, p]
+        aout[p] = ap
+        row = L[p]
+        for q in range(p):
+            z[q] -= row[q] * ap
     o = 0
     for p in range(m):
+        row = L[p]
         for q in range(p + 1):
-            Lout[o] = L[p, q]
-            o += 1
+            Lout[o + q] = row[q]
+        o += p + 1
     return m
 
 

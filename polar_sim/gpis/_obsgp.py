@@ -199,6 +199,7 @@ def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale
 def _predict_tiles(qv, qu, bv, bu, margin, TI, TX, TA, TK, TN, scale, noise, rho_out, var_out):
     nr = bv.shape[0] - 1
     nc = bu.shape[0] - 1
+    k = np.empty(TX.shape[1])
     for i in range(qv.shape[0]):
         v = qv[i]
         u = qu[i]
@@ -217,19 +218,42 @@ def _predict_tiles(qv, qu, bv, bu, margin, TI, TX, TA, TK, TN, scale, noise, rho
         n = TN[t]
         if n <= 0:
             continue
-        k = np.empty(n)
         m = 0.0
         for j in range(n):
             dv = v - TX[t, j, 0]
             du = u - TX[t, j, 1]
             k[j] = np.exp(-np.sqrt(dv * dv + du * du) / scale)
             m += k[j] * TA[t, j]
+        # q = k' Kinv k: four rows at a time (independent sums, each in the original order)
         q = 0.0
-        for j in range(n):
-            s = 0.0
+        j = 0
+        while j + 4 <= n:
+            r0 = TK[t, j]
+            r1 = TK[t, j + 1]
+            r2 = TK[t, j + 2]
+            r3 = TK[t, j + 3]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
             for l in range(n):
-                s += TK[t, j, l] * k[l]
-            q += k[j] * s
+                kl = k[l]
+                s0 += r0[l] * kl
+                s1 += r1[l] * kl
+                s2 += r2[l] * kl
+                s3 += r3[l] * kl
+            q += k[j] * s0
+            q += k[j + 1] * s1
+            q += k[j + 2] * s2
+            q += k[j + 3] * s3
+            j += 4
+        while j < n:
+            r0 = TK[t, j]
+            s0 = 0.0
+            for l in range(n):
+                s0 += r0[l] * k[l]
+            q += k[j] * s0
+            j += 1
         rho_out[i] = m
         var_out[i] = 1.0 + noise - q
 

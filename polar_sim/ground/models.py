@@ -145,7 +145,8 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
     dbar : (N,) scaled inverse depths V/Z, 1/s (positive).
     h : camera height above the ground, m.
     weights : (N,) sampling weights (None = uniform). Used for drawing and, for 6param, in the
-        weighted ridge LS (spec §4.5–4.6).
+        weighted ridge LS (spec §4.5–4.6); under "fixed" each LS solve scales its weights to mean 1, so
+        that λ regularises weighted and uniform fits equally (the spec's raw weights under "code").
     n_iter : RANSAC iterations (None = :func:`default_iterations`).
     rng : numpy Generator.
     lam : ridge weight of the 6param hypotheses (all coefficients but the scale).
@@ -181,6 +182,11 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
         lam_diag = np.full(6, lam)
         lam_diag[0] = 0.0
         ws = w[idx]
+        if compat != "code":
+            # The ridge λ is meant relative to unit weights: with raw P_G weights (< 1) the weighted LS would
+            # run a stronger ridge (λ / mean w) than the uniform one, confounding sampling with
+            # regularisation. The fixed mode scales each solve's weights to mean 1; "code" keeps the raw ones.
+            ws = ws / np.maximum(ws.mean(axis=1, keepdims=True), 1e-300)
         AtW = np.swapaxes(As, 1, 2) * ws[:, None, :]
         M = np.linalg.solve(AtW @ As + np.diag(lam_diag)[None], (AtW @ bs[..., None]))[..., 0]
         res = (M @ A.T) - b[None, :]
@@ -192,7 +198,10 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
         if counts[best] < 2:
             return _failed(n, sigma, n_iter)
         best_inl = inl[best]
-        coef = _ridge_solve(A[best_inl], b[best_inl], w[best_inl], lam_diag)
+        wi = w[best_inl]
+        if compat != "code":
+            wi = wi / max(float(wi.mean()), 1e-300)
+        coef = _ridge_solve(A[best_inl], b[best_inl], wi, lam_diag)
         resid = np.abs(A @ coef - b) / np.sqrt(1.0 + np.sum(coef[:5] ** 2))
     else:
         # Minimal samples are solved exactly; the candidate model is the LS refit on its inliers.

@@ -675,7 +675,8 @@ class ReachScript:
         v = np.asarray(velocity, dtype=np.float64).reshape(-1)
         w = float(yaw_rate)
         if v.shape != (3,) or not np.isfinite(v).all() or not np.isfinite(w):
-            raise ValueError(f"velocity, yaw_rate: expected finite (3,) and a finite number, got {velocity!r}, {yaw_rate!r}")
+            raise ValueError(f"velocity, yaw_rate: expected finite (3,) and a finite number, got {velocity!r}, "
+                             f"{yaw_rate!r}")
         self._cmd = (v.copy(), w)
 
     # -- World's script protocol -----------------------------------------------------------

@@ -36,7 +36,8 @@ from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandS
                                 look_at_quat, matrix_to_quat)
 from polar_sim.sim.robots import GROUP
 
-__all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "AGENT_SCRIPTS", "COLOURS", "OrbitScript", "object_texture"]
+__all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "AGENT_SCRIPTS", "COLOURS", "OrbitScript",
+           "object_texture"]
 
 logger = logging.getLogger(__name__)
 

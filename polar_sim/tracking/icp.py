@@ -196,8 +196,11 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     rmse = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else np.inf
     w = np.zeros(len(X))
     w[sel] = w0[sel] * tukey(res[sel] / (4.685 * sigma))
+    # covariance from point-to-plane alone: the tangential term's Hessian claims information that
+    # its sliding nearest-neighbour residuals do not have (a cylinder turning about its axis would
+    # look well measured and the filter would reject its true motion)
     icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                         P, N, idx, res, w, mu2, H, g)
+                         P, N, idx, res, w, 0.0, H, g)
     tr = np.trace(H)
     try:
         cov = sigma**2 * np.linalg.inv(H + 1e-6 * max(tr, 1e-12) * np.eye(6))

@@ -27,11 +27,13 @@ class MotionFilter:
     q_pose, q_vel : (rot, trans) process noise densities, (rad, m)/sqrt(s) and (rad/s, m/s)/sqrt(s).
     meas_floor : (rot rad, trans m) standard deviations added to the measurement covariance.
     sigma_cap : (rot rad, trans m) upper bound of the pose standard deviations.
+    velocity_cap : (rad/s, m/s) upper bound of the velocity standard deviations.
     beta : alpha-beta velocity gain.
     """
 
     def __init__(self, T0, *, mode="ekf", q_pose=(0.05, 0.01), q_vel=(2.0, 0.5),
-                 meas_floor=(np.deg2rad(0.5), 0.002), sigma_cap=(0.3, 0.04), beta=0.5, v0=(0.5, 0.1),
+                 meas_floor=(np.deg2rad(0.5), 0.002), sigma_cap=(0.3, 0.04), velocity_cap=(3.0, 1.0),
+                 beta=0.5, v0=(0.5, 0.1),
                  sigma_static=(0.05, 0.01)):
         self.mode = mode
         self.T = T0.copy()
@@ -39,7 +41,8 @@ class MotionFilter:
         self.q = np.repeat(np.asarray(q_pose, float) ** 2, 3)
         self.qv = np.repeat(np.asarray(q_vel, float) ** 2, 3)
         self.floor = np.repeat(np.asarray(meas_floor, float) ** 2, 3)
-        self.cap = np.repeat(np.asarray(sigma_cap, float), 3)
+        self.cap = np.concatenate([np.repeat(np.asarray(sigma_cap, float), 3),
+                                   np.repeat(np.asarray(velocity_cap, float), 3)])
         self.beta = beta
         self.static = np.repeat(np.asarray(sigma_static, float) ** 2, 3)
         p0 = np.concatenate([np.repeat(np.array([np.deg2rad(1.0), 0.002]) ** 2, 3),
@@ -70,9 +73,11 @@ class MotionFilter:
         return self.T_bar, self.P_bar[:6, :6]
 
     def _cap(self, P):
-        s = np.sqrt(np.maximum(np.diag(P)[:6], 1e-30))
-        f = np.ones(12)
-        f[:6] = np.minimum(1.0, self.cap / s)
+        # bound every standard deviation (pose and velocity): repeated x4 inflations while an
+        # object stays hidden would otherwise grow the velocity block without limit, and the
+        # first update after it reappears would then throw the velocity (and the pose) away
+        s = np.sqrt(np.maximum(np.diag(P), 1e-30))
+        f = np.minimum(1.0, self.cap / s)
         return P * np.outer(f, f)
 
     def update(self, T_meas, cov, dt, *, inflate=1.0):
@@ -93,6 +98,9 @@ class MotionFilter:
         self.xi = self.xi + dx[6:]
         P = self.P_bar - G @ self.P_bar[:6, :]
         self.P = self._cap(0.5 * (P + P.T) * inflate)
+        if not (np.all(np.isfinite(self.T)) and np.all(np.isfinite(self.xi)) and np.all(np.isfinite(self.P))):
+            # cannot happen with the caps above; never let a numerical failure escape as a pose
+            self.T, self.xi, self.P = T_meas.copy(), np.zeros(6), self._cap(self.P_bar.copy())
 
     def coast(self, *, velocity_decay=1.0, inflate=1.0):
         """No (usable) measurement: keep the prediction, damp the velocity, scale P by ``inflate``."""

@@ -394,8 +394,8 @@ class ObjectTracker:
             scale = n_cand / max(n_sel, 1)
             coverage = res.n_inliers * scale / expected
             e = se3_log(inv_pose(T_bar) @ res.T)
-            S = self._filter.P_bar[:6, :6] + np.diag(self._filter.floor)
-            d2 = float(e @ np.linalg.solve(S, e))
+            S_e = self._filter.P_bar[:6, :6] + np.diag(self._filter.floor)
+            d2 = float(e @ np.linalg.solve(S_e, e))
             measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
                         and d2 < self.max_mahalanobis and coverage >= self.min_coverage)
         if not measured:
@@ -409,8 +409,8 @@ class ObjectTracker:
             self._train(feats, O, S_hat, r_hat, D)
         self._clock.lap("learning")
         # a good fit updates the filter (a mostly hidden object only skips learning); a poor fit is
-        # reported (spec 3.7) but not fused: the filter coasts (widened x4, velocity damped), the frame counts
-        # towards lost mode, in which the prediction is reported instead
+        # reported (spec 3.7) but not fused: the filter coasts (widened x4, velocity damped) and
+        # the frame counts towards lost mode, in which the prediction is reported instead
         if good_fit:
             filt.update(T_hat, res.cov, dt)
             self._rejections = 0

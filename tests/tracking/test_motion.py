@@ -50,3 +50,16 @@ def test_measurement_pulls_the_state():
     f.update(make_pose(None, [0.01, 0, 0]), np.eye(6) * 1e-8, 1 / 30)
     gain = P[3, 3] / (P[3, 3] + 0.002**2)  # prior variance vs the 2 mm measurement floor
     assert f.T[0, 3] == pytest.approx(0.01 * gain, rel=1e-3)
+
+
+def test_long_coast_with_inflation_stays_bounded():
+    # many x4 inflations (a long occlusion), then a measurement: velocity and pose stay sane
+    f = MotionFilter(make_pose(None, [0, 0, 0.7]), sigma_cap=(0.3, 0.04))
+    for _ in range(60):
+        f.predict(1 / 30)
+        f.coast(velocity_decay=0.5, inflate=4.0)
+    assert np.all(np.sqrt(np.diag(f.P)) <= np.array([0.3] * 3 + [0.04] * 3 + [3.0] * 3 + [1.0] * 3) + 1e-12)
+    Tb, _ = f.predict(1 / 30)
+    f.update(Tb @ se3_exp([0.01, 0, 0, 0.003, 0, 0]), np.eye(6) * 1e-8, 1 / 30)
+    T2, _ = f.predict(1 / 30)
+    assert np.linalg.norm(T2[:3, 3] - Tb[:3, 3]) < 0.05 and np.all(np.abs(f.xi) < 10)

@@ -1,0 +1,58 @@
+"""The GPIS-chapter experiments (issue 4, and issue 3's accuracy experiment) at their quick size.
+
+Each test runs one experiment exactly as ``polar-sim run NAME --quick`` does and asserts its
+headline checks (the issue's inequalities, evaluated against exact ground truth). A few of the
+issue's bounds are missed by the current maps; they are listed in ``KNOWN_MISSES`` with the
+measured figure, and the test asserts that they are still missed, like a strict xfail: the day one
+is met, the test fails so that benchmarks/results/structure.md and the README get updated.
+"""
+
+import json
+
+import pytest
+
+from polar_sim.runner import run_experiment
+
+pytestmark = pytest.mark.slow
+
+EXPERIMENTS = ["gpis_accuracy", "surface_vs_rate", "mapping_cost", "localisation", "objects3d", "gazebo1"]
+
+#: (experiment, start of the check's name): why it is missed (measured at the quick size).
+KNOWN_MISSES = {
+    ("gpis_accuracy", "SDF RMSE within 0.3 m"): "6.2 cm vs 2 cm: thin walls, small furniture, corners, glimpses",
+    ("gpis_accuracy", "Hausdorff surface()"): "4.4 m vs 10 cm: surface seen by one scan gets no zero level",
+    ("gpis_accuracy", "object_orbit SDF RMSE"): "2.3 mm vs 2 mm on seed 0's 4.8 cm cube (edges)",
+    ("surface_vs_rate", "at the sparsest rate"): "GPIS 1.4 m vs grid 10 cm 0.8 m: isolated glimpses",
+}
+
+# Figures and tables each experiment's summary must produce.
+ARTEFACTS = {
+    "gpis_accuracy": ["gpis_accuracy_office2d.csv", "gpis_accuracy_object_orbit.csv", "gpis_accuracy_office2d.png"],
+    "surface_vs_rate": ["surface_vs_rate.csv", "structure_surface_vs_rate.png", "structure_surfaces_sparsest.png"],
+    "mapping_cost": ["mapping_cost.csv", "structure_mapping_cost.png"],
+    "localisation": ["localisation.csv", "structure_localisation.png"],
+    "objects3d": ["objects3d.csv", "gpis_objects3d.png"],
+    "gazebo1": ["gazebo1.csv", "gpis_gazebo1_modes.png"],
+}
+
+
+# quick size: every trial runs, the summary has its tables and figures, and the headline checks hold
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_quick_experiment(name, tmp_path):
+    res = run_experiment(name, quick=True, out=tmp_path, progress=False)
+    assert not res.failures, res.failures[0]["error"] if res.failures else ""
+    assert res.checks, "the experiment declares no checks"
+    for f in ARTEFACTS[name]:
+        assert (tmp_path / f).is_file(), f"{name}: {f} missing"
+    assert "**FAIL**" in (tmp_path / "summary.md").read_text() or all(c.passed for c in res.checks)
+    saved = json.loads((tmp_path / "checks.json").read_text())
+    assert [c["name"] for c in saved] == [c.name for c in res.checks]
+    for c in res.checks:
+        miss = next((why for (e, start), why in KNOWN_MISSES.items() if e == name and c.name.startswith(start)), None)
+        if miss is None:
+            assert c.passed, f"{name}: check failed: {c.name}: {c.detail}"
+        else:
+            assert not c.passed, f"{name}: known miss now met, update the records: {c.name}: {c.detail}"
+    for (e, start) in KNOWN_MISSES:
+        if e == name:
+            assert any(c.name.startswith(start) for c in res.checks), f"{name}: no check named {start!r}"
