@@ -153,8 +153,8 @@ def objecttrack_throughput(n, rows):
     return lines
 
 
-def groundvo_baseline(seeds, route_length):
-    env = gym.make("polar_sim/GroundVO-v0", route_length=route_length)
+def groundvo_baseline(seeds, route_length, kw):
+    env = gym.make("polar_sim/GroundVO-v0", route_length=route_length, **kw)
     pol = PurePursuitVO()
     out = []
     for s in seeds:
@@ -171,8 +171,9 @@ def groundvo_baseline(seeds, route_length):
         out.append(dict(seed=s, steps=n, end=end, drift=info["drift"], drift_pct=100 * info["drift"] / route_length,
                         progress=info["progress"], heading=np.degrees(info["heading_error"]), max_cte=max_cte,
                         max_drift=max_drift, success=info["is_success"]))
-        print(f"  GroundVO seed {s}: {end} after {n} steps, final drift {info['drift']:.2f} m "
-              f"({out[-1]['drift_pct']:.2f} % of {route_length:.0f} m), max cte {max_cte:.2f} m", file=sys.stderr, flush=True)
+        print(f"  GroundVO {kw} seed {s}: {end} after {n} steps, final drift {info['drift']:.2f} m "
+              f"({out[-1]['drift_pct']:.2f} % of {route_length:.0f} m), max cte {max_cte:.2f} m",
+              file=sys.stderr, flush=True)
     env.close()
     return out
 
@@ -207,8 +208,9 @@ def pictures(vo_steps=220, track_steps=62):
     import cv2
 
     root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs", "img")
-    for env_id, pol, steps, name in (("polar_sim/GroundVO-v0", PurePursuitVO(), vo_steps, "env_groundvo.png"),
-                                     ("polar_sim/ObjectTrack-v0", VisualServoReach(), track_steps, "env_objecttrack.png")):
+    for env_id, pol, steps, name in (
+            ("polar_sim/GroundVO-v0", PurePursuitVO(), vo_steps, "env_groundvo.png"),
+            ("polar_sim/ObjectTrack-v0", VisualServoReach(), track_steps, "env_objecttrack.png")):
         env = gym.make(env_id, render_mode="rgb_array")
         obs, _ = env.reset(seed=0)
         pol.reset()
@@ -260,36 +262,52 @@ def main():
     pw, pc = per["physics"]
     out += ["", f"GroundVO-v0 against the renderer: the camera render alone would run at {1 / rc:.0f} frames/s on "
             f"CPU ({1 / rw:.0f} wall at this load); render + physics at {1 / (rc + pc):.0f}/s on CPU; the full step "
-            f"(+ VO) at {float(rows[0][3]):.0f}/s on CPU = {100 * float(rows[0][3]) * rc:.0f} % of the render rate.", ""]
+            f"(+ VO) at {float(rows[0][3]):.0f}/s on CPU = {100 * float(rows[0][3]) * rc:.0f} % of the render "
+            "rate.", ""]
     print("baselines ...", file=sys.stderr, flush=True)
-    la0 = load()
-    vo = groundvo_baseline(range(n_vo), args.route_length)
+    vo_sets = [("default", {})] + ([] if args.quick else [("supersample=True", {"supersample": True})])
+    results = []
+    for label, kw in vo_sets:
+        la0 = load()
+        results.append((label, la0, groundvo_baseline(range(n_vo), args.route_length, kw)))
     tr = objecttrack_baseline(range(n_tr))
-    if vo:
-        out += [f"## PurePursuitVO on GroundVO-v0 ({n_vo} seeds, {args.route_length:.0f} m routes; load {la0})", "",
-                "Final drift = distance between the estimated and the true position when the episode ends, "
-                "as % of the route length (target: within 3 %).", "",
-                "| seed | end | steps | true progress (m) | final drift (m) | final drift (% of route) | heading error (deg) | max drift (m) | max cross-track (m) |",
-                "|---|---|---|---|---|---|---|---|---|"]
-        for r in vo:
-            out.append(f"| {r['seed']} | {r['end']} | {r['steps']} | {r['progress']:.0f} | {r['drift']:.2f} | {r['drift_pct']:.2f} | "
-                       f"{r['heading']:+.2f} | {r['max_drift']:.2f} | {r['max_cte']:.2f} |")
-        d = np.array([r["drift_pct"] for r in vo])
-        ok = [r for r in vo if r["success"]]
-        out += ["", f"Reached the end: {len(ok)}/{len(vo)}. Final drift: mean {d.mean():.2f} %, max {d.max():.2f} %, "
-                f"{int((d <= 3).sum())}/{len(vo)} within 3 % of the route length"
-                + (f"; over the episodes that reached the end: mean {np.mean([r['drift_pct'] for r in ok]):.2f} %, "
-                   f"max {np.max([r['drift_pct'] for r in ok]):.2f} %." if ok else "."), ""]
+    for label, la0, vo in results:
+        if vo:
+            out += [f"## PurePursuitVO on GroundVO-v0, {label} ({n_vo} seeds, {args.route_length:.0f} m routes; "
+                    f"load {la0})", "",
+                    "Final drift = distance between the estimated and the true position when the episode ends, "
+                    "as % of the route length (target: within 3 %).", "",
+                    "| seed | end | steps | true progress (m) | final drift (m) | final drift (% of route) "
+                    "| heading error (deg) | max drift (m) | max cross-track (m) |",
+                    "|---|---|---|---|---|---|---|---|---|"]
+            for r in vo:
+                out.append(f"| {r['seed']} | {r['end']} | {r['steps']} | {r['progress']:.0f} | {r['drift']:.2f} "
+                           f"| {r['drift_pct']:.2f} | {r['heading']:+.2f} | {r['max_drift']:.2f} "
+                           f"| {r['max_cte']:.2f} |")
+            d = np.array([r["drift_pct"] for r in vo])
+            ok = [r for r in vo if r["success"]]
+            line = (f"Reached the end: {len(ok)}/{len(vo)}. Final drift: mean {d.mean():.2f} %, max {d.max():.2f} %, "
+                    f"{int((d <= 3).sum())}/{len(vo)} within 3 % of the route length")
+            if ok:
+                good = [r["drift_pct"] for r in ok]
+                line += (f"; over the episodes that reached the end: mean {np.mean(good):.2f} %, "
+                         f"max {np.max(good):.2f} %")
+            out += ["", line + ".", ""]
     if tr:
         out += [f"## VisualServoReach on ObjectTrack-v0 ({n_tr} seeds)", "",
-                "| seed | object | success | steps | final position error (mm) | tracking error mean (mm) | max (mm) | lost frames |",
+                "| seed | object | success | steps | final position error (mm) | tracking error mean (mm) "
+                "| max (mm) | lost frames |",
                 "|---|---|---|---|---|---|---|---|"]
         for r in tr:
-            out.append(f"| {r['seed']} | {r['target']} | {r['success']} | {r['steps']} | {1000 * r['final_error']:.1f} | "
-                       f"{1000 * r['mean_track']:.2f} | {1000 * r['max_track']:.2f} | {r['lost']} |")
+            out.append(f"| {r['seed']} | {r['target']} | {r['success']} | {r['steps']} "
+                       f"| {1000 * r['final_error']:.1f} | {1000 * r['mean_track']:.2f} | {1000 * r['max_track']:.2f} "
+                       f"| {r['lost']} |")
         ok = [r for r in tr if r["success"]]
-        out += ["", f"Success {len(ok)}/{len(tr)}" + (f"; median steps to success {np.median([r['steps'] for r in ok]):.0f} "
-                                                       f"({np.median([r['steps'] for r in ok]) / 30:.1f} s)." if ok else "."), ""]
+        line = f"Success {len(ok)}/{len(tr)}"
+        if ok:
+            med = float(np.median([r["steps"] for r in ok]))
+            line += f"; median steps to success {med:.0f} ({med / 30:.1f} s)"
+        out += ["", line + ".", ""]
     out += [f"Load average at the end: {load()}."]
     text = "\n".join(out) + "\n"
     print(text)

@@ -39,6 +39,8 @@ WARMUP = 5
 
 def snake(n, tile=30.0):
     """Waypoints (k, 2) of the snake through an n x n tiled office (see the module docstring)."""
+    from polar_sim.sim.office import LANE_X
+
     pts = [(-13.0, 0.0)]
     for j in range(n):
         y = tile * j
@@ -48,7 +50,7 @@ def snake(n, tile=30.0):
             x_end = tile * (n - 1) + 13.0 if east else -13.0
             pts.append((x_end, y))
         else:
-            x_lane = tile * (n - 1) + 10.0 if east else 10.0
+            x_lane = tile * (n - 1) + LANE_X if east else LANE_X
             pts += [(x_lane, y), (x_lane, y + tile)]
     p = np.asarray(pts, float)
     out = [p[0]]
@@ -153,7 +155,7 @@ def summarize(table, out_dir, quick):
     tcols = ["tiles", "seed"] + [f"cpu_ms_median_tile{k}" for k in (1, 4, 16, 64)]
     ser = _series(out_dir, table)
     fig, ax = plt.subplots(1, 2, figsize=(13, 4.2))
-    bins = np.linspace(0, max(np.percentile(v["cpu_ms"], 99.5) for v in ser.values()) * 1.1, 60)
+    bins = np.linspace(0, max(np.percentile(v["cpu_ms"][WARMUP:], 99.5) for v in ser.values()) * 1.1, 60)
     for (n, s), v in sorted(ser.items()):
         ax[0].hist(v["cpu_ms"][WARMUP:], bins=bins, histtype="step", lw=1.5, density=True,
                    label=f"{n * n}x area (seed {s}, {len(v['cpu_ms'])} scans)")
@@ -163,18 +165,18 @@ def summarize(table, out_dir, quick):
     ax[0].set_title("update time per scan")
     big = max(ser)
     v = ser[big]
-    x = np.arange(len(v["cpu_ms"]))
-    ax[1].plot(x, v["cpu_ms"], ".", ms=1.5, alpha=0.5, label="per scan")
+    x = np.arange(WARMUP, len(v["cpu_ms"]))
+    ax[1].plot(x, v["cpu_ms"][WARMUP:], ".", ms=1.5, alpha=0.5, label="per scan")
     k = 51
     if len(x) > k:
-        med = np.array([np.median(v["cpu_ms"][max(0, i - k // 2): i + k // 2 + 1]) for i in range(len(x))])
+        med = np.array([np.median(v["cpu_ms"][max(WARMUP, i - k // 2): i + k // 2 + 1]) for i in x])
         ax[1].plot(x, med, "-", c="k", lw=1.2, label=f"running median ({k} scans)")
     ax2 = ax[1].twinx()
-    ax2.plot(x, v["samples"], "-", c="tab:red", lw=1, label="surface samples in the map")
+    ax2.plot(x, v["samples"][WARMUP:], "-", c="tab:red", lw=1, label="surface samples in the map")
     ax2.set_ylabel("samples", color="tab:red")
     ax[1].set_xlabel(f"scan index ({big[0] * big[0]}x world, the map grows along the drive)")
     ax[1].set_ylabel("CPU ms")
-    ax[1].set_ylim(0, np.percentile(v["cpu_ms"], 99.5) * 1.2)
+    ax[1].set_ylim(0, np.percentile(v["cpu_ms"][WARMUP:], 99.5) * 1.2)
     ax[1].legend(loc="upper left", fontsize=8)
     ax[1].set_title("update time as the map grows")
     fig_line = savefig(fig, out_dir, "structure_mapping_cost")

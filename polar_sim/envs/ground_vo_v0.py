@@ -106,7 +106,7 @@ class GroundVOEnv(RoverDriveEnv):
         chase = super()._render_frame()
         h, w = chase.shape[:2]
         cam = self._rgb.astype(np.float32)
-        gp = cv2.resize(self._odometry.estimate.ground_prob, (cam.shape[1], cam.shape[0]))
+        gp = cv2.resize(self._odometry.ground_prob, (cam.shape[1], cam.shape[0]), interpolation=cv2.INTER_LINEAR)
         tint = np.array([40.0, 220.0, 90.0], np.float32)
         cam = (cam * (1 - 0.45 * gp[..., None]) + tint * 0.45 * gp[..., None]).astype(np.uint8)
         cam = cv2.resize(cam, (w, int(round(w * cam.shape[0] / cam.shape[1]))), interpolation=cv2.INTER_AREA)

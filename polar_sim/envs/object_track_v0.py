@@ -34,8 +34,9 @@ class ObjectTrackEnv(TabletopReachEnv):
 
     ## Action Space, Reward, Episode End
     As ``TabletopReach-v0``: a normalised hand velocity (vx, vy, vz, yaw rate), world frame;
-    minus the true distance to the pre-grasp pose each step, +10 on success; terminated on
-    success (2 cm, 10 deg of the true pre-grasp pose), truncated at 300 steps (10 s).
+    minus the true distance to the pre-grasp pose each step, +10 on success, -10 for knocking
+    the object off the table; terminated on success (2 cm, 10 deg of the true pre-grasp pose) or
+    when the object is off the table, truncated at 300 steps (10 s).
 
     ## Arguments
     ``TabletopReach-v0``'s, plus:

@@ -15,6 +15,8 @@ __all__ = ["TabletopReachEnv", "ReachTask", "DEPTH_MAX"]
 
 DEPTH_MAX = 10.0  # m; the room's walls are within 3 m. Missing depth is 0 in the observation.
 SUCCESS_BONUS = 10.0
+DROP_PENALTY = 10.0
+DROP_HEIGHT = 0.05  # m below the table top at which the object counts as knocked off the table
 YAW_WEIGHT = 0.05  # m per rad of yaw error in the distance to the pre-grasp pose
 PALM_HALF_THICKNESS = 0.012  # m, polar_sim.sim.hand.PALM_HALF[2]
 
@@ -97,12 +99,14 @@ class TabletopReachEnv(PolarMujocoEnv):
 
     ## Reward
     ``distance`` (minus the true distance to the pre-grasp pose: position error (m) + 0.05 m/rad x
-    yaw error, every step) + ``success`` (+10 on success). The terms are in ``info["reward_terms"]``.
+    yaw error, every step) + ``success`` (+10 on success) + ``dropped`` (-10 when the hand knocks
+    the object off the table). The terms are in ``info["reward_terms"]``.
 
     ## Episode End
     Terminated on success: the hand within ``success_position`` (2 cm) and ``success_yaw`` (10
-    deg) of the true pre-grasp pose. Truncated by the ``TimeLimit`` of the registration (300 steps
-    = 10 s at 30 Hz).
+    deg) of the true pre-grasp pose; or when the object has been knocked off the table (its origin
+    5 cm below the table top). Truncated by the ``TimeLimit`` of the registration (300 steps = 10 s
+    at 30 Hz).
 
     ## Arguments
     | argument | default | meaning |
@@ -121,7 +125,8 @@ class TabletopReachEnv(PolarMujocoEnv):
     ## Truth in ``info``
     ``object_pose`` (4, 4, world), ``object_pose_cam`` (T_cam_obj), ``pregrasp_pose`` (4, 4,
     world), ``hand_pose`` (4, 4), ``position_error`` (m), ``yaw_error`` (rad, the turn the hand
-    still needs), ``distance``, ``in_contact`` (hand touches the target), ``disturbance``
+    still needs), ``distance``, ``in_contact`` (hand touches the target), ``dropped`` (the object
+    was knocked off the table), ``disturbance``
     (``"slide"`` or ``"rest"``), ``is_success``, ``target``, ``layout_seed``, ``time`` (s, of the
     frame in the observation).
 
@@ -221,7 +226,10 @@ class TabletopReachEnv(PolarMujocoEnv):
         return G, pos, yaw
 
     def _success(self, pos, yaw):
-        return pos < self._success_pos and abs(yaw) < self._success_yaw
+        return pos < self._success_pos and abs(yaw) < self._success_yaw and not self._dropped()
+
+    def _dropped(self):
+        return bool(self._truth["objects"][self.task.target][2, 3] < self._world.meta["table_z"] - DROP_HEIGHT)
 
     # -- observation, info, reward --------------------------------------------------------
     def _hand_obs(self):
@@ -239,14 +247,16 @@ class TabletopReachEnv(PolarMujocoEnv):
         return {"object_pose": T_obj.copy(), "object_pose_cam": inv_pose(self._T_world_cam) @ T_obj,
                 "pregrasp_pose": G, "hand_pose": tr["hand_pose"].copy(), "position_error": pos, "yaw_error": yaw,
                 "distance": pos + YAW_WEIGHT * abs(yaw), "in_contact": bool(tr["in_contact"]),
+                "dropped": self._dropped(),
                 "disturbance": str(tr["phase"]), "is_success": self._success(pos, yaw), "target": self.task.target,
                 "layout_seed": self._layout_seed, "time": self._world.time}
 
     def _get_reward(self):
         _, pos, yaw = self._errors()
-        ok = self._success(pos, yaw)
-        terms = {"distance": -(pos + YAW_WEIGHT * abs(yaw)), "success": SUCCESS_BONUS if ok else 0.0}
-        return sum(terms.values()), ok, terms
+        ok, dropped = self._success(pos, yaw), self._dropped()
+        terms = {"distance": -(pos + YAW_WEIGHT * abs(yaw)), "success": SUCCESS_BONUS if ok else 0.0,
+                 "dropped": -DROP_PENALTY if dropped else 0.0}
+        return sum(terms.values()), ok or dropped, terms
 
     def _render_frame(self):
         """A third-person view of the table beside the camera image."""

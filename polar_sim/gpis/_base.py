@@ -14,7 +14,8 @@ import numpy as np
 from polar_sim._validation import as_points, check_updated
 from polar_sim.gpis import _io
 from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
-from polar_sim.gpis._kernels import apply_new, apply_reeval, candidates, gather_training, query_gp
+from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
+                                     gather_training, query_gp)
 from polar_sim.gpis._localgp import GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
 
@@ -221,9 +222,9 @@ class GPISMapBase:
         R = self._TRAIN_R * self._hc()
         w = 2.0 * self._hc()
         reach = int(np.ceil(R / w - 0.5))
-        U = self._neigh(np.unique(self._cluster_coords(changed), axis=0), reach)
-        slots = self._slots_of(U)
-        slots = np.unique(slots[slots >= 0])
+        tr = self.tree_
+        slots = dirty_slots(np.ascontiguousarray(changed, np.float64), reach, tr.geo, tr.cgrid,
+                            tr.gshape, tr.goff, tr.node_sample.shape[0])
         self._train(slots)
 
     # -- query ----------------------------------------------------------------------------------

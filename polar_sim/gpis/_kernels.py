@@ -9,7 +9,8 @@ import numpy as np
 from polar_sim.gpis._localgp import _dot4
 from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove
 
-__all__ = ["apply_new", "apply_reeval", "candidates", "gather_training", "query_gp", "maybe_new"]
+__all__ = ["apply_new", "apply_reeval", "candidates", "dirty_slots", "gather_training", "query_gp",
+           "maybe_new"]
 
 
 @nb.njit(cache=True)
@@ -167,6 +168,36 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_sample, node_internal, le
             nc += 1
             ptr[nc] = ns
     return cent[:nc], ptr[: nc + 1], samp[:ns]
+
+
+@nb.njit(cache=True)
+def dirty_slots(pts, reach, geo, cgrid, gshape, goff, nslots):
+    """Sorted slots of the non-empty clusters within ``reach`` cells (per axis) of the cells
+    holding pts (n, d): the clusters whose training sets may contain those positions."""
+    n, dim = pts.shape
+    w = geo[dim]
+    mark = np.zeros(nslots, np.bool_)
+    span = 2 * reach + 1
+    total = 1
+    for _ in range(dim):
+        total *= span
+    cc = np.empty(dim, np.int64)
+    c0 = np.empty(dim, np.int64)
+    for j in range(n):
+        for k in range(dim):
+            c0[k] = np.int64(np.floor((pts[j, k] - geo[k]) / w))
+        for flat in range(total):
+            r = flat
+            for k in range(dim):
+                cc[k] = c0[k] + r % span - reach
+                r //= span
+            g = _lin(cc, gshape, goff)
+            if g < 0:
+                continue
+            s = cgrid[g]
+            if s >= 0:
+                mark[s] = True
+    return np.nonzero(mark)[0].astype(np.int64)
 
 
 @nb.njit(cache=True)

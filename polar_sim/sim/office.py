@@ -8,9 +8,9 @@ a closed form. Nothing is placed in the corridor or within 1.2 m of a door.
 30 m apart (tile (i, j) is shifted by (30 i, 30 j) m; tile (0, 0) is the original position),
 each with its own seeded furniture. Neighbouring tiles share their outer wall, which then has a
 1.2 m door: east-west on the corridor axis (y = 30 j), so the corridors form one long corridor
-per row, and north-south at x = 30 i + 10 between the east office and the store of the tile
-above, through a furniture-free lane 1 m either side of x = 30 i + 10. The outer boundary of
-the whole world is closed.
+per row, and north-south at x = 30 i + 9.85 between the east office and the store of the tile
+above, in line with their corridor doors, through a furniture-free lane 1 m either side of it.
+The outer boundary of the whole world is closed.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 
 from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
 
-__all__ = ["build_office", "ROOMS", "DOORS", "TILE"]
+__all__ = ["build_office", "ROOMS", "DOORS", "TILE", "LANE_X"]
 
 #: Rooms as (x0, x1, y0, y1) interiors, metres.
 ROOMS = {
@@ -34,6 +34,9 @@ ROOMS = {
 }
 #: Side of one floor tile, metres (the ``tiles`` option repeats the floor at this pitch).
 TILE = 30.0
+#: x of the tiled north-south passage in each tile: the centre of the east office's and the
+#: store's doors onto the corridor (9.475-10.225 m).
+LANE_X = 9.85
 #: Door centres (x, y), metres.
 DOORS = [(-10, 1.5), (0, 1.5), (10, 1.5), (-8, -1.5), (10, -1.5), (5, 7.9), (5, -8.5)]
 
@@ -56,7 +59,7 @@ def _furniture(rng):
 
 def _place_furniture(spec, rng, offset, lane, k, per_room):
     """Seeded furniture in the five rooms of one tile shifted by ``offset`` (x, y); ``lane``:
-    keep footprints 1 m clear of the line x = offset_x + 10 (the tiled north-south passage).
+    keep footprints 1 m clear of the line x = offset_x + LANE_X (the tiled north-south passage).
     Returns the next free furniture index."""
     ox, oy = offset
     placed = []  # (x, y, radius) footprints, for spacing
@@ -72,7 +75,7 @@ def _place_furniture(spec, rng, offset, lane, k, per_room):
                 y = rng.uniform(y0 + rad, y1 - rad)
                 if np.min(np.hypot(doors[:, 0] - x, doors[:, 1] - y)) < rad + 1.2:
                     continue
-                if lane and abs(x - 10.0) < rad + 1.0:
+                if lane and abs(x - LANE_X) < rad + 1.0:
                     continue
                 # Keep 0.9 m between pieces so the rover can pass between most of them.
                 if any(np.hypot(px - x, py - y) < rad + pr + 0.9 for px, py, pr in placed):
@@ -139,8 +142,8 @@ def _tile_walls(spec, n):
     for i in range(n + 1):  # vertical lines x = -15 + 30 i; doors on each row's corridor axis
         doors = [TILE * j for j in range(n)] if 0 < i < n else []
         _line_with_doors(spec, f"wall_x{i}", -h + TILE * i, lo, hi, doors, vertical=True)
-    for j in range(n + 1):  # horizontal lines y = -15 + 30 j; doors at x = 30 i + 10
-        doors = [TILE * i + 10.0 for i in range(n)] if 0 < j < n else []
+    for j in range(n + 1):  # horizontal lines y = -15 + 30 j; doors at x = 30 i + LANE_X
+        doors = [TILE * i + LANE_X for i in range(n)] if 0 < j < n else []
         _line_with_doors(spec, f"wall_y{j}", -h + TILE * j, lo, hi, doors, vertical=False)
     floor = spec.geom("floor")
     floor.size = [TILE * n / 2 + 0.5, TILE * n / 2 + 0.5, 0.5]

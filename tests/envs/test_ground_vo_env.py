@@ -146,3 +146,27 @@ def test_pure_pursuit_on_vo_makes_progress_against_truth():
     assert set(info["reward_terms"]) == {"progress", "cross_track", "fail", "success"}
     assert reward == pytest.approx(sum(info["reward_terms"].values()))
     env.close()
+
+
+class _StandStillVO:
+    """A VO of one's own: always at the first camera pose, not moving."""
+
+    def __init__(self, K, camera_height, seed=None):
+        self.K = K
+
+    def process(self, rgb, t):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(pose=np.eye(4), speed=0.0, yaw_rate=0.0, status="mine")
+
+
+def test_a_vo_of_ones_own_plugs_in():
+    # A factory passed as vo= replaces GroundVO: its pose, chained onto the start pose, is the
+    # estimate; without a ground_prob the image is zeros.
+    env = gym.make(ENV_ID, vo=_StandStillVO, route_length=50.0)
+    obs, info = env.reset(seed=0)
+    obs, _, _, _, info = env.step(np.array([0.5, 0.0], np.float32))
+    start = env.unwrapped.task.start_pose
+    np.testing.assert_allclose(info["est_pose2d"][:2], start[:2, 3], atol=1e-9)
+    assert info["vo_status"] == "mine" and not obs["ground_prob"].any() and obs in env.observation_space
+    env.close()

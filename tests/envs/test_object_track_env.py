@@ -149,6 +149,28 @@ def test_visual_servo_reaches_the_moving_object_against_truth():
     G, H = info["pregrasp_pose"], info["hand_pose"]
     assert info["position_error"] == pytest.approx(np.linalg.norm(G[:3, 3] - H[:3, 3]))
     assert info["is_success"] == (info["position_error"] < 0.02 and abs(info["yaw_error"]) < np.radians(10))
-    assert set(info["reward_terms"]) == {"distance", "success"}
+    assert set(info["reward_terms"]) == {"distance", "success", "dropped"} and not info["dropped"]
     assert reward == pytest.approx(sum(info["reward_terms"].values()))
+    env.close()
+
+
+class _FrozenTracker:
+    """A tracker of one's own: always reports the initial pose, with no covariance."""
+
+    def __init__(self, model_points, K, initial_pose, model_normals=None, random_state=0):
+        self.T = np.array(initial_pose)
+
+    def process(self, rgb, depth, t):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(pose=self.T.copy())
+
+
+def test_a_tracker_of_ones_own_plugs_in():
+    # A factory passed as tracker= replaces ObjectTracker: its pose, mapped through the camera
+    # pose, is the estimate; without a covariance the uncertainty reads as the bound (unknown).
+    env = gym.make(ENV_ID, tracker=_FrozenTracker)
+    obs, info = env.reset(seed=0)
+    np.testing.assert_allclose(info["est_object_pose"], env.unwrapped.task.initial_object_pose, atol=1e-9)
+    assert np.all(obs["object_std"] == 10.0) and obs in env.observation_space
     env.close()

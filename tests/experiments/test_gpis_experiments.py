@@ -9,6 +9,8 @@ is met, the test fails so that benchmarks/results/structure.md and the README ge
 
 import json
 
+import numpy as np
+
 import pytest
 
 from polar_sim.runner import run_experiment
@@ -56,3 +58,25 @@ def test_quick_experiment(name, tmp_path):
     for (e, start) in KNOWN_MISSES:
         if e == name:
             assert any(c.name.startswith(start) for c in res.checks), f"{name}: no check named {start!r}"
+
+
+# office2d tiles=2: four floors joined by doors; the mapping_cost snake keeps clear of every wall
+def test_tiled_office_is_drivable():
+    from polar_sim.experiments.mapping_cost import snake
+    from polar_sim.sim import World
+
+    w = World("office2d", seed=0, kinematic=True, tiles=2)
+    one = World("office2d", seed=0, kinematic=True)
+    try:
+        assert w.meta["bounds"] == (-15.0, 45.0, -15.0, 45.0) and "tiles" not in one.meta
+        path = snake(2)
+        assert w.sdf(path).min() > 0.35                     # doors between tiles, furniture-free lanes
+        assert one.sdf(path[path[:, 0] < 14.5][:10]).min() > 0.5
+        # tile (0, 0) keeps the untiled furniture where the lane allows it; tile (1, 1) has its own
+        assert w.model.ngeom > 3 * one.model.ngeom
+        # the walls between tiles are there, with a door only where the snake passes
+        assert w.sdf(np.array([[20.0, 15.0], [15.0, 8.0]])).max() < 0.0
+        assert w.sdf(np.array([[39.85, 15.0], [15.0, 0.0]])).min() > 0.4
+    finally:
+        w.close()
+        one.close()
