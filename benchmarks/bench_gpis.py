@@ -9,6 +9,9 @@ Usage: python benchmarks/bench_gpis.py [--quick] [--legacy] [--out FILE]
   untimed pass).
 - 3D update: 640x480 depth frames of an analytic sphere (r = 0.1 m) orbited at 0.6 m.
 - 3D query: 1000 points within 1 cm of the sphere surface, and uniform in its bounding box.
+- GPISNav-v0 (the closed-loop navigation environment, default arguments, seed 0, driven by
+  ``SDFReactive``): per-step map update (270 beams) and 64-point stencil query, and the whole
+  ``env.step`` (physics, lidar, map, observation), first 5 steps excluded (--no-env: skip).
 
 The machine is shared: wall times include time the process waited for a CPU, thread CPU time
 does not. Both are printed, with the load average. Prints a markdown table.
@@ -112,10 +115,55 @@ def bench_3d(n_frames, legacy):
     return res
 
 
+def bench_env(n_steps=100, seed=0):
+    """Map update / stencil query / whole step inside GPISNav-v0, as the environment calls them."""
+    import gymnasium as gym
+
+    import polar_sim.envs  # noqa: F401  (registers the environments)
+    from polar_sim.envs.policies import SDFReactive
+
+    env = gym.make("polar_sim/GPISNav-v0")
+    m = env.unwrapped._source.map
+    rec = {"update": [], "query": []}
+    orig = {"update": m.update, "query": m.query}
+
+    def timed(name):
+        def f(*a):
+            t0, c0 = time.perf_counter(), time.thread_time()
+            r = orig[name](*a)
+            rec[name].append((time.perf_counter() - t0, time.thread_time() - c0, len(a[0])))
+            return r
+        return f
+
+    m.update, m.query = timed("update"), timed("query")
+    pol = SDFReactive()
+    obs, _ = env.reset(seed=seed)
+    pol.reset()
+    steps = []
+    for _ in range(n_steps):
+        t0, c0 = time.perf_counter(), time.thread_time()
+        obs, _, term, trunc, _ = env.step(pol(obs))
+        steps.append((time.perf_counter() - t0, time.thread_time() - c0))
+        if term or trunc:
+            obs, _ = env.reset()
+            pol.reset()
+    env.close()
+    up = np.array([r[:2] for r in rec["update"][5:]])
+    q = np.array([r[:2] for r in rec["query"][5:] if r[2] == 64])
+    st = np.array(steps[5:])
+    return {"n": len(st), "samples": len(m.samples()["points"]),
+            "update": (_stats(up[:, 0]), _stats(up[:, 1])),
+            "query": (_stats(q[:, 0]), _stats(q[:, 1])),
+            "queries_per_step": len(q) / len(st),
+            "step": (_stats(st[:, 0]), _stats(st[:, 1])),
+            "steps_per_s": (len(st) / st[:, 0].sum(), len(st) / st[:, 1].sum())}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="600 scans, 6 frames")
     ap.add_argument("--legacy", action="store_true", help="also benchmark legacy=True")
+    ap.add_argument("--no-env", action="store_true", help="skip the GPISNav-v0 measurement")
     ap.add_argument("--out", help="append the markdown table to this file")
     a = ap.parse_args(argv)
     n2, n3 = (600, 6) if a.quick else (2879, 24)
@@ -148,6 +196,20 @@ def main(argv=None):
             f"| 3D query, 1000 uniform pts in bbox, ms | {mode} | {r['q_uniform'][0]:.2f}"
             f" | {r['q_uniform'][1]:.2f} | 10 |",
             f"| 3D SDF RMSE within 1 cm, mm ({r['samples']} samples) | {mode} | {r['rmse_mm']:.2f} | | 2 |",
+        ]
+        print("\n".join(lines[-4:]), flush=True)
+    if not a.no_env:
+        r = bench_env(100 if not a.quick else 40)
+        f = "{:.2f} / {:.2f}".format
+        lines += [
+            f"| GPISNav-v0 map update (270 beams), ms, {r['n']} steps | default | {f(*r['update'][0])}"
+            f" | {f(*r['update'][1])} | |",
+            f"| GPISNav-v0 stencil query (64 pts), ms ({r['queries_per_step']:.1f} per step) | default"
+            f" | {f(*r['query'][0])} | {f(*r['query'][1])} | |",
+            f"| GPISNav-v0 whole env.step, ms ({r['samples']} samples at the end) | default"
+            f" | {f(*r['step'][0])} | {f(*r['step'][1])} | |",
+            f"| GPISNav-v0 steps per second | default | {r['steps_per_s'][0]:.0f}"
+            f" | {r['steps_per_s'][1]:.0f} | >= 80 |",
         ]
         print("\n".join(lines[-4:]), flush=True)
     lines.append(f"\nload average after: {os.getloadavg()[0]:.2f}")

@@ -345,7 +345,9 @@ def classify_worst(world, details, obs: Observation, corner_pts, *, top=0.01, co
     :func:`score_surface_2d`, each located at its true surface point (an estimated point is
     moved onto the true surface along the exact gradient; an observed true point is itself) and
     classified as ``corner`` (within ``corner_r`` of a true corner, :func:`corners`), ``sparse``
-    (hit by fewer than ``sparse_k`` scans) or ``wall`` (a well-seen flat stretch).
+    (hit by fewer than ``sparse_k`` scans; the experiments use the number of scans taken over
+    1 m of travel, at least 2: "seen from less than a metre of the drive") or ``wall`` (a
+    well-seen flat stretch).
 
     Returns the shares of each class and the located worst points (k, 2) with their class.
     """

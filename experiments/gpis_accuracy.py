@@ -81,7 +81,8 @@ def _office(seed, ctx):
     row.update(legacy_far_mae_m=leg["far_mae_m"], legacy_near_rmse_m=leg["near_rmse_m"])
     lsurf, _ = C.score_surface_2d(w, C.polyline_points(maps["legacy"].surface()), obs)
     row["legacy_hausdorff_m"] = lsurf["hausdorff_m"]
-    shares, (wq, wcls) = C.classify_worst(w, det, obs, C.corners(w))
+    # "sparse": seen from less than 1 m of the drive (10 scans at 10 Hz and 1 m/s)
+    shares, (wq, wcls) = C.classify_worst(w, det, obs, C.corners(w), sparse_k=int(np.ceil(10 / every)))
     row.update(shares)
     row.update(n_scans=len(d.poses), travelled_m=float(d.travelled[-1]),
                update_cpu_ms_median=1e3 * float(np.median(cpu["default"])),
