@@ -77,15 +77,18 @@ def _held_scale_vo(K, h, speed_truth, **kw):
             vf.predict()
             yf.predict()
             speed_raw = np.nan
-            if not getattr(self, "scale_set_", False):
-                # The only ground truth: the metric scale of the first solved frame.
-                vf.reset(float(speed_truth[self.n_frames_ - 1]), 1e-6)
-                self.scale_set_ = True
-            elif usable.sum() >= c["min_inliers"]:
-                # The frame's scale is its structure's (no speed filter: filtering would re-anchor the
-                # depths to a lagging speed every frame and make the scale lag the truth, not drift).
+            if usable.sum() >= c["min_inliers"]:
+                # The frame's scale is its structure's: the median ratio of the measured d̄ to the propagated
+                # metric inverse depths (no speed filter: filtering would re-anchor the depths to a lagging
+                # speed every frame, so the scale would lag the truth instead of drifting).
                 speed_raw = float(np.median(m.dbar[vi][usable] / trk["d"][ti][usable]))
                 vf.reset(speed_raw, 1e-6)
+                self.scale_held_ = True
+            elif not getattr(self, "scale_held_", False):
+                # Start-up, the only ground truth: the true speed of the first solved frame gives the metric
+                # scale. (The rover starts from rest, and a static frame on the next images resets speed
+                # and depths, so this repeats until the structure has carried the scale once.)
+                vf.reset(float(speed_truth[self.n_frames_ - 1]), 1e-6)
             yf.update(float(m.rates[1]))
             self.rates_ = np.array([rates_raw[0], yf.x, rates_raw[2]])
             if vf.x > 0:
@@ -270,7 +273,7 @@ def summarize(table, out_dir, quick):
         axes[0].bar(x, vt, width, label=dict(LABELS)[lab])
         axes[1].bar(x, vr, width, label=dict(LABELS)[lab])
     for ax, yl, tgt in ((axes[0], "translation error (%)", TARGET_T_PCT), (axes[1], "rotation error (deg/m)", TARGET_R_DEGM)):
-        ax.set_xticks(np.arange(len(routes)), routes, rotation=30, fontsize=8)
+        ax.set_xticks(np.arange(len(routes)), routes, rotation=30, ha="right", fontsize=8)
         ax.set_ylabel(yl + (" (scaled segments)" if quick else ""))
         ax.axhline(tgt, color="k", ls="--", lw=0.8)
         ax.grid(alpha=0.3, axis="y")

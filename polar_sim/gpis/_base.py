@@ -284,11 +284,10 @@ class GPISMapBase:
 
     def _faithful(self, pts):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
-        d = self.dim
         kd, idx = self._kd()
         tr = self.tree_
         if kd is None:
-            dist, grad, var_far = far_field(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
+            dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                             self._surfel_radius(), self.free_,
                                             1.0 + float(self.map_noise))
             return dist, grad, var_far

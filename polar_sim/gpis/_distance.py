@@ -194,6 +194,7 @@ def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
     return dist, grad, var
 
 
+
 @nb.njit(cache=True)
 def _observed(pts, grid, gshape, goff, res, seen):
     """``FreeSpace.observed`` in one pass (same cells, same answer)."""

@@ -397,10 +397,11 @@ def query_gp(pts, *args):
 
 
 @nb.njit(cache=True)
-def _ks_mean(x, alpha, X, kinds, a, dim, ks, rbuf, out):
+def _ks_mean(x, alpha, X, kinds, a, dim, ks, eb, out):
     """Cross-covariances ks (m, dim + 2) of one GP at x and the mean [f, grad] into out.
 
-    Same arithmetic, in the same order, as ``_localgp._predict_one``.
+    Same arithmetic as ``_localgp._predict_one``; the per-sample quantities (x - X, 1/r) are
+    computed once per sample and reused by its gradient observations (``eb`` (m, dim + 1)).
     """
     m = X.shape[0]
     a2 = a * a
@@ -411,24 +412,24 @@ def _ks_mean(x, alpha, X, kinds, a, dim, ks, rbuf, out):
         r2 = 0.0
         for k in range(dim):
             e = x[k] - X[p, k]
+            eb[p, 1 + k] = e
             r2 += e * e
         r = np.sqrt(r2)
         ex = np.exp(-a * r)
-        rbuf[p] = r
+        eb[p, 0] = 1.0 / r if r > 0.0 else 0.0
         ks[p, dim + 1] = ex
         ks[p, 0] = (1.0 + a * r) * ex
         for k in range(dim):
-            ks[p, 1 + k] = -a2 * (x[k] - X[p, k]) * ex
+            ks[p, 1 + k] = -a2 * eb[p, 1 + k] * ex
     for p in range(nv, m):
         c = (kinds[p] >> 32) - 1
         u = kinds[p] & 0xFFFFFFFF
-        r = rbuf[u]
         ex = ks[u, dim + 1]
-        dc = x[c] - X[p, c]
+        dc = eb[u, 1 + c]
         ks[p, 0] = a2 * dc * ex
-        inv_r = 1.0 / r if r > 0.0 else 0.0
+        inv_r = eb[u, 0]
         for k in range(dim):
-            v = (1.0 if k == c else 0.0) - a * (x[k] - X[p, k]) * dc * inv_r
+            v = (1.0 if k == c else 0.0) - a * eb[u, 1 + k] * dc * inv_r
             ks[p, 1 + k] = a2 * v * ex
     # the dim + 1 sums run side by side (independent chains), each in the original order
     s0 = 0.0
@@ -578,7 +579,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     best_k = np.empty(3, np.int64)
     iw = np.empty(6 * dim, np.int64)
     ks = np.empty((mmax, dim + 2))
-    rbuf = np.empty(mmax)
+    rbuf = np.empty((mmax, dim + 1))
     Z = np.empty((4, mmax))
     acc = np.empty(4)
     ne = 0
