@@ -44,65 +44,10 @@ SHAPE = {"drill": "distinct", "mug": "distinct", "bracket": "distinct", "box": "
          "bottle": "revolved", "can": "revolved"}
 
 
-def save_frames(ctx, name, config, a, meta):
-    """Per-frame arrays a summary needs (errors, IoU, CPU ms, flags), in the trial's folder."""
-    d = meta["diameter"]
-    e = a["adds"] if meta["symmetric"] else a["add"]
-    info = dict(sequence=name, config=config, object=meta["object"], diameter=d, width=meta["width"],
-                load=meta["load_start"])
-    np.savez_compressed(ctx.out_dir / "frames.npz", info=np.frombuffer(json.dumps(info).encode(), np.uint8),
-                        err_d=e / d, add=a["add"], adds=a["adds"], iou=a["iou"], cpu_ms=a["cpu_ms"],
-                        in_contact=a["in_contact"], occlusion=a["occlusion"], lost=a["lost"],
-                        hand_near=a["hand_near"], hand_near_tgt=a["hand_near_tgt"])
-
-
-def load_frames(out_dir):
-    """{(sequence, config): dict of per-frame arrays + info} from a run's trial folders."""
-    out = {}
-    for p in sorted((out_dir / "trials").glob("*/frames.npz")):
-        with np.load(p, allow_pickle=False) as z:
-            info = json.loads(bytes(z["info"]).decode())
-            out[(info["sequence"], info["config"])] = {**{k: z[k] for k in z.files if k != "info"}, **info}
-    return out
-
-
 def trial(params, seed, ctx):
     a, meta = C.track(params["sequence"], seed, params["variant"], quick=ctx.quick)
-    save_frames(ctx, params["sequence"], params["variant"], a, meta)
+    C.save_frames(ctx, params["sequence"], params["variant"], a, meta)
     return C.summarize_run(a, meta)
-
-
-def _by(table, key, value):
-    return [r for r in table if r[key] == value]
-
-
-def variant_rows(table, key="variant", order=VARIANT_ORDER):
-    """One row per variant: pooled and per-sequence-mean rates, speed."""
-    rows = []
-    for v in order:
-        rs = _by(table, key, v)
-        if not rs:
-            continue
-        rows.append({
-            key: v, "sequences": len(rs), "frames": int(sum(r["frames"] for r in rs)),
-            "add_ok": C.pooled(rs, "add_ok"), "add_ok_seqmean": float(np.mean([r["add_ok"] for r in rs])),
-            "add_ok_seqmin": float(np.min([r["add_ok"] for r in rs])),
-            "add_strict_ok": C.pooled(rs, "add_strict_ok"), "add_auc": C.pooled(rs, "add_auc"),
-            "s5cm5deg": C.pooled(rs, "s5cm5deg"),
-            "iou_ok": C.pooled(rs, "iou_ok"), "iou_ok_seqmean": float(np.mean([r["iou_ok"] for r in rs])),
-            "iou_mean": C.pooled(rs, "iou_mean"),
-            "hand_as_target": (sum(r["hand_tgt_px_touch"] for r in rs) / max(1, sum(r["hand_px_touch"] for r in rs))),
-            "occl_add_ok": C.pooled(rs, "occl_add_ok", "occl_frames"),
-            "lost": int(sum(r["lost"] for r in rs)),
-            "ar_bop": float(np.nanmean([C.pooled(rs, "ar_vsd"), C.pooled(rs, "ar_mssd"), C.pooled(rs, "ar_mspd")])),
-        })
-    return rows
-
-
-def best_variant(vrows, key="variant"):
-    """The variant whose worse headline rate (pooled ADD(-S) or IoU success) is highest."""
-    return max(vrows, key=lambda r: (min(r["add_ok"], r["iou_ok"], r["add_ok_seqmean"], r["iou_ok_seqmean"]),
-                                     r["add_auc"]))[key]
 
 
 def speed_rows(frames, order=VARIANT_ORDER):
@@ -124,8 +69,8 @@ def speed_rows(frames, order=VARIANT_ORDER):
 def object_rows(table, key="variant"):
     """Per object (all its sequences and every variant): size, shape class, success."""
     rows = []
-    for obj in sorted({r["object"] for r in table}, key=lambda o: -_by(table, "object", o)[0]["diameter_cm"]):
-        rs = _by(table, "object", obj)
+    for obj in sorted({r["object"] for r in table}, key=lambda o: -C.by(table, "object", o)[0]["diameter_cm"]):
+        rs = C.by(table, "object", obj)
         rows.append({"object": obj, "diameter_cm": rs[0]["diameter_cm"], "shape": SHAPE.get(obj, "?"),
                      "sequences": len({r["sequence"] for r in rs}), "add_ok": C.pooled(rs, "add_ok"),
                      "add_auc": C.pooled(rs, "add_auc"), "iou_ok": C.pooled(rs, "iou_ok"),
@@ -148,9 +93,9 @@ def summarize(table, out_dir, quick):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    frames = load_frames(out_dir)
-    vrows = variant_rows(table)
-    best = best_variant(vrows)
+    frames = C.load_frames(out_dir)
+    vrows = C.rate_rows(table, "variant", VARIANT_ORDER)
+    best = C.best_of(vrows, "variant")
     vcols = ["variant", "sequences", "frames", "add_ok", "add_ok_seqmean", "add_ok_seqmin", "add_strict_ok", "add_auc",
              "s5cm5deg", "iou_ok", "iou_ok_seqmean", "iou_mean", "hand_as_target", "lost", "ar_bop"]
     write_csv_table(vrows, vcols, out_dir / "tracking_variants_table.csv")
@@ -167,7 +112,7 @@ def summarize(table, out_dir, quick):
     seqs = [s for s in C.SEQUENCE_ORDER if any(r["sequence"] == s for r in table)]
     prow = []
     for s in seqs:
-        rs = _by(table, "sequence", s)
+        rs = C.by(table, "sequence", s)
         d = {"sequence": s, "object": rs[0]["object"], "occl_max": rs[0]["occlusion_max"]}
         for v in VARIANT_ORDER:
             r = next((r for r in rs if r["variant"] == v), None)
@@ -252,8 +197,8 @@ def summarize(table, out_dir, quick):
 
 
 def checks(table, quick):
-    vrows = variant_rows(table)
-    best = best_variant(vrows)
+    vrows = C.rate_rows(table, "variant", VARIANT_ORDER)
+    best = C.best_of(vrows, "variant")
     b = next(r for r in vrows if r["variant"] == best)
     out = [
         Check(f"best variant ({best}): ADD(-S) < 0.1 d on >= 95 % of frames (pooled and per-sequence mean)",
@@ -266,8 +211,8 @@ def checks(table, quick):
     ]
     if not quick:
         # speed at 640x480 (the quick size is 320x240, so its speed is not the target's)
-        med = {v: float(np.median([r["cpu_ms_median"] for r in _by(table, "variant", v)])) for v in VARIANT_ORDER
-               if _by(table, "variant", v)}
+        med = {v: float(np.median([r["cpu_ms_median"] for r in C.by(table, "variant", v)])) for v in VARIANT_ORDER
+               if C.by(table, "variant", v)}
         out += [
             Check(f"best variant ({best}) >= 30 frames/s single-threaded at 640x480 (CPU time)",
                   1000 / med[best] >= 30, f"{1000 / med[best]:.0f} frames/s ({med[best]:.1f} ms, median of "

@@ -73,15 +73,15 @@ class GPISNavEnv(LidarNavEnv):
     - v0: first release.
     """
 
-    def __init__(self, *, render_mode=None, sdf_source="gpis", sdf_params=None, stencil_rays=16,
-                 stencil_radii=(0.5, 1.0, 2.0, 3.0), rooms=3, room_size=4.0, clutter=10, n_beams=270,
-                 max_speed=1.0, max_yaw_rate=1.5, **unknown):
+    def __init__(self, *, render_mode=None, render_size=(480, 480), sdf_source="gpis", sdf_params=None,
+                 stencil_rays=16, stencil_radii=(0.5, 1.0, 2.0, 3.0), rooms=3, room_size=4.0, clutter=10,
+                 n_beams=270, max_speed=1.0, max_yaw_rate=1.5, **unknown):
         check_kwargs(type(self), unknown)
         self._stencil = SDFStencil(stencil_rays, stencil_radii)
         self._source = make_sdf_source(sdf_source, **(sdf_params or {}))
         self._source_name = sdf_source if isinstance(sdf_source, str) else type(sdf_source).__name__
-        super().__init__(render_mode=render_mode, rooms=rooms, room_size=room_size, clutter=clutter,
-                         n_beams=n_beams, max_speed=max_speed, max_yaw_rate=max_yaw_rate)
+        super().__init__(render_mode=render_mode, render_size=render_size, rooms=rooms, room_size=room_size,
+                         clutter=clutter, n_beams=n_beams, max_speed=max_speed, max_yaw_rate=max_yaw_rate)
 
     def _obs_spaces(self, half):
         base = super()._obs_spaces(half)

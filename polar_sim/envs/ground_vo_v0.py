@@ -107,8 +107,8 @@ class GroundVOEnv(RoverDriveEnv):
         h, w = chase.shape[:2]
         cam = self._rgb.astype(np.float32)
         gp = cv2.resize(self._odometry.ground_prob, (cam.shape[1], cam.shape[0]), interpolation=cv2.INTER_LINEAR)
-        tint = np.array([40.0, 220.0, 90.0], np.float32)
-        cam = (cam * (1 - 0.45 * gp[..., None]) + tint * 0.45 * gp[..., None]).astype(np.uint8)
+        tint = np.array([255.0, 40.0, 200.0], np.float32)
+        cam = (cam * (1 - 0.5 * gp[..., None]) + tint * 0.5 * gp[..., None]).astype(np.uint8)
         cam = cv2.resize(cam, (w, int(round(w * cam.shape[0] / cam.shape[1]))), interpolation=cv2.INTER_AREA)
         return np.hstack([chase, _vstack_fit(cam, self._route_map(w, h - cam.shape[0]), h)])
 

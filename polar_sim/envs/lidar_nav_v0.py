@@ -51,6 +51,7 @@ class LidarNavEnv(PolarMujocoEnv):
     | argument | default | meaning |
     |---|---|---|
     | ``render_mode`` | None | ``"rgb_array"``: top-down view |
+    | ``render_size`` | (480, 480) | (width, height) of the rendered view, pixels |
     | ``rooms`` | 3 | rooms per side of the world |
     | ``room_size`` | 4.0 | m |
     | ``clutter`` | 10 | pieces of clutter |
@@ -68,10 +69,10 @@ class LidarNavEnv(PolarMujocoEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, *, render_mode=None, rooms=3, room_size=4.0, clutter=10, n_beams=270,
-                 max_speed=1.0, max_yaw_rate=1.5, **unknown):
+    def __init__(self, *, render_mode=None, render_size=(480, 480), rooms=3, room_size=4.0, clutter=10,
+                 n_beams=270, max_speed=1.0, max_yaw_rate=1.5, **unknown):
         check_kwargs(type(self), unknown)
-        super().__init__(render_mode=render_mode)
+        super().__init__(render_mode=render_mode, render_size=render_size)
         self._rooms = int(rooms)
         self._room_size = float(room_size)
         self._clutter = int(clutter)

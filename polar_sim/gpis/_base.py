@@ -235,7 +235,7 @@ class GPISMapBase:
         out = np.empty((len(pts), 2 * self.dim + 2))
         W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
         v0, g0 = _var_consts(self.dim, float(self.map_scale))
-        mmax = int(g.gp_m.max()) if g.gp_m.size else 0
+        mmax = g.m_max
         query_gp(pts, float(W), self._T_BLEND, bool(self.legacy), float(self.map_scale), v0, g0,
                  1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
                  tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,

@@ -397,17 +397,24 @@ def query_gp(pts, *args):
 
 
 @nb.njit(cache=True)
-def _ks_mean(x, alpha, X, kinds, a, dim, ks, eb, out):
-    """Cross-covariances ks (m, dim + 2) of one GP at x and the mean [f, grad] into out.
+def _ks_mean(x, alpha, X, kinds, a, dim, z, eb, out):
+    """One GP at x: the value cross-covariances k(x, obs) into z (m,), the mean [f, grad]
+    into out.
 
-    Same arithmetic as ``_localgp._predict_one``; the per-sample quantities (x - X, 1/r) are
-    computed once per sample and reused by its gradient observations (``eb`` (m, dim + 1)).
+    Same arithmetic and summation order as ``_localgp._predict_one``; the per-sample
+    quantities (x - X, 1/r, exp) are computed once per sample and reused by its gradient
+    observations (``eb`` (m, dim + 2)), and the gradient cross-covariances go straight into
+    their sums.
     """
     m = X.shape[0]
     a2 = a * a
     nv = 0
     while nv < m and (kinds[nv] >> 32) == 0:
         nv += 1
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
     for p in range(nv):
         r2 = 0.0
         for k in range(dim):
@@ -417,38 +424,32 @@ def _ks_mean(x, alpha, X, kinds, a, dim, ks, eb, out):
         r = np.sqrt(r2)
         ex = np.exp(-a * r)
         eb[p, 0] = 1.0 / r if r > 0.0 else 0.0
-        ks[p, dim + 1] = ex
-        ks[p, 0] = (1.0 + a * r) * ex
-        for k in range(dim):
-            ks[p, 1 + k] = -a2 * eb[p, 1 + k] * ex
+        eb[p, dim + 1] = ex
+        k0 = (1.0 + a * r) * ex
+        z[p] = k0
+        ap = alpha[p]
+        s0 += k0 * ap
+        s1 += (-a2 * eb[p, 1] * ex) * ap
+        s2 += (-a2 * eb[p, 2] * ex) * ap
+        if dim == 3:
+            s3 += (-a2 * eb[p, 3] * ex) * ap
     for p in range(nv, m):
         c = (kinds[p] >> 32) - 1
         u = kinds[p] & 0xFFFFFFFF
-        ex = ks[u, dim + 1]
+        ex = eb[u, dim + 1]
         dc = eb[u, 1 + c]
-        ks[p, 0] = a2 * dc * ex
+        k0 = a2 * dc * ex
+        z[p] = k0
+        ap = alpha[p]
+        s0 += k0 * ap
         inv_r = eb[u, 0]
-        for k in range(dim):
-            v = (1.0 if k == c else 0.0) - a * eb[u, 1 + k] * dc * inv_r
-            ks[p, 1 + k] = a2 * v * ex
-    # the dim + 1 sums run side by side (independent chains), each in the original order
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    if dim == 2:
-        for p in range(m):
-            ap = alpha[p]
-            s0 += ks[p, 0] * ap
-            s1 += ks[p, 1] * ap
-            s2 += ks[p, 2] * ap
-    else:
-        for p in range(m):
-            ap = alpha[p]
-            s0 += ks[p, 0] * ap
-            s1 += ks[p, 1] * ap
-            s2 += ks[p, 2] * ap
-            s3 += ks[p, 3] * ap
+        v = (1.0 if c == 0 else 0.0) - a * eb[u, 1] * dc * inv_r
+        s1 += (a2 * v * ex) * ap
+        v = (1.0 if c == 1 else 0.0) - a * eb[u, 2] * dc * inv_r
+        s2 += (a2 * v * ex) * ap
+        if dim == 3:
+            v = (1.0 if c == 2 else 0.0) - a * eb[u, 3] * dc * inv_r
+            s3 += (a2 * v * ex) * ap
     out[0] = s0
     out[1] = s1
     out[2] = s2
@@ -497,7 +498,7 @@ def _tri_sq4(Lp, Z, m, acc):
 
 @nb.njit(cache=True)
 def _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri, X,
-                kinds, alpha, Lbuf, ks, rbuf, Z, acc, cand):
+                kinds, alpha, Lbuf, rbuf, Z, acc, cand):
     """Predict [f, grad, var_f] of cluster s at the points of evaluations order[g0:g1].
 
     Means one point at a time; variances four points at a time (``_tri_sq4``; a short last
@@ -515,11 +516,8 @@ def _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_o
             b = t - c0
             if t < c1:
                 e = order[t]
-                _ks_mean(pts[ev_pt[e]], al, Xs, ks_, a, dim, ks, rbuf,
+                _ks_mean(pts[ev_pt[e]], al, Xs, ks_, a, dim, Z[b], rbuf,
                          cand[ev_pt[e], ev_out[e]])
-                zb = Z[b]
-                for p in range(m0):
-                    zb[p] = ks[p, 0]
             else:
                 Z[b, :m0] = Z[c1 - 1 - c0, :m0]
         _tri_sq4(Lp, Z, m0, acc)
@@ -530,7 +528,7 @@ def _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_o
 
 @nb.njit(cache=True)
 def _run_evals(ne, ev_pt, ev_out, ev_s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
-               alpha, Lbuf, ks, rbuf, Z, acc, cand):
+               alpha, Lbuf, rbuf, Z, acc, cand):
     """Evaluate the ne (point, cluster) pairs, grouped by cluster (stable, so deterministic)."""
     if ne == 0:
         return
@@ -542,7 +540,7 @@ def _run_evals(ne, ev_pt, ev_out, ev_s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tr
         while g1 < ne and ev_s[order[g1]] == s:
             g1 += 1
         _eval_group(ev_pt, ev_out, order, g0, g1, s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tri,
-                    X, kinds, alpha, Lbuf, ks, rbuf, Z, acc, cand)
+                    X, kinds, alpha, Lbuf, rbuf, Z, acc, cand)
         g0 = g1
 
 
@@ -562,7 +560,8 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
 
     Per point: the nearest cluster's GP; when its var_f exceeds T, also the other (up to two)
     nearest clusters', then the lowest-variance one or a variance-weighted blend of the best
-    two. The evaluations are grouped by cluster so that the variance solves run as blocks.
+    two. The evaluations are grouped by cluster (factor reused from cache, variance solves four
+    points at a time).
     """
     dim = pts.shape[1]
     n = i1 - i0
@@ -578,8 +577,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     best_d = np.empty(3)
     best_k = np.empty(3, np.int64)
     iw = np.empty(6 * dim, np.int64)
-    ks = np.empty((mmax, dim + 2))
-    rbuf = np.empty((mmax, dim + 1))
+    rbuf = np.empty((mmax, dim + 2))
     Z = np.empty((4, mmax))
     acc = np.empty(4)
     ne = 0
@@ -612,7 +610,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
             ne += 1
     sub = pts[i0:i1]
     _run_evals(ne, ev_pt, ev_out, ev_s, sub, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
-               alpha, Lbuf, ks, rbuf, Z, acc, cand)
+               alpha, Lbuf, rbuf, Z, acc, cand)
     # second round: the other clusters of points whose nearest GP is not confident enough
     ne = 0
     for t in range(n):
@@ -623,7 +621,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
                 ev_s[ne] = cs[t, j]
                 ne += 1
     _run_evals(ne, ev_pt, ev_out, ev_s, sub, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
-               alpha, Lbuf, ks, rbuf, Z, acc, cand)
+               alpha, Lbuf, rbuf, Z, acc, cand)
     for t in range(n):
         k = nv[t]
         if k == 0:
@@ -634,17 +632,15 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
             o[:] = c0
             continue
         # order the candidates by var_f (stable, NaN last, as numpy's mergesort)
-        ia, ib, ic = 0, 1, 2
+        ia, ib = 0, 1
         v = cand[t, :, dim + 1]
         if _lt(v[1], v[0]):
             ia, ib = 1, 0
-        if k == 3:
-            if _lt(v[2], v[ib]):
-                ic = ib
-                ib = 2
-                if _lt(v[2], v[ia]):
-                    ib = ia
-                    ia = 2
+        if k == 3 and _lt(v[2], v[ib]):
+            ib = 2
+            if _lt(v[2], v[ia]):
+                ib = ia
+                ia = 2
         if v[ia] < T:
             o[:] = cand[t, ia]
             continue

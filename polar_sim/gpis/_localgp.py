@@ -295,6 +295,7 @@ class GPStore:
         self.Lbuf = np.zeros(0)
         self.n_obs = 0
         self.n_tri = 0
+        self.m_max = 0          # upper bound of gp_m (query work-buffer size)
 
     def ensure_slots(self, n):
         if n > self.gp_m.shape[0]:
@@ -356,6 +357,8 @@ class GPStore:
         self.gp_obs[slots] = obs_off[:-1]
         self.gp_tri[slots] = tri_off[:-1]
         self.gp_m[slots] = m
+        if len(m):
+            self.m_max = max(self.m_max, int(m.max()))
         self.n_obs = int(obs_off[-1])
         self.n_tri = int(tri_off[-1])
 
@@ -388,6 +391,7 @@ class GPStore:
             setattr(self, k, np.ascontiguousarray(st[k]).astype(getattr(self, k).dtype, copy=True))
         m = self.gp_m
         live = m > 0
+        self.m_max = int(m.max()) if m.size else 0
         self.n_obs = int((self.gp_obs[live] + m[live]).max()) if live.any() else 0
         t = m * (m + 1) // 2
         self.n_tri = int((self.gp_tri[live] + t[live]).max()) if live.any() else 0

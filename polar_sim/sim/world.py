@@ -67,10 +67,11 @@ class World:
         self._rig = None
         self._closed = False
         self.kinematic = bool(kinematic)
-        self._has_rover = _has_body(m, "rover")
+        # A rover is one added by a scene builder (it brings its configuration and controller).
+        self._has_rover = "rover_config" in self.meta and _has_body(m, "rover")
         if self.kinematic and not self._has_rover:
             raise ValueError("kinematic: only scenes with a rover can move kinematically")
-        self._controller = RoverController(m, self.meta["rover_config"]) if self._has_rover and "rover_config" in self.meta else None
+        self._controller = RoverController(m, self.meta["rover_config"]) if self._has_rover else None
         self._script = self.meta.get("script")
         ts = m.opt.timestep
         if control_dt is None:
