@@ -2,7 +2,7 @@
 
 ``GPISMap2D`` fuses planar laser scans (quadtree), ``GPISMap3D`` depth images and 3D lidar
 (octree). Both answer ``query(points) -> (sdf, grad, var)``; see ``specs/gpis.md`` for the
-algorithm and ``docs/readme/gpis.md`` for usage.
+algorithm and the README ("Online GPIS mapping") for usage.
 """
 
 from polar_sim.gpis.map2d import GPISMap2D

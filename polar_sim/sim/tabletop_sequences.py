@@ -74,7 +74,7 @@ def _tt(script, target, frames, description, **extra):
 
 
 #: The sequence suite (name -> spec). Occlusion ranges are measured by
-#: ``benchmarks/plot_scenes_tabletop.py --stats`` and listed in docs/readme/tabletop.md.
+#: ``benchmarks/plot_scenes_tabletop.py --stats`` and listed in the README (tabletop sequences).
 SEQUENCES = {
     "mug_touch": _tt("touch", "mug", 450, "the palm rests on the mug twice, fingers over its front"),
     "can_push": _tt("push", "can", 450, "fingers push the can 10 cm right, then 8 cm back (physics)"),

@@ -4,7 +4,7 @@ Each test runs one experiment exactly as ``polar-sim run NAME --quick`` does and
 headline checks (the issue's inequalities, evaluated against exact ground truth). A few of the
 issue's bounds are missed by the current maps; they are listed in ``KNOWN_MISSES`` with the
 measured figure, and the test asserts that they are still missed, like a strict xfail: the day one
-is met, the test fails so that benchmarks/results/structure.md and the README get updated.
+is met, the test fails so that benchmarks/RESULTS.md and the README get updated.
 """
 
 import json

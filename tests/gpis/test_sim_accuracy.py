@@ -7,7 +7,7 @@ those of ``experiments/gpis_accuracy.py`` (``experiments/_gpis_common.py``); thi
 
 Bounds that the current GPISMap2D/3D miss are marked ``xfail(strict=True)`` with the measured
 figure: they still run and assert the issue's bound, and they turn into failures the day the bound
-is met (so the recorded results get updated). See benchmarks/results/structure.md.
+is met (so the recorded results get updated). See benchmarks/RESULTS.md.
 """
 
 import os
