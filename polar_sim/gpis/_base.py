@@ -36,6 +36,9 @@ class GPISMapBase:
     _UPDATE_R = 4.0         # legacy retraining box half-width in units of h_c
     _QUERY_W = None         # query search half-width; None = 4 * map_scale
     _SURF_RES, _SURF_BAND, _SURF_VAR = 0.05, 0.3, 0.4
+    _VAR_BLEND = False      # default mode: weight the GPIS by its information (blend_gp)
+    _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
+                            # different faces and not subject to the sample spacing (None: off)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def get_params(self):
@@ -51,8 +54,12 @@ class GPISMapBase:
 
     def _init_state(self):
         p = self._checked_params()
+        faces = None if self.legacy else self._FACE_COS
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
-                          p["max_half"], spacing=None if self.legacy else self._spacing())
+                          p["max_half"], spacing=None if self.legacy else self._spacing(),
+                          face_cos=faces,
+                          # leaves small enough for both faces of a wall thinner than min_half
+                          leaf_half=None if faces is None else 0.5 * p["min_half"])
         self.slot_gen_ = np.zeros(self.tree_.node_sample.shape[0], np.int64)
         self.gps_ = GPStore(self.dim)
         self.gp_gen_ = np.zeros(0, np.int64)
@@ -299,7 +306,7 @@ class GPISMapBase:
         if len(sel):
             out = self._gp_query(pts[sel])
             blend_gp(sel, out, w, float(self.fbias), 1.0 + float(self.map_noise) - 1e-12, dist,
-                     grad, var)
+                     grad, var, self._T_BLEND if self._VAR_BLEND else 0.0)
         return dist, grad, var
 
     def surface(self, res=None, band=None):

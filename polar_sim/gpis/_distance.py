@@ -251,13 +251,21 @@ def far_weights(pts, kd, idx, pos, nrm, sp, r_s, free, var_unobs, near, far, k=4
 
 
 @nb.njit(cache=True)
-def blend_gp(sel, out, w, fbias, has_thr, dist, grad, var):
-    """Blend the GPIS rows ``out`` (one per selected point) into the surfel answer in place."""
+def blend_gp(sel, out, w, fbias, has_thr, dist, grad, var, t_info=0.0):
+    """Blend the GPIS rows ``out`` (one per selected point) into the surfel answer in place.
+
+    With ``t_info`` > 0 the GPIS weight is also scaled by how much the GP knows there,
+    ``clip(1 - var_f / t_info, 0, 1)``: a GP whose samples carry no gradient observation (poorly
+    seen surfaces, whose samples fail the gradient gate) has a value but no zero level, and
+    near var_f >= t_info (the spec's query threshold for "uninformative") the surfel distance is
+    used instead."""
     d = grad.shape[1]
     for j in range(sel.shape[0]):
         i = sel[j]
         o = out[j]
         ws = w[i] if o[d + 1] < has_thr else 0.0     # a cluster answered
+        if t_info > 0.0:
+            ws *= min(max(1.0 - o[d + 1] / t_info, 0.0), 1.0)
         dist[i] = ws * (o[0] + fbias) + (1 - ws) * dist[i]
         for k in range(d):
             grad[i, k] = ws * o[1 + k] + (1 - ws) * grad[i, k]

@@ -30,7 +30,7 @@ def apply_new(P, ok, bad, nrm, sp, sg, geo, root, level_off, L, cgrid, gshape, g
         hw = counts[2]
         i, s = _insert(P[j], geo, root, level_off, L, cgrid, gshape, goff, node_sample,
                        node_internal, slot_coord, slot_free, pos, s_slot, s_node, s_free, counts,
-                       strict)
+                       strict, nrm[j], s_nrm, sg[j], s_sg)
         if i < 0:
             continue
         if counts[2] != hw or node_sample[s, 0] == i:
@@ -75,7 +75,7 @@ def apply_reeval(cand, action, P, nrm, sp, sg, geo, root, level_off, L, cgrid, g
         hw = counts[2]
         ni, s = _insert(P[j], geo, root, level_off, L, cgrid, gshape, goff, node_sample,
                         node_internal, slot_coord, slot_free, pos, s_slot, s_node, s_free, counts,
-                        strict)
+                        strict, nrm[j], s_nrm, sg[j], s_sg)
         if ni < 0:
             continue
         if counts[2] != hw or node_sample[s, 0] == ni:

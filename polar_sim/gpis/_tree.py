@@ -13,6 +13,11 @@ next to a sample closer than ``h_min`` in the same leaf is rejected (the chain-o
 test); a max-depth cell never splits; removal collapses parents whose children are all empty
 leaves. With ``spacing`` given (default mode) an insert is also rejected when closer than
 ``spacing`` to *any* sample in the 3^d neighbouring clusters (the spacing the spec intends).
+
+With ``face_cos`` given (2D default mode), spacing applies only between samples of the same
+surface side: a sample whose normal makes a dot product below ``face_cos`` with the new one's
+(the other face of a wall thinner than the spacing) neither blocks it nor shares its leaf, and
+the tree has leaves of half-length ``leaf_half`` (< ``min_half``) so that both faces fit.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import numpy as np
 __all__ = ["Tree"]
 
 _I32 = np.int32
+_FACE_SG = 0.1001       # gradient-noise gate of the local GPs (spec §8.2)
 
 
 @nb.njit(cache=True)
@@ -133,8 +139,10 @@ def _in_root_or_grow(p, root, hmax, dim):
 
 
 @nb.njit(cache=True)
-def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos):
-    """True if any sample in the 3^d clusters around cluster cc is closer than hmin to p."""
+def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos, n_p, nrm,
+                          face_cos, g_p, sg):
+    """True if any sample in the 3^d clusters around cluster cc is closer than hmin to p
+    (samples facing away from ``n_p``, normal dot < face_cos, do not count)."""
     nb_ = 1
     for _ in range(dim):
         nb_ *= 3
@@ -159,17 +167,32 @@ def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, po
                 for k in range(dim):
                     e = pos[i, k] - p[k]
                     d2 += e * e
-                if d2 < h2:
+                if d2 < h2 and not _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
                     return True
     return False
 
 
 @nb.njit(cache=True)
-def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_internal,
-            slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict):
-    """Insert p; return (sample index, cluster slot) or (-1, -1) when rejected.
+def _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
+    """True if sample i faces away from the normal n_p (dot < face_cos; -inf: never).
 
-    geo = [origin(d), cluster width w, h_min, h_max, strict spacing]. counts = [n_samples_hw, n_free_samples,
+    Only trusted normals (both gradient noises within the GP's gradient gate, spec §8.2) tell
+    faces apart: a poorly known normal is not evidence of another surface."""
+    if not face_cos > -2.0 or g_p > _FACE_SG or sg[i] > _FACE_SG:
+        return False
+    c = 0.0
+    for k in range(dim):
+        c += n_p[k] * nrm[i, k]
+    return c < face_cos
+
+
+@nb.njit(cache=True)
+def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_internal,
+            slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict, n_p, nrm, g_p,
+            sg):
+    """Insert p (normal n_p, gradient noise g_p); return (sample index, cluster slot) or (-1, -1) when rejected.
+
+    geo = [origin(d), cluster width w, h_min, h_max, strict spacing, face_cos]. counts = [n_samples_hw, n_free_samples,
     n_slots_hw, n_free_slots]. The caller guarantees capacity and grid coverage.
     """
     dim = p.shape[0]
@@ -181,8 +204,9 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
     g = _lin(cc, gshape, goff)
     if g < 0:
         return -1, -1
+    face_cos = geo[dim + 4]
     if strict and _too_close_neighbours(p, cc, geo[dim + 3], dim, cgrid, gshape, goff,
-                                        node_sample, pos):
+                                        node_sample, pos, n_p, nrm, face_cos, g_p, sg):
         return -1, -1
     s = cgrid[g]
     lo = np.empty(dim)
@@ -203,7 +227,8 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
             for k in range(dim):
                 e = pos[q, k] - p[k]
                 d2 += e * e
-            if d2 < hmin * hmin or lvl == L:
+            if lvl == L or (d2 < hmin * hmin
+                            and not (strict and _other_face(n_p, nrm, q, face_cos, dim, g_p, sg))):
                 return -1, -1
             node_internal[s, node] = 1
             node_sample[s, node] = -1
@@ -279,13 +304,15 @@ class Tree:
     (h_c), ``min_half`` (h_min) and ``max_half`` (h_max), in metres.
     """
 
-    def __init__(self, dim, init_half, cluster_half, min_half, max_half, spacing=None):
+    def __init__(self, dim, init_half, cluster_half, min_half, max_half, spacing=None,
+                 face_cos=None, leaf_half=None):
         self.dim = dim
         ratio = init_half / cluster_half
         if ratio < 1 or abs(np.log2(ratio) - round(np.log2(ratio))) > 1e-9:
             raise ValueError("init_half / cluster_half must be a power of two >= 1")
         L, h = 0, cluster_half
-        while not h < min_half:
+        leaf = min_half if leaf_half is None else float(leaf_half)
+        while not h < leaf:
             h /= 2.0
             L += 1
         self.L = L
@@ -296,7 +323,9 @@ class Tree:
         sp = 0.0 if spacing is None else float(spacing)
         if sp > w:
             raise ValueError("sample_spacing must not exceed the cluster cell size 2*cluster_half")
-        self.geo = np.array([-init_half] * dim + [w, min_half, max_half, sp], np.float64)
+        self.face_cos = -np.inf if face_cos is None else float(face_cos)
+        self.geo = np.array([-init_half] * dim + [w, min_half, max_half, sp, self.face_cos],
+                            np.float64)
         self.root = np.array([0.0] * dim + [init_half, 0.0], np.float64)
         self.strict = spacing is not None
         self.cgrid = np.full(1, -1, _I32)
@@ -380,12 +409,14 @@ class Tree:
         self.goff = nlo.astype(np.int64)
 
     # -- operations --------------------------------------------------------------------------
-    def insert(self, p):
-        """Insert one point (d,); returns (sample index, slot) or (-1, -1)."""
+    def insert(self, p, n=None, g=1.0):
+        """Insert one point (d,) with normal n (d,) and gradient noise g; returns (sample index,
+        slot) or (-1, -1)."""
+        n = np.zeros(self.dim) if n is None else np.asarray(n, np.float64)
         return _insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
                        self.goff, self.node_sample, self.node_internal, self.slot_coord,
                        self.slot_free, self.pos, self.s_slot, self.s_node, self.s_free,
-                       self.counts, self.strict)
+                       self.counts, self.strict, n, self.nrm, float(g), self.sg)
 
     def remove(self, i):
         _remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
@@ -426,3 +457,13 @@ class Tree:
     def set_state(self, st):
         for k in self.STATE:
             setattr(self, k, np.ascontiguousarray(st[k]).astype(getattr(self, k).dtype, copy=True))
+        if self.geo.shape[0] == self.dim + 4:       # files written before face_cos existed
+            self.geo = np.append(self.geo, self.face_cos)
+        # the tree depth is the file's (2D default maps written before face_cos: one level less)
+        B = 1 << self.dim
+        L = 0
+        while (B ** (L + 1) - 1) // (B - 1) < self.node_sample.shape[1]:
+            L += 1
+        self.L = L
+        self.level_off = np.array([(B**lv - 1) // (B - 1) for lv in range(L + 2)], np.int64)
+        self.n_nodes = int(self.level_off[L + 1])

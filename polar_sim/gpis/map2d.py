@@ -44,7 +44,9 @@ class GPISMap2D(GPISMapBase):
         Observation GP (Ornstein-Uhlenbeck) length scale in rad and noise variance.
     blend_near, blend_far : float, default=0.1, 0.4
         Default mode: the query is the GPIS within ``blend_near`` of the nearest surfel, the
-        surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres.
+        surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres. The
+        GPIS weight is further scaled by ``clip(1 - var_f / 0.4, 0, 1)``: where the local GP is
+        uninformative (no gradient observations) the surfel distance is used.
     surfel_radius : float or None, default=None
         Radius of the disc each sample stands for in the far-field distance; None = min_half / 2.
     free_res : float or None, default=None
@@ -56,7 +58,10 @@ class GPISMap2D(GPISMapBase):
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
-        None = min_half.
+        None = min_half. It applies between samples of the same face only: a sample whose
+        trusted normal (gradient noise within the GP gate 0.1001) points away from the new
+        one's (dot < -0.5) is the other face of a thin wall and does not block it (the tree gets
+        leaves of half-length min_half / 2 so that both faces fit).
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
         the query is then the published SDF f + fbias.
@@ -72,6 +77,12 @@ class GPISMap2D(GPISMapBase):
     """
 
     dim = 2
+    # the two faces of a wall thinner than the sample spacing (office walls are 15 cm) both
+    # need samples: spacing is enforced only between samples whose normals agree (dot >= -0.5)
+    _FACE_COS = -0.5
+    # where the local GP is uninformative (var_f near the 0.4 query threshold: samples without a
+    # gradient observation), its value has no zero level; the surfel distance takes over
+    _VAR_BLEND = True
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
