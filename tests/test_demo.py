@@ -10,5 +10,5 @@ from polar_sim.demo import DEMOS, run_demo
 def test_demo_runs(tmp_path):
     assert run_demo(tmp_path) == 0
     names = {p.name for p in tmp_path.glob("*.png")}
-    assert {"gpis_office2d.png", "ground_prob.png", "env_gpisnav.png", "office2d_front_rgb.png"} <= names
+    assert {"gpis_office2d.png", "ground_prob.png", "tracking_mug.png", "env_gpisnav.png", "office2d_front_rgb.png"} <= names
     assert len(DEMOS) >= 4
