@@ -59,8 +59,14 @@ class World:
             self.model = spec.compile()
         except Exception as exc:
             raise ValueError(f"scene: {scene!r} does not compile: {exc}") from exc
-        self.data = mujoco.MjData(self.model)
         m = self.model
+        # Cameras render primitives as polygons: a cylinder of radius r drawn with n slices lies up
+        # to r (1 - cos(pi / n)) inside its exact surface, 2.7 mm for a 0.43 m round table at
+        # MuJoCo's default 28. With 256 slices and 128 stacks that is 0.04 mm at r = 0.5 m, so depth
+        # back-projects onto the exact geometry that lidar rays and sdf() use.
+        m.vis.quality.numslices = max(int(m.vis.quality.numslices), 256)
+        m.vis.quality.numstacks = max(int(m.vis.quality.numstacks), 128)
+        self.data = mujoco.MjData(m)
         self.cameras = tuple(m.camera(i).name for i in range(m.ncam))
         self._lidars = {k: Lidar(m, s) for k, s in parse_lidars(m).items()}
         self.lidars = tuple(self._lidars)
