@@ -40,6 +40,28 @@ def single(source, steps):
     return steps / wall, steps / cpu
 
 
+def single_random(source, steps):
+    """One process with the vector run's action stream (uniform random, resets included): the
+    like-for-like baseline of the AsyncVectorEnv ratio (random actions collide and reset far more
+    often than the reactive baseline, and a reset builds a new world)."""
+    env = gym.make("polar_sim/GPISNav-v0", sdf_source=source)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    act = lambda: rng.uniform([0.0, -1.0], [0.8, 1.0], 2).astype(np.float32)  # noqa: E731
+    for _ in range(20):
+        _, _, te, tr, _ = env.step(act())
+        if te or tr:
+            env.reset()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        _, _, te, tr, _ = env.step(act())
+        if te or tr:
+            env.reset()
+    rate = steps / (time.perf_counter() - t0)
+    env.close()
+    return rate
+
+
 def vector(source, steps, n):
     fns = [lambda: gym.make("polar_sim:polar_sim/GPISNav-v0", sdf_source=source) for _ in range(n)]
     venv = gym.vector.AsyncVectorEnv(fns, context="spawn")
@@ -68,8 +90,10 @@ def main():
         w, c = single(src, steps)
         rates[src] = w
         print(f"| {src} | {w:.1f} | {c:.1f} |", flush=True)
+    one = single_random("gpis", steps)
     v = vector("gpis", steps // 2, 2)
-    print(f"\nAsyncVectorEnv, 2 workers (spawn), gpis: {v:.1f} steps/s = {v / rates['gpis']:.2f}x one process")
+    print(f"\nrandom actions (resets included), gpis: one process {one:.1f} steps/s; AsyncVectorEnv, 2 workers "
+          f"(spawn): {v:.1f} steps/s = {v / one:.2f}x one process")
     print(f"load after: {os.getloadavg()[0]:.2f}")
 
 

@@ -114,8 +114,8 @@ def test_labels_match_geom_ids(terrain):
 
 
 # Rendered primitives are polygons: with MuJoCo's default 28 slices a 0.43 m round table drew up to
-# 2.7 mm inside its exact surface. World raises the tessellation, so its depth lands on the exact
-# cylinder that lidar rays and sdf() use (issue 2's 2 mm bound, with room to spare).
+# 2.7 mm inside its exact surface. World raises the tessellation until the widest static cylinder is
+# drawn within 0.5 mm, so its depth lands on the exact cylinder that lidar rays and sdf() use.
 def test_depth_of_a_rendered_cylinder_is_exact():
     rng = np.random.default_rng(0)
     with World("office2d", seed=0, kinematic=True) as w:
@@ -127,4 +127,4 @@ def test_depth_of_a_rendered_cylinder_is_exact():
         P, z, ok = _backproject(f)
         on_table = f.geom_ids[ok] == gid
         assert on_table.sum() > 500 and z[on_table].max() < 5.0
-        assert np.abs(w.sdf(P[on_table])).max() < 2e-4
+        assert np.abs(w.sdf(P[on_table])).max() < 5e-4
