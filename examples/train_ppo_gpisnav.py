@@ -49,7 +49,7 @@ def main():
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import SubprocVecEnv
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     torch.set_num_threads(1)
     out = Path(args.out)
@@ -59,13 +59,21 @@ def main():
     venv = make_vec_env(env_id, n_envs=args.envs, seed=args.seed, env_kwargs=kwargs,
                         vec_env_cls=SubprocVecEnv if args.envs > 1 else None,
                         vec_env_kwargs={"start_method": "spawn"} if args.envs > 1 else None)
+    # The goal (metres, up to the world's diagonal), the SDF and its variance span very different
+    # scales; running normalisation lets one learning rate serve them all.
+    venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     model = PPO("MultiInputPolicy", venv, n_steps=1024, batch_size=256, learning_rate=3e-4, gamma=0.99,
                 gae_lambda=0.95, ent_coef=0.005, seed=args.seed, verbose=0, device="cpu")
+    def ppo_policy(obs):
+        # Score with the normalisation statistics frozen at their current values.
+        return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
+
     probe = gym.make(env_id, **kwargs)
     random_rate = success_rate(env_id, RandomPolicy(probe.action_space, seed=args.seed), args.eval_episodes, kwargs)
     probe.close()
-    rows = [{"steps": 0, "ppo_success": random_rate, "random_success": random_rate}]
-    print(f"random policy: success {random_rate:.2f}")
+    untrained = success_rate(env_id, ppo_policy, args.eval_episodes, kwargs)
+    rows = [{"steps": 0, "ppo_success": untrained, "random_success": random_rate}]
+    print(f"random policy: success {random_rate:.2f}; untrained PPO {untrained:.2f}", flush=True)
 
     class Evaluate(BaseCallback):
         def __init__(self):
@@ -75,8 +83,7 @@ def main():
         def _on_step(self):
             if self.num_timesteps >= self.next:
                 self.next += args.eval_every
-                rate = success_rate(env_id, lambda o: self.model.predict(o, deterministic=True)[0],
-                                    args.eval_episodes, kwargs)
+                rate = success_rate(env_id, ppo_policy, args.eval_episodes, kwargs)
                 rows.append({"steps": self.num_timesteps, "ppo_success": rate, "random_success": random_rate})
                 print(f"{self.num_timesteps} steps: PPO success {rate:.2f} (random {random_rate:.2f})", flush=True)
                 with open(out / "curve.csv", "w", newline="") as fh:
@@ -87,6 +94,10 @@ def main():
 
     model.learn(total_timesteps=args.steps, callback=Evaluate(), progress_bar=False)
     model.save(out / "ppo_gpisnav")
+    # The observation statistics the policy expects, as plain arrays (not SB3's pickle).
+    rms = venv.obs_rms
+    np.savez(out / "obs_normalisation.npz", format_version=1, clip=10.0,
+             **{f"{k}_mean": r.mean for k, r in rms.items()}, **{f"{k}_var": r.var for k, r in rms.items()})
     venv.close()
 
     import matplotlib

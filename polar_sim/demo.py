@@ -162,16 +162,16 @@ def demo_tracking(out: Path):
 
 
 def demo_env(out: Path):
-    """One GPISNav-v0 episode: the SDF-reactive controller drives to the goal on the online map."""
+    """One GPISNav-v0 episode: the SDF navigator drives to the goal on the online map."""
     import gymnasium as gym
 
     import polar_sim  # noqa: F401  (registers the ids)
-    from polar_sim.envs.policies import SDFReactive
+    from polar_sim.envs.policies import SDFNavigator
     from polar_sim.sim.pictures import save_png
 
     env = gym.make("polar_sim/GPISNav-v0", sdf_source="gpis", render_mode="rgb_array", rooms=2, room_size=4.0,
                    clutter=3)
-    pol = SDFReactive()
+    pol = SDFNavigator()
     obs, info = env.reset(seed=1)
     start = info["goal_distance"]
     done, n = False, 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SDFReactive", "PurePursuitVO", "VisualServoReach"]
+__all__ = ["SDFReactive", "SDFNavigator", "PurePursuitVO", "VisualServoReach"]
 
 
 def _angle(v):
@@ -109,12 +109,7 @@ class SDFReactive:
                 self._side, self._d_hit, self._steps = -self._side, dg, 0
 
         if self._mode == "go" or not len(s):
-            push = np.zeros(2)
-            close = ds < self.safe
-            if close.any():
-                w = (self.safe - ds[close]) / self.safe
-                push = -(w[:, None] * s[close] / ds[close, None]).sum(0)
-            direction = to_goal + 1.5 * push
+            direction = to_goal + 1.5 * self._repulsion(s, ds)
         else:
             # The followed surface is on the robot's left for side +1, right for side -1; keep
             # to points on that side (or nearly ahead) so a doorway's far jamb is not mistaken
@@ -126,15 +121,125 @@ class SDFReactive:
             away = -s[k] / max(d_near, 1e-9)
             tangent = self._side * np.array([-away[1], away[0]])
             direction = tangent + 2.0 * (self.follow_distance - d_near) * away
+        return self._steer(direction, s, dg if self._mode == "go" else np.inf)
+
+    def _repulsion(self, s, ds):
+        """Sum of unit pushes away from surface points nearer than ``safe``, weighted by depth."""
+        close = ds < self.safe
+        if not close.any():
+            return np.zeros(2)
+        w = (self.safe - ds[close]) / self.safe
+        return -(w[:, None] * s[close] / ds[close, None]).sum(0)
+
+    def _steer(self, direction, s, dg):
+        """The action that turns toward ``direction`` (robot frame) and drives as the clearance
+        ahead allows, slowing within 1 m of the goal (``dg``, m)."""
         heading = _angle(direction)
         omega = float(np.clip(1.8 * heading, -1.0, 1.0))
         # The chassis reaches 0.3 m ahead and the wheels 0.33 m to the side: slow down from
         # 0.9 m ahead, stop at 0.4 m.
         ahead = self._clearance(s, np.array([1.0, 0.0]), 0.4) if len(s) else np.inf
         v = 0.9 * max(np.cos(heading), 0.0) ** 2 * float(np.clip((ahead - 0.4) / 0.5, 0.0, 1.0))
-        if self._mode == "go":
-            v *= min(1.0, dg)
+        v *= min(1.0, dg)
         return np.array([v, omega], dtype=np.float32)
+
+
+class SDFNavigator(SDFReactive):
+    """The SDF-gradient reactive controller steered by a remembered map, for ``GPISNav-v0``.
+
+    It reads what ``SDFReactive`` reads (the stencil, the goal in the robot frame and the
+    twist) and adds memory. The goal vector fixes the robot's position relative to the goal, and
+    the integrated yaw rate fixes its heading; in that goal-anchored frame it keeps an obstacle
+    grid, marking the stencil's surface estimates s = p - d g and clearing the disk of radius d
+    around every stencil point, which the SDF says is free. Each step it plans the cheapest
+    path to the goal on that grid, taking unknown cells as free (optimistic planning), and steers
+    toward the path point ``lookahead`` m ahead, with ``SDFReactive``'s repulsion from nearby
+    surfaces and its speed law. Where the grid has no path it falls back to ``SDFReactive``.
+
+    Parameters
+    ----------
+    cell, inflate : float
+        Grid cell (m) and obstacle inflation for planning (m).
+    lookahead : float
+        Distance along the planned path to the steering point, m.
+    dt : float
+        The environment's step, s (to integrate the yaw rate).
+    **reactive
+        ``SDFReactive``'s parameters.
+    """
+
+    def __init__(self, cell=0.2, inflate=0.45, lookahead=1.0, dt=0.1, half=18.0, **reactive):
+        self.cell, self.inflate, self.half = float(cell), float(inflate), float(half)
+        self.lookahead = float(lookahead)
+        self.dt = float(dt)
+        super().__init__(**reactive)
+
+    def reset(self):
+        from polar_sim.envs._gridplan import ObstacleMemory
+
+        super().reset()
+        self.memory = ObstacleMemory(self.half, self.cell, self.inflate)
+        self._theta = 0.0
+        self._yaw_rate = None
+
+    def _steering_point(self, p):
+        """The point ``lookahead`` m along the cheapest path from ``p`` (memory frame), or None."""
+        from polar_sim.envs._gridplan import cost_to_go
+
+        mem = self.memory
+        goal_ij = mem.index(np.zeros((1, 2)))[0]
+        here = mem.index(p[None])[0]
+        # Plan with the full inflation, then with a thinner one: a goal among clutter can be
+        # closed off by a 20 cm grid's rounding although the rover fits.
+        for inflate in (self.inflate, 0.6 * self.inflate):
+            cost = mem.cost(inflate)
+            # The goal and the robot's own cell stay passable: the goal is known free, and a
+            # robot pressed against a wall must still be able to plan its way out.
+            cost[goal_ij[0], goal_ij[1]] = 1.0
+            if not np.isfinite(cost[here[0], here[1]]):
+                cost[here[0], here[1]] = 1.0 + mem.clearance_weight
+            dist = cost_to_go(cost, int(goal_ij[0]), int(goal_ij[1]))
+            if np.isfinite(dist[here[0], here[1]]):
+                break
+        else:
+            return None
+        ij = here.copy()
+        for _ in range(max(1, int(round(self.lookahead / self.cell)))):
+            i0, i1 = max(ij[0] - 1, 0), min(ij[0] + 2, mem.n)
+            j0, j1 = max(ij[1] - 1, 0), min(ij[1] + 2, mem.n)
+            win = dist[i0:i1, j0:j1]
+            k = np.unravel_index(int(np.argmin(win)), win.shape)
+            nxt = np.array([i0 + k[0], j0 + k[1]])
+            if dist[nxt[0], nxt[1]] >= dist[ij[0], ij[1]]:
+                break
+            ij = nxt
+        if (ij == here).all():
+            return None
+        return mem.centre(ij[None])[0]
+
+    def __call__(self, obs):
+        w = float(obs["twist"][1])
+        if self._yaw_rate is not None:
+            self._theta += 0.5 * (self._yaw_rate + w) * self.dt  # trapezoidal rule
+        self._yaw_rate = w
+        c, sn = np.cos(self._theta), np.sin(self._theta)
+        R = np.array([[c, -sn], [sn, c]])
+        goal = np.asarray(obs["goal"], float)
+        p = -R @ goal
+        s = self._surface_points(obs)
+        d = np.asarray(obs["sdf"], float)
+        free = (np.asarray(obs["sdf_var"], float) < self.max_var) & (d > 0.25)
+        radius = np.minimum(d[free], 3.0) - 0.15
+        self.memory.add(p + s @ R.T, p + self._points[free] @ R.T, radius)
+
+        target = self._steering_point(p)
+        if target is None:
+            return super().__call__(obs)
+        dg = float(np.linalg.norm(goal))
+        ds = np.linalg.norm(s, axis=1) if len(s) else np.zeros(0)
+        to_target = R.T @ (target - p)
+        to_target /= max(np.linalg.norm(to_target), 1e-9)
+        return self._steer(to_target + 1.5 * self._repulsion(s, ds), s, dg)
 
 
 class PurePursuitVO:
