@@ -1,8 +1,9 @@
-"""A small remembered obstacle grid and shortest-path cost-to-go, for the scripted navigator.
+"""Shortest paths on grids: the geodesic distance that scores navigation progress, and the
+remembered obstacle grid of the scripted navigator.
 
-The grid lives in a frame anchored at the goal (origin) with a fixed orientation; it is filled
-from surface points and cleared by free-space disks, then planned on optimistically (unknown
-cells are free), as in planning for navigation in unknown terrain.
+The navigator's grid lives in a frame anchored at the goal (origin) with a fixed orientation; it
+is filled from surface points and cleared by free-space disks, then planned on optimistically
+(unknown cells are free), as in planning for navigation in unknown terrain.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["ObstacleMemory", "cost_to_go"]
+__all__ = ["GeodesicDistance", "ObstacleMemory", "cost_to_go"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -110,3 +111,56 @@ class ObstacleMemory:
         c = 1.0 + self.clearance_weight * np.clip((inflate + self.clearance - edt) / self.clearance, 0, 1)
         c[edt <= inflate] = np.inf
         return c
+
+
+class GeodesicDistance:
+    """The shortest-path distance (m) to a goal around the obstacles of an occupancy grid.
+
+    Parameters
+    ----------
+    occupancy : (ny, nx) bool
+        Cells the robot cannot enter (obstacles inflated by its radius); row i is y, column j is x.
+    origin : (2,) float
+        World (x, y) of the grid's lower-left corner, m.
+    res : float
+        Cell size, m.
+    goal : (2,) float
+        World (x, y) of the goal, m.
+    """
+
+    def __init__(self, occupancy, origin, res, goal):
+        occupancy = np.asarray(occupancy, bool)
+        self.origin = np.asarray(origin, float)
+        self.res = float(res)
+        self.shape = occupancy.shape
+        cost = np.where(occupancy, np.inf, 1.0)
+        gi, gj = self._cell(goal)
+        cost[gi, gj] = 1.0
+        self.dist = cost_to_go(cost, gi, gj) * self.res
+        # For points off the reachable cells (a robot brushing a wall stands in the inflation):
+        # the nearest reachable cell.
+        reach = np.isfinite(self.dist)
+        _, (self._ni, self._nj) = ndimage.distance_transform_edt(~reach, return_indices=True)
+
+    def _cell(self, xy):
+        j, i = np.floor((np.asarray(xy, float) - self.origin) / self.res).astype(int)
+        return int(np.clip(i, 0, self.shape[0] - 1)), int(np.clip(j, 0, self.shape[1] - 1))
+
+    def __call__(self, xy):
+        """Distance (m) from the world point ``xy`` (2,): the least, over the reachable cells of
+        its 3x3 neighbourhood, of the cell's path length plus the straight line to its centre
+        (continuous in ``xy``, so its decrease is a smooth progress signal)."""
+        xy = np.asarray(xy, float)
+        i, j = self._cell(xy)
+        best = np.inf
+        for a in range(max(i - 1, 0), min(i + 2, self.shape[0])):
+            for b in range(max(j - 1, 0), min(j + 2, self.shape[1])):
+                d = self.dist[a, b]
+                if np.isfinite(d):
+                    c = self.origin + self.res * (np.array([b, a]) + 0.5)
+                    best = min(best, d + float(np.hypot(*(xy - c))))
+        if not np.isfinite(best):
+            a, b = self._ni[i, j], self._nj[i, j]
+            c = self.origin + self.res * (np.array([b, a]) + 0.5)
+            best = self.dist[a, b] + float(np.hypot(*(xy - c)))
+        return best

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
+from polar_sim.envs._gridplan import GeodesicDistance
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.geometry import T_to_pose2d, between2d, wrap_angle
 
@@ -38,9 +39,11 @@ class LidarNavEnv(PolarMujocoEnv):
     ``max_yaw_rate``. Actions outside the box or with NaN raise ``ValueError``.
 
     ## Reward
-    ``progress`` (decrease of the straight-line goal distance, m) − ``time`` (0.01 per step) −
-    ``collision`` (5 on a collision) + ``success`` (5 on reaching the goal). The terms are in
-    ``info["reward_terms"]``.
+    ``progress`` (decrease of the shortest-path distance to the goal around the walls and
+    clutter, m, as in Habitat's PointNav) − ``time`` (0.01 per step) − ``collision`` (5 on a
+    collision) + ``success`` (5 on reaching the goal). The terms are in ``info["reward_terms"]``.
+    (The straight-line distance would reward pushing into a wall that stands between the robot
+    and the goal.)
 
     ## Episode End
     Terminated when the robot is within 0.4 m of the goal (success) or touches an obstacle (a
@@ -60,8 +63,9 @@ class LidarNavEnv(PolarMujocoEnv):
     | ``max_yaw_rate`` | 1.5 | rad/s at action 1 |
 
     ## Truth in ``info``
-    ``robot_pose2d`` (x, y, theta), ``goal`` (world, m), ``goal_distance`` (m), ``collision``,
-    ``path_length`` (m), ``is_success``, ``layout_seed``.
+    ``robot_pose2d`` (x, y, theta), ``goal`` (world, m), ``goal_distance`` (straight line, m),
+    ``geodesic_distance`` (shortest path for the rover, m), ``collision``, ``path_length`` (m),
+    ``is_success``, ``layout_seed``.
 
     ## Version History
     - v0: first release.
@@ -103,9 +107,11 @@ class LidarNavEnv(PolarMujocoEnv):
     def _reset_scene(self):
         w = self._world
         self._goal = np.asarray(w.meta["goal"], dtype=np.float64)
+        x0, _, y0, _ = w.meta["bounds"]
+        self._geodesic = GeodesicDistance(w.meta["occupancy"], (x0, y0), w.meta["occupancy_res"], self._goal)
         self._truth = w.truth()
         self._pose = self._truth["robot_pose2d"]
-        self._prev_dist = self._goal_distance()
+        self._prev_dist = self._geodesic(self._pose[:2])
         self._path_length = 0.0
         self._collision = False
         self._scan = w.lidar("lidar")
@@ -147,15 +153,17 @@ class LidarNavEnv(PolarMujocoEnv):
     def _get_info(self):
         d = self._goal_distance()
         return {"robot_pose2d": self._pose.copy(), "goal": self._goal.copy(), "goal_distance": d,
-                "collision": self._collision, "path_length": self._path_length,
+                "geodesic_distance": self._geodesic(self._pose[:2]), "collision": self._collision,
+                "path_length": self._path_length,
                 "is_success": bool(d < GOAL_RADIUS and not self._collision), "layout_seed": self._layout_seed}
 
     def _get_reward(self):
         d = self._goal_distance()
-        terms = {"progress": self._prev_dist - d, "time": -TIME_COST,
+        geo = self._geodesic(self._pose[:2])
+        terms = {"progress": self._prev_dist - geo, "time": -TIME_COST,
                  "collision": -COLLISION_PENALTY if self._collision else 0.0,
                  "success": SUCCESS_BONUS if (d < GOAL_RADIUS and not self._collision) else 0.0}
-        self._prev_dist = d
+        self._prev_dist = geo
         terminated = self._collision or d < GOAL_RADIUS
         return sum(terms.values()), terminated, terms
 

@@ -190,3 +190,20 @@ def test_vector_envs():
     finally:
         sync.close()
         asyn.close()
+
+
+# The progress term is the decrease of the geodesic distance in info, which is never shorter than
+# the straight line (less the grid's half-cell) and sums to the distance covered toward the goal.
+def test_progress_reward_is_geodesic():
+    env = gym.make("polar_sim/GPISNav-v0", sdf_source="truth", **SMALL)
+    obs, info = env.reset(seed=2)
+    pol = SDFNavigator()
+    pol.reset()
+    start, total, done = info["geodesic_distance"], 0.0, False
+    while not done:
+        obs, r, term, trunc, info = env.step(pol(obs))
+        done = term or trunc
+        total += info["reward_terms"]["progress"]
+        assert info["geodesic_distance"] >= info["goal_distance"] - 0.071
+    assert total == pytest.approx(start - info["geodesic_distance"], abs=1e-9)
+    env.close()

@@ -47,3 +47,30 @@ def test_memory_marks_clears_and_inflates():
     assert h[k[0, 0], k[0, 1]] == 0 and h[k[1, 0], k[1, 1]] > 0
     centre = mem.centre(mem.index(np.array([[0.33, -1.27]])))
     np.testing.assert_allclose(centre, [[0.35, -1.25]], atol=1e-12)
+
+
+# Geodesic distance on an open grid lies between the straight line and the octile bound
+# (8-connected paths overestimate it by at most 1/cos(22.5 deg) - 1 = 8.24 %), give or take the
+# goal's offset from its cell's centre (half a diagonal, 0.071 m) and a cell.
+def test_geodesic_open_grid_is_bounded_by_the_straight_line():
+    from polar_sim.envs._gridplan import GeodesicDistance
+
+    geo = GeodesicDistance(np.zeros((60, 80), bool), (-4.0, -3.0), 0.1, (0.52, 0.31))
+    rng = np.random.default_rng(0)
+    for xy in rng.uniform([-3.9, -2.9], [3.9, 2.9], (50, 2)):
+        e = np.hypot(*(xy - [0.52, 0.31]))
+        assert e - 0.0711 <= geo(xy) <= 1.0824 * e + 0.15
+
+
+# A wall between the point and the goal: the path goes round the wall's end, and the distance is
+# the two straight legs via that end, within the octile bound.
+def test_geodesic_goes_round_a_wall():
+    from polar_sim.envs._gridplan import GeodesicDistance
+
+    occ = np.zeros((60, 60), bool)           # x, y in [-3, 3), 0.1 m cells
+    occ[:45, 29:31] = True                   # wall at x in [-0.1, 0.1), from y = -3 up to y = 1.5
+    geo = GeodesicDistance(occ, (-3.0, -3.0), 0.1, (1.5, -2.0))
+    p, end = np.array([-1.5, -2.0]), np.array([0.0, 1.5])
+    legs = np.hypot(*(p - end)) + np.hypot(*(end - [1.5, -2.0]))
+    assert legs - 0.2 <= geo(p) <= 1.0824 * legs + 0.2
+    assert geo(p) > 2.5 * 3.0                # far more than the 3 m straight line
