@@ -9,10 +9,9 @@ checked reachable for the rover on an inflated occupancy grid.
 
 from __future__ import annotations
 
-from collections import deque
-
 import mujoco
 import numpy as np
+from scipy import ndimage
 
 from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
 
@@ -44,23 +43,6 @@ def _rasterise(obstacles, bounds, res, inflate):
         else:
             occ |= np.hypot(X - cx, Y - cy) <= a + inflate
     return occ, xs, ys
-
-
-def _reachable(occ, start_ij, goal_ij):
-    ny, nx = occ.shape
-    seen = np.zeros_like(occ)
-    q = deque([start_ij])
-    seen[start_ij] = True
-    while q:
-        i, j = q.popleft()
-        if (i, j) == goal_ij:
-            return True
-        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            a, b = i + di, j + dj
-            if 0 <= a < ny and 0 <= b < nx and not occ[a, b] and not seen[a, b]:
-                seen[a, b] = True
-                q.append((a, b))
-    return False
 
 
 def build_navworld(spec: mujoco.MjSpec, seed, *, rooms=3, room_size=4.0, clutter=10, door_width=1.6,
@@ -172,13 +154,14 @@ def build_navworld(spec: mujoco.MjSpec, seed, *, rooms=3, room_size=4.0, clutter
     res = 0.1
     occ, xs, ys = _rasterise(obstacles, bounds, res, radius + 0.1)
     free = np.argwhere(~occ)
+    region, _ = ndimage.label(~occ)  # 4-connected free regions
     for _ in range(500):
         si, gi = free[rng.integers(len(free))], free[rng.integers(len(free))]
         start_xy = np.array([xs[si[1]], ys[si[0]]])
         goal_xy = np.array([xs[gi[1]], ys[gi[0]]])
         if np.linalg.norm(goal_xy - start_xy) < min(min_goal_distance, 0.8 * n * L):
             continue
-        if _reachable(occ, tuple(si), tuple(gi)):
+        if region[tuple(si)] == region[tuple(gi)]:
             break
     else:
         raise ValueError(f"navworld: seed {seed} produced no reachable start/goal pair; change the options")
