@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from polar_sim.envs._gridplan import ObstacleMemory, cost_to_go
+
 __all__ = ["SDFReactive", "SDFNavigator", "PurePursuitVO", "VisualServoReach"]
 
 
@@ -164,6 +166,9 @@ class SDFNavigator(SDFReactive):
         Distance along the planned path to the steering point, m.
     dt : float
         The environment's step, s (to integrate the yaw rate).
+    half : float
+        Half the side of the grid, m, centred on the goal: it must reach the start (the default
+        covers GPISNav-v0's worlds; 180 x 180 cells).
     **reactive
         ``SDFReactive``'s parameters.
     """
@@ -175,8 +180,6 @@ class SDFNavigator(SDFReactive):
         super().__init__(**reactive)
 
     def reset(self):
-        from polar_sim.envs._gridplan import ObstacleMemory
-
         super().reset()
         self.memory = ObstacleMemory(self.half, self.cell, self.inflate)
         self._theta = 0.0
@@ -184,8 +187,6 @@ class SDFNavigator(SDFReactive):
 
     def _steering_point(self, p):
         """The point ``lookahead`` m along the cheapest path from ``p`` (memory frame), or None."""
-        from polar_sim.envs._gridplan import cost_to_go
-
         mem = self.memory
         goal_ij = mem.index(np.zeros((1, 2)))[0]
         here = mem.index(p[None])[0]
