@@ -9,10 +9,15 @@ import numpy as np
 from polar_sim._validation import as_angles, as_pose2d, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import check_params
-from polar_sim.gpis._fusion import fuse, normal_noise
+from polar_sim.gpis._fusion import RangeNoiseModel, fuse, normal_noise
 from polar_sim.gpis._obsgp import ObsGP1D
 
 __all__ = ["GPISMap2D"]
+
+import os as _os
+_RANGE_NOISE = float(_os.environ.get("GP_RN", 0.01))
+_FLOOR_P = float(_os.environ.get("GP_FP", 1e-4))
+_KAPPA = float(_os.environ.get("GP_K", 0.5))
 
 
 class GPISMap2D(GPISMapBase):
@@ -182,9 +187,13 @@ class GPISMap2D(GPISMapBase):
         gp = ObsGP1D(phi, r ** -0.5, scale=p["obs_scale"], noise=p["obs_noise"])
         sp = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
         hits = (sp + o) @ R.T + t
+        model = None
+        if not p["legacy"]:
+            dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
+            model = RangeNoiseModel(_RANGE_NOISE, max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=t, rmax=float(r.max()),
                                sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
-                               lim=np.asarray(p["angle_obs_limit"], float))
+                               lim=np.asarray(p["angle_obs_limit"], float), model=model)
 
     # -- sensor model ---------------------------------------------------------------------------
     def _oc(self, q, gp):
@@ -218,7 +227,7 @@ class GPISMap2D(GPISMapBase):
         g = np.stack([oc[:, 0] - oc[:, 1], oc[:, 2] - oc[:, 3]], 1) / self.delx
         obar = oc.mean(1)
         n, sp, sg = normal_noise(g, obar, s, scan.r ** 2, self.min_position_noise,
-                                 self.min_grad_noise, scan.R)
+                                 self.min_grad_noise, scan.R, model=scan.model)
         P = scan.hits
         bad = ~fd_ok
         return P, ok, bad, n, sp, sg
@@ -230,4 +239,4 @@ class GPISMap2D(GPISMapBase):
         n = N @ scan.R
         return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
                     lambda q: q @ scan.R.T + (scan.R @ scan.o + scan.t), scan.R, oc_skip=-0.1,
-                    rhat_dim=2)
+                    rhat_dim=2, model=scan.model)
