@@ -8,6 +8,7 @@ import numpy as np
 __all__ = ["normal_noise", "fuse", "RangeNoiseModel"]
 
 _TOL = 0.02          # line-search tolerance on |oc|
+_GATE_MIN = 0.05     # m, smallest association gate of the default-mode re-evaluation
 
 
 class RangeNoiseModel:
@@ -218,6 +219,15 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
     spf = np.where(replace, sp, spf)
     sgf = np.where(replace, sg, sgf)
     drop = (spf > 1) & (sgf > 0.61)
-    action[ii] = np.where(drop, 3, 2)
+    act = np.where(drop, 3, 2)
+    if model is not None:
+        # data association: a line search that had to move the sample further than 3 sigma of
+        # the two position noises (and 5 cm) found another surface along the normal (an edge
+        # seen against a farther wall, an occluder): leave the sample as it is rather than
+        # drag it into free space one scan at a time
+        move = np.linalg.norm(qq - p[ii], axis=1)
+        far = move > np.maximum(3.0 * np.sqrt(sp + spo), _GATE_MIN)
+        act = np.where(far & ~replace, 0, act)
+    action[ii] = act
     Pn[ii], Nn[ii], spn[ii], sgn[ii] = Pf, Nf, spf, sgf
     return action, Pn, Nn, spn, sgn

@@ -14,10 +14,11 @@ from polar_sim.gpis._obsgp import ObsGP1D
 
 __all__ = ["GPISMap2D"]
 
-import os as _os
-_RANGE_NOISE = float(_os.environ.get("GP_RN", 0.01))
-_FLOOR_P = float(_os.environ.get("GP_FP", 1e-4))
-_KAPPA = float(_os.environ.get("GP_K", 0.5))
+# default-mode sample noise (RangeNoiseModel): position-variance floor, m^2 ((3.2 cm)^2: what the
+# observation GP and the local GPIS cannot resolve, e.g. the rounding of corners), and the
+# normal-noise factor calibrated on exact normals
+_FLOOR_P = 1e-3
+_KAPPA = 0.5
 
 
 class GPISMap2D(GPISMapBase):
@@ -67,6 +68,14 @@ class GPISMap2D(GPISMapBase):
         trusted normal (gradient noise within the GP gate 0.1001) points away from the new
         one's (dot < -0.5) is the other face of a thin wall and does not block it (the tree gets
         leaves of half-length min_half / 2 so that both faces fit).
+    range_noise : float, default=0.01
+        Default mode: standard deviation of the laser's range noise, metres. It sets the sample
+        noise (spec §5/§6 replaced by ``_fusion.RangeNoiseModel``): position variance
+        ``range_noise^2 cos^2(incidence) + 1e-3`` m^2 and normal variance
+        ``(0.5 range_noise cos^2(incidence) / (r dtheta))^2`` rad^2 (``dtheta`` the beam spacing),
+        so far and grazing returns keep their normals. Re-evaluation gates the line-search move
+        at 3 sigma (at least 5 cm) and drops samples whose doubled noises pass the drop gate.
+        Legacy mode uses the spec's model (0.01 r^2 and the view-angle terms).
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
         the query is then the published SDF f + fbias.
@@ -91,7 +100,7 @@ class GPISMap2D(GPISMapBase):
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
-               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "legacy")
+               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "range_noise", "legacy")
 
     def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
@@ -99,7 +108,7 @@ class GPISMap2D(GPISMapBase):
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
                  max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.4,
                  surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
-                 legacy=False):
+                 range_noise=0.01, legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
         self.obs_var_thre = obs_var_thre
@@ -123,6 +132,7 @@ class GPISMap2D(GPISMapBase):
         self.free_res = free_res
         self.retrain_tol = retrain_tol
         self.sample_spacing = sample_spacing
+        self.range_noise = range_noise
         self.legacy = legacy
 
     def _checked_params(self):
@@ -190,7 +200,7 @@ class GPISMap2D(GPISMapBase):
         model = None
         if not p["legacy"]:
             dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
-            model = RangeNoiseModel(_RANGE_NOISE, max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
+            model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=t, rmax=float(r.max()),
                                sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
                                lim=np.asarray(p["angle_obs_limit"], float), model=model)
