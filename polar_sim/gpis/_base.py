@@ -37,6 +37,8 @@ class GPISMapBase:
     _QUERY_W = None         # query search half-width; None = 4 * map_scale
     _SURF_RES, _SURF_BAND, _SURF_VAR = 0.05, 0.3, 0.4
     _VAR_BLEND = False      # default mode: weight the GPIS by its information (blend_gp)
+    _SIGN_GATE = np.inf     # default mode: surfels with gradient noise above this do not set the
+                            # far-field sign where observed free space says otherwise
     _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
                             # different faces and not subject to the sample spacing (None: off)
 
@@ -296,12 +298,13 @@ class GPISMapBase:
         if kd is None:
             dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                             self._surfel_radius(), self.free_,
-                                            1.0 + float(self.map_noise))
+                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE)
             return dist, grad, var_far
         near, far = self._blend_band()
         dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp,
                                          self._surfel_radius(), self.free_,
-                                         1.0 + float(self.map_noise), near, far)
+                                         1.0 + float(self.map_noise), near, far, sg=tr.sg,
+                                         gate=self._SIGN_GATE)
         sel = np.flatnonzero(w > 0)
         if len(sel):
             out = self._gp_query(pts[sel])

@@ -97,6 +97,8 @@ class GPISMap2D(GPISMapBase):
     # where the local GP is uninformative (var_f near the 0.4 query threshold: samples without a
     # gradient observation), its value has no zero level; the surfel distance takes over
     _VAR_BLEND = True
+    # a surfel whose normal fails the GP's gradient gate does not override observed free space
+    _SIGN_GATE = 0.1001
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
@@ -239,6 +241,17 @@ class GPISMap2D(GPISMapBase):
         n, sp, sg = normal_noise(g, obar, s, scan.r ** 2, self.min_position_noise,
                                  self.min_grad_noise, scan.R, model=scan.model)
         P = scan.hits
+        if scan.model is not None:
+            # no usable finite-difference gradient (the observation GP disagrees with this beam,
+            # e.g. a lone beam through a gap): the return is still a surface point with the
+            # range noise along its ray; it gets the normal facing the sensor, untrusted (the GP
+            # takes no gradient from it), so that the surfel field keeps a zero level there
+            deg = (g * g).sum(1) <= 1e-6
+            if deg.any():
+                ray = s[deg] / np.linalg.norm(s[deg], axis=1)[:, None]
+                n[deg] = -ray @ scan.R.T
+                sp[deg] = scan.model.position(1.0)
+                sg[deg] = 1.0
         bad = ~fd_ok
         return P, ok, bad, n, sp, sg
 
