@@ -99,6 +99,9 @@ class GPISMap2D(GPISMapBase):
     _VAR_BLEND = True
     # a surfel whose normal fails the GP's gradient gate does not override observed free space
     _SIGN_GATE = 0.1001
+    # a sample without a trusted normal still has a trusted position (the range noise along its
+    # ray): its value observation keeps its own position noise instead of the spec's 2.0
+    _NOGRAD_NOISE = 0.0
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
