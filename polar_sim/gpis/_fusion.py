@@ -138,6 +138,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
     occ = oc0.copy()
     rnew = rng(p)
     run = live & (A > _TOL)
+    found = live & ~run                  # the line search reached |oc| < tol
     bug3d = legacy and d == 3
     for _ in range(10):
         idx = np.nonzero(run)[0]
@@ -149,6 +150,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
             rnew[idx] = rng(q[idx])
         o2, ob2, _ = oc_fn(p[idx] if bug3d else q[idx], scan.gp)
         conv = ob2 & (np.abs(o2) < _TOL)
+        found[idx[conv]] = True
         prev = ob2 & ~conv & (occ[idx] < oc_skip)
         cont = ob2 & ~conv & ~prev
         c = idx[cont]
@@ -227,7 +229,10 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
         # drag it into free space one scan at a time
         move = np.linalg.norm(qq - p[ii], axis=1)
         far = move > np.maximum(3.0 * np.sqrt(sp + spo), _GATE_MIN)
-        act = np.where(far & ~replace, 0, act)
+        # nor fuse a search that did not reach the observed surface (it stopped on the step
+        # limit or an unobservable direction): moving such samples a little every scan lets
+        # them creep off edges into free space
+        act = np.where((far | ~found[ii]) & ~replace, 0, act)
     action[ii] = act
     Pn[ii], Nn[ii], spn[ii], sgn[ii] = Pf, Nf, spf, sgf
     return action, Pn, Nn, spn, sgn
