@@ -39,6 +39,7 @@ class GPISMapBase:
     _VAR_BLEND = False      # default mode: weight the GPIS by its information (blend_gp)
     _NOGRAD_NOISE = NOGRAD_VALUE_NOISE   # default mode: value noise of samples without a
                             # gradient observation (<= 0: their position noise plus -this)
+    _VALUE_FLOOR = 0.0      # default mode: added to every GP value noise (m^2)
     _SIGN_GATE = np.inf     # default mode: surfels with gradient noise above this do not set the
                             # far-field sign where observed free space says otherwise
     _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
@@ -209,7 +210,8 @@ class GPISMapBase:
         self._sync_slot_arrays()
         self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
                         self.legacy and self.dim == 2,
-                        NOGRAD_VALUE_NOISE if self.legacy else self._NOGRAD_NOISE)
+                        NOGRAD_VALUE_NOISE if self.legacy else self._NOGRAD_NOISE,
+                        0.0 if self.legacy else self._VALUE_FLOOR)
         self._sync_slot_arrays()
         self.gp_gen_[slots] = self.slot_gen_[slots]
 

@@ -8,6 +8,7 @@ import numpy as np
 __all__ = ["normal_noise", "fuse", "RangeNoiseModel"]
 
 _TOL = 0.02          # line-search tolerance on |oc|
+_BETA = 1.0          # between-beam interpolation error of the observation GP, in beam spacings
 _GATE_MIN = 0.05     # m, smallest association gate of the default-mode re-evaluation
 
 
@@ -35,15 +36,21 @@ class RangeNoiseModel:
       the observation GP smooths over a range discontinuity) is kept on top.
     """
 
-    def __init__(self, sigma_r, dtheta, floor_p, kappa=0.5, c_min=0.05):
+    def __init__(self, sigma_r, dtheta, floor_p, kappa=0.5, c_min=0.05, beta=_BETA):
         self.sigma_r, self.dtheta, self.floor_p = float(sigma_r), float(dtheta), float(floor_p)
-        self.kappa, self.c_min = float(kappa), float(c_min)
+        self.kappa, self.c_min, self.beta = float(kappa), float(c_min), float(beta)
 
     def position(self, c):
         return (self.sigma_r * c) ** 2 + self.floor_p
 
     def normal(self, r, c):
         return (self.kappa * self.sigma_r * c * c / (np.maximum(r, 1e-3) * self.dtheta)) ** 2
+
+    def between(self, r, c):
+        """Variance (m^2) of a surface point located between beams (re-evaluation): the
+        observation GP's range there is an interpolation over the beam spacing r dtheta, and its
+        error normal to the surface is ``beta r dtheta sin(incidence)``."""
+        return (self.beta * r * self.dtheta) ** 2 * (1.0 - c * c)
 
     @staticmethod
     def residual(A, r, c):
@@ -197,7 +204,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
     else:
         rq = np.linalg.norm(qq, axis=1)
         c = np.maximum(np.abs((qq * np_).sum(1)) / rq, model.c_min)
-        sp = model.position(c) + model.residual(A[ii], rq, c) ** 2
+        sp = model.position(c) + model.residual(A[ii], rq, c) ** 2 + model.between(rq, c)
         sg = np.clip(np.abs(obar[j]) + model.normal(rq, c), float(m.min_grad_noise), 1.0)
     Pq = to_world(qq)
     Nq = np_ @ R.T
@@ -228,11 +235,14 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
         # seen against a farther wall, an occluder): leave the sample as it is rather than
         # drag it into free space one scan at a time
         move = np.linalg.norm(qq - p[ii], axis=1)
+        # (the gate is on the measurement noises: the model floor is what the GPs cannot resolve)
         far = move > np.maximum(3.0 * np.sqrt(sp + spo), _GATE_MIN)
         # nor fuse a search that did not reach the observed surface (it stopped on the step
         # limit or an unobservable direction): moving such samples a little every scan lets
         # them creep off edges into free space
         act = np.where((far | ~found[ii]) & ~replace, 0, act)
+        # nor take a normal that faces away from the sensor (not the surface the scan sees)
+        act = np.where((qq * np_).sum(1) > 0, 0, act)
     action[ii] = act
     Pn[ii], Nn[ii], spn[ii], sgn[ii] = Pf, Nf, spf, sgf
     return action, Pn, Nn, spn, sgn

@@ -10,14 +10,17 @@ from polar_sim._validation import as_angles, as_pose2d, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import check_params
 from polar_sim.gpis._fusion import RangeNoiseModel, fuse, normal_noise
+from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
 
 __all__ = ["GPISMap2D"]
 
-# default-mode sample noise (RangeNoiseModel): position-variance floor, m^2 ((3.2 cm)^2: what the
-# observation GP and the local GPIS cannot resolve, e.g. the rounding of corners), and the
-# normal-noise factor calibrated on exact normals
-_FLOOR_P = 1e-3
+# default-mode sample noise (RangeNoiseModel): the samples' position variances are measurement
+# variances (floored at (3 mm)^2 so that fusion never claims more than the range noise supports);
+# what the local GP cannot resolve (corners, the rounding of a 15 cm wall) is its own value-noise
+# floor, (3.2 cm)^2; kappa is the normal-noise factor calibrated on exact normals
+_VFLOOR = 1e-3      # m^2, value-noise floor of the local GPs ((3.2 cm)^2)
+_FLOOR_P = 1e-5     # m^2, floor of the samples' (fused) position variances ((3 mm)^2)
 _KAPPA = 0.5
 
 
@@ -71,11 +74,16 @@ class GPISMap2D(GPISMapBase):
     range_noise : float, default=0.01
         Default mode: standard deviation of the laser's range noise, metres. It sets the sample
         noise (spec §5/§6 replaced by ``_fusion.RangeNoiseModel``): position variance
-        ``range_noise^2 cos^2(incidence) + 1e-3`` m^2 and normal variance
+        ``range_noise^2 cos^2(incidence)`` m^2 (re-evaluation adds the line-search residual and
+        the between-beam term ``(r dtheta sin(incidence))^2``; fused values are floored at
+        1e-5 m^2, and the local GPs add 1e-3 m^2 to every value noise) and normal variance
         ``(0.5 range_noise cos^2(incidence) / (r dtheta))^2`` rad^2 (``dtheta`` the beam spacing),
-        so far and grazing returns keep their normals. Re-evaluation gates the line-search move
-        at 3 sigma (at least 5 cm) and drops samples whose doubled noises pass the drop gate.
-        Legacy mode uses the spec's model (0.01 r^2 and the view-angle terms).
+        so far and grazing returns keep their normals. Re-evaluation fuses only line searches
+        that reached the observed surface within 3 sigma (at least 5 cm) with a normal facing the
+        sensor, and drops samples whose doubled noises pass the drop gate. Returns without a
+        trusted normal keep their position (value noise = position noise, not 2.0) with the
+        normal facing the sensor. Legacy mode uses the spec's model (0.01 r^2 and the view-angle
+        terms).
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
         the query is then the published SDF f + fbias.
@@ -102,6 +110,9 @@ class GPISMap2D(GPISMapBase):
     # a sample without a trusted normal still has a trusted position (the range noise along its
     # ray): its value observation keeps its own position noise instead of the spec's 2.0
     _NOGRAD_NOISE = 0.0
+    # the samples' position variances shrink with fusion (a well-seen sample resists being
+    # dragged off an edge); the local GP adds its own model-error floor to every value noise
+    _VALUE_FLOOR = _VFLOOR
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
@@ -249,12 +260,18 @@ class GPISMap2D(GPISMapBase):
             # e.g. a lone beam through a gap): the return is still a surface point with the
             # range noise along its ray; it gets the normal facing the sensor, untrusted (the GP
             # takes no gradient from it), so that the surfel field keeps a zero level there
-            deg = (g * g).sum(1) <= 1e-6
+            # a normal facing away from the sensor cannot belong to the surface the beam hit
+            # (the observation GP smoothed across an edge): it is replaced the same way
+            deg = ((g * g).sum(1) <= 1e-6) | ((g * s).sum(1) > 0)
+            sp[deg] = scan.model.position(1.0)
+            sg[deg] = 1.0
+            # an untrusted finite-difference normal (a beam next to a range discontinuity, where
+            # the observation GP smooths across the edge) is no better than that guess either;
+            # only the surfel field uses it, and a wrong one there puts a zero level in free space
+            deg |= sg > _GRAD_GATE
             if deg.any():
                 ray = s[deg] / np.linalg.norm(s[deg], axis=1)[:, None]
                 n[deg] = -ray @ scan.R.T
-                sp[deg] = scan.model.position(1.0)
-                sg[deg] = 1.0
         bad = ~fd_ok
         return P, ok, bad, n, sp, sg
 
