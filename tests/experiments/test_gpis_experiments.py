@@ -24,7 +24,6 @@ KNOWN_MISSES = {
     ("gpis_accuracy", "SDF RMSE within 0.3 m"): "3.1 cm vs 2 cm: corners, glimpsed surfaces, untrusted normals",
     ("gpis_accuracy", "Hausdorff surface()"): "0.37 m vs 10 cm: glimpsed walls without trusted normals, corners",
     ("gpis_accuracy", "object_orbit SDF RMSE"): "2.3 mm vs 2 mm on seed 0's 4.8 cm cube (edges)",
-    ("surface_vs_rate", "at the sparsest rate"): "GPIS 0.98 m vs grid 10 cm 0.8 m: isolated glimpses",
 }
 
 # Figures and tables each experiment's summary must produce.
