@@ -16,7 +16,7 @@ from polar_sim.gpis import _io
 from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
 from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
                                      gather_training, query_gp)
-from polar_sim.gpis._localgp import GPStore, _var_consts
+from polar_sim.gpis._localgp import NOGRAD_VALUE_NOISE, GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
 
 logger = logging.getLogger(__name__)
@@ -37,6 +37,11 @@ class GPISMapBase:
     _QUERY_W = None         # query search half-width; None = 4 * map_scale
     _SURF_RES, _SURF_BAND, _SURF_VAR = 0.05, 0.3, 0.4
     _VAR_BLEND = False      # default mode: weight the GPIS by its information (blend_gp)
+    _NOGRAD_NOISE = NOGRAD_VALUE_NOISE   # default mode: value noise of samples without a
+                            # gradient observation (<= 0: their position noise plus -this)
+    _VALUE_FLOOR = 0.0      # default mode: added to every GP value noise (m^2)
+    _SIGN_GATE = np.inf     # default mode: surfels with gradient noise above this do not set the
+                            # far-field sign where observed free space says otherwise
     _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
                             # different faces and not subject to the sample spacing (None: off)
 
@@ -204,7 +209,9 @@ class GPISMapBase:
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
         self._sync_slot_arrays()
         self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
-                        self.legacy and self.dim == 2)
+                        self.legacy and self.dim == 2,
+                        NOGRAD_VALUE_NOISE if self.legacy else self._NOGRAD_NOISE,
+                        0.0 if self.legacy else self._VALUE_FLOOR)
         self._sync_slot_arrays()
         self.gp_gen_[slots] = self.slot_gen_[slots]
 
@@ -296,12 +303,13 @@ class GPISMapBase:
         if kd is None:
             dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                             self._surfel_radius(), self.free_,
-                                            1.0 + float(self.map_noise))
+                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE)
             return dist, grad, var_far
         near, far = self._blend_band()
         dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp,
                                          self._surfel_radius(), self.free_,
-                                         1.0 + float(self.map_noise), near, far)
+                                         1.0 + float(self.map_noise), near, far, sg=tr.sg,
+                                         gate=self._SIGN_GATE)
         sel = np.flatnonzero(w > 0)
         if len(sel):
             out = self._gp_query(pts[sel])

@@ -114,13 +114,15 @@ class FreeSpace:
 
 
 @nb.njit(cache=True)
-def _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad, var):
+def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
+             dtrust):
     n, d = pts.shape
     k = gi.shape[1]
     v = np.empty(d)
     t = np.empty(d)
     for i in range(n):
         best = np.inf
+        bt = np.inf                  # nearest surfel whose normal is trusted
         bj = -1
         ba = 0.0
         for j in range(k):
@@ -149,6 +151,8 @@ def _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad,
                 dk = np.sqrt(dk)
             if dk < best:
                 best, bj, ba = dk, j, a
+            if sg[s] <= gate and dk < bt:
+                bt = dk
         s = gi[i, bj]
         nl = 0.0
         for c in range(d):
@@ -168,7 +172,9 @@ def _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad,
             v[c] = v[c] - sc * t[c]
             gl += v[c] * v[c]
         gl = np.sqrt(gl)
-        ok = seen[i] and best > cell_diag
+        # observed free space decides the sign beyond one cell diagonal of the surfel, and also
+        # within it when the surfel's normal is not trusted (gradient noise above ``gate``)
+        ok = seen[i] and (best > cell_diag or sg[s] > gate)
         sign = 1.0 if (ok or ba >= 0) else -1.0
         dist[i] = sign * best
         for c in range(d):
@@ -177,9 +183,10 @@ def _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad,
             else:
                 grad[i, c] = sign * (nrm[s, c] / nl if nl > 0.5 else 0.0)
         var[i] = min(sp[s], var_unobs) if ok else var_unobs
+        dtrust[i] = bt
 
 
-def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
+def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4, gate=np.inf):
     """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs."""
     n, d = pts.shape
     if kd is None:
@@ -189,8 +196,8 @@ def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4):
     gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
     dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
     # a free cell may straddle the surface: trust it only beyond one cell diagonal
-    _surfels(pts, gi, pos, nrm, sp, float(r_s), free.observed(pts), free.res * np.sqrt(d),
-             float(var_unobs), dist, grad, var)
+    _surfels(pts, gi, pos, nrm, sp, sg, float(gate), float(r_s), free.observed(pts),
+             free.res * np.sqrt(d), float(var_unobs), dist, grad, var, np.empty(n))
     return dist, grad, var
 
 
@@ -216,16 +223,21 @@ def _observed(pts, grid, gshape, goff, res, seen):
 
 
 @nb.njit(cache=True)
-def _far_weights(pts, gi, pos, nrm, sp, r_s, grid, gshape, goff, res, cell_diag, var_unobs,
+def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, goff, res,
+                 cell_diag, var_unobs,
                  near, far, dist, grad, var, w):
     """Surfel distance, gradient, variance (``far_field``) and the GPIS blend weight (0..1)."""
     n = pts.shape[0]
     seen = np.empty(n, np.bool_)
     _observed(pts, grid, gshape, goff, res, seen)
-    _surfels(pts, gi, pos, nrm, sp, r_s, seen, cell_diag, var_unobs, dist, grad, var)
+    dtrust = np.empty(n)
+    _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
+             dtrust)
     nsel = 0
     for i in range(n):
-        a = abs(dist[i])
+        # the GPIS learned its shape from trusted normals only: its weight follows the distance
+        # to the nearest trusted surfel (with gate = inf, every surfel: the nearest one)
+        a = max(abs(dist[i]), dtrust[i]) if use_trust else abs(dist[i])
         # behind surfaces the GP has no data: hand over to the surfel distance twice as early
         sc = 0.5 if dist[i] < 0 else 1.0
         x = (far * sc - a) / ((far - near) * sc)
@@ -237,14 +249,18 @@ def _far_weights(pts, gi, pos, nrm, sp, r_s, grid, gshape, goff, res, cell_diag,
     return nsel
 
 
-def far_weights(pts, kd, idx, pos, nrm, sp, r_s, free, var_unobs, near, far, k=4):
+def far_weights(pts, kd, idx, pos, nrm, sp, r_s, free, var_unobs, near, far, k=4, sg=None,
+                gate=np.inf):
     """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None)."""
     n, d = pts.shape
     k = min(k, len(idx))
     _, nn = kd.query(pts, k=k)
     gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
     dist, grad, var, w = np.empty(n), np.empty((n, d)), np.empty(n), np.empty(n)
-    _far_weights(pts, gi, pos, nrm, sp, float(r_s), free.grid, free.gshape, free.goff,
+    if sg is None:
+        sg = np.zeros_like(sp)
+    _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
+                 free.grid, free.gshape, free.goff,
                  float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),
                  float(far), dist, grad, var, w)
     return dist, grad, var, w

@@ -91,9 +91,14 @@ def _cholesky(K):
 
 
 @nb.njit(cache=True)
-def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout):
+def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout,
+               nograd=NOGRAD_VALUE_NOISE, vfloor=0.0):
     """kout[t] = kind (0 value, 1+c gradient c) * 2^32 + index of the sample's value obs."""
-    """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds."""
+    """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds.
+
+    ``nograd``: value noise of samples without a gradient observation; > 0 a constant (the
+    spec's 2.0), <= 0 their own position noise plus ``-nograd``. ``vfloor`` is added to every
+    value noise taken from a sample's position noise (default mode: the GP's model error)."""
     n = idx.shape[0]
     hasg, m = _obs_layout(idx, nrm, sg, dim)
     a = np.sqrt(3.0) / scale
@@ -107,7 +112,10 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
             xout[t, k] = pos[i, k]
         kout[t] = t
         y[t] = -fbias
-        noise[t] = sp[i] if hasg[u] else NOGRAD_VALUE_NOISE
+        if hasg[u]:
+            noise[t] = sp[i] + vfloor
+        else:
+            noise[t] = nograd if nograd > 0 else sp[i] + vfloor - nograd
         t += 1
     for c in range(dim):
         for u in range(n):
@@ -192,14 +200,14 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
 
 @nb.njit(cache=True)
 def _train_many(csr_ptr, csr_idx, obs_off, tri_off, pos, nrm, sp, sg, dim, scale, fbias,
-                quirk_x, Lbuf, abuf, xbuf, kbuf):
+                quirk_x, Lbuf, abuf, xbuf, kbuf, nograd, vfloor):
     nc = csr_ptr.shape[0] - 1
     for c in range(nc):
         idx = csr_idx[csr_ptr[c]:csr_ptr[c + 1]]
         o0, o1 = obs_off[c], obs_off[c + 1]
         t0, t1 = tri_off[c], tri_off[c + 1]
         _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lbuf[t0:t1], abuf[o0:o1],
-                   xbuf[o0:o1], kbuf[o0:o1])
+                   xbuf[o0:o1], kbuf[o0:o1], nograd, vfloor)
 
 
 @nb.njit(cache=True)
@@ -331,7 +339,8 @@ class GPStore:
         self.X, self.kinds, self.alpha, self.Lbuf = X, kinds, alpha, Lbuf
         self.n_obs, self.n_tri = o, t
 
-    def train(self, slots, csr_ptr, csr_idx, tree, scale, fbias, quirk_x):
+    def train(self, slots, csr_ptr, csr_idx, tree, scale, fbias, quirk_x, nograd=NOGRAD_VALUE_NOISE,
+              vfloor=0.0):
         """(Re)train the GPs of ``slots`` on the training sets given in CSR form."""
         slots = np.asarray(slots, np.int64)
         self.ensure_slots(int(slots.max()) + 1 if len(slots) else 0)
@@ -353,7 +362,8 @@ class GPStore:
         obs_off = self.n_obs + np.concatenate([[0], np.cumsum(m)])
         tri_off = self.n_tri + np.concatenate([[0], np.cumsum(tri)])
         _train_many(csr_ptr, csr_idx, obs_off, tri_off, tree.pos, tree.nrm, tree.sp, tree.sg,
-                    self.dim, scale, fbias, quirk_x, self.Lbuf, self.alpha, self.X, self.kinds)
+                    self.dim, scale, fbias, quirk_x, self.Lbuf, self.alpha, self.X, self.kinds,
+                    float(nograd), float(vfloor))
         self.gp_obs[slots] = obs_off[:-1]
         self.gp_tri[slots] = tri_off[:-1]
         self.gp_m[slots] = m

@@ -34,6 +34,27 @@ def grid_query(m, axes, band, var_max, chunk=100_000):
     return sdf.reshape(shape), keep
 
 
+def _jumps(sdf, res, k=2.0):
+    """Nodes of grid cells whose sign change is a jump, not a zero crossing.
+
+    A distance field changes by at most ``res * sqrt(2)`` across a cell, so at a true zero
+    crossing every corner lies within that of zero; a cell with a sign change and a corner beyond
+    ``k`` times it straddles a discontinuity of the field (the surfel distance changes sign
+    where a point passes the plane of a surfel beyond its rim), which marching squares would
+    turn into a spurious surface."""
+    a, b, c, d = sdf[:-1, :-1], sdf[1:, :-1], sdf[:-1, 1:], sdf[1:, 1:]
+    lo = np.minimum(np.minimum(a, b), np.minimum(c, d))
+    hi = np.maximum(np.maximum(a, b), np.maximum(c, d))
+    big = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.maximum(np.abs(c), np.abs(d)))
+    bad = (lo < 0) & (hi > 0) & (big > k * np.sqrt(2.0) * res)
+    out = np.zeros(sdf.shape, bool)
+    out[:-1, :-1] |= bad
+    out[1:, :-1] |= bad
+    out[:-1, 1:] |= bad
+    out[1:, 1:] |= bad
+    return out
+
+
 def _axes(m, res, margin):
     pts = m.samples()["points"]
     lo = np.floor((pts.min(0) - margin) / res) * res
@@ -49,9 +70,17 @@ def surface_2d(m, res, band, var_max):
         return []
     axes = _axes(m, res, 2 * res + band)
     sdf, mask = grid_query(m, axes, band, var_max)
+    if not m.legacy:
+        mask = mask & ~_jumps(sdf, res)
     lines = find_contours(sdf, 0.0, mask=mask)
     x0 = np.array([a[0] for a in axes])
-    return [x0 + c * res for c in lines if len(c) >= 2]
+    out = [x0 + c * res for c in lines if len(c) >= 2]
+    if not m.legacy:
+        # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
+        # field's sign (a spurious zero between samples), not a surface the grid can resolve
+        out = [ln for ln in out if not (np.allclose(ln[0], ln[-1]) and
+                                        np.linalg.norm(np.diff(ln, axis=0), axis=1).sum() < 4 * res)]
+    return out
 
 
 def surface_3d(m, res, band, var_max):

@@ -9,10 +9,19 @@ import numpy as np
 from polar_sim._validation import as_angles, as_pose2d, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import check_params
-from polar_sim.gpis._fusion import fuse, normal_noise
+from polar_sim.gpis._fusion import RangeNoiseModel, fuse, normal_noise
+from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
 
 __all__ = ["GPISMap2D"]
+
+# default-mode sample noise (RangeNoiseModel): the samples' position variances are measurement
+# variances (floored at (3 mm)^2 so that fusion never claims more than the range noise supports);
+# what the local GP cannot resolve (corners, the rounding of a 15 cm wall) is its own value-noise
+# floor, (3.2 cm)^2; kappa is the normal-noise factor calibrated on exact normals
+_VFLOOR = 1e-3      # m^2, value-noise floor of the local GPs ((3.2 cm)^2)
+_FLOOR_P = 1e-5     # m^2, floor of the samples' (fused) position variances ((3 mm)^2)
+_KAPPA = 0.5
 
 
 class GPISMap2D(GPISMapBase):
@@ -62,6 +71,19 @@ class GPISMap2D(GPISMapBase):
         trusted normal (gradient noise within the GP gate 0.1001) points away from the new
         one's (dot < -0.5) is the other face of a thin wall and does not block it (the tree gets
         leaves of half-length min_half / 2 so that both faces fit).
+    range_noise : float, default=0.01
+        Default mode: standard deviation of the laser's range noise, metres. It sets the sample
+        noise (spec §5/§6 replaced by ``_fusion.RangeNoiseModel``): position variance
+        ``range_noise^2 cos^2(incidence)`` m^2 (re-evaluation adds the line-search residual and
+        the between-beam term ``(r dtheta sin(incidence))^2``; fused values are floored at
+        1e-5 m^2, and the local GPs add 1e-3 m^2 to every value noise) and normal variance
+        ``(0.5 range_noise cos^2(incidence) / (r dtheta))^2`` rad^2 (``dtheta`` the beam spacing),
+        so far and grazing returns keep their normals. Re-evaluation fuses only line searches
+        that reached the observed surface within 3 sigma (at least 5 cm) with a normal facing the
+        sensor, and drops samples whose doubled noises pass the drop gate. Returns without a
+        trusted normal keep their position (value noise = position noise, not 2.0) with the
+        normal facing the sensor. Legacy mode uses the spec's model (0.01 r^2 and the view-angle
+        terms).
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
         the query is then the published SDF f + fbias.
@@ -83,10 +105,18 @@ class GPISMap2D(GPISMapBase):
     # where the local GP is uninformative (var_f near the 0.4 query threshold: samples without a
     # gradient observation), its value has no zero level; the surfel distance takes over
     _VAR_BLEND = True
+    # a surfel whose normal fails the GP's gradient gate does not override observed free space
+    _SIGN_GATE = 0.1001
+    # a sample without a trusted normal still has a trusted position (the range noise along its
+    # ray): its value observation keeps its own position noise instead of the spec's 2.0
+    _NOGRAD_NOISE = 0.0
+    # the samples' position variances shrink with fusion (a well-seen sample resists being
+    # dragged off an edge); the local GP adds its own model-error floor to every value noise
+    _VALUE_FLOOR = _VFLOOR
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
-               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "legacy")
+               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "range_noise", "legacy")
 
     def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
@@ -94,7 +124,7 @@ class GPISMap2D(GPISMapBase):
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
                  max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.4,
                  surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
-                 legacy=False):
+                 range_noise=0.01, legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
         self.obs_var_thre = obs_var_thre
@@ -118,6 +148,7 @@ class GPISMap2D(GPISMapBase):
         self.free_res = free_res
         self.retrain_tol = retrain_tol
         self.sample_spacing = sample_spacing
+        self.range_noise = range_noise
         self.legacy = legacy
 
     def _checked_params(self):
@@ -182,9 +213,13 @@ class GPISMap2D(GPISMapBase):
         gp = ObsGP1D(phi, r ** -0.5, scale=p["obs_scale"], noise=p["obs_noise"])
         sp = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
         hits = (sp + o) @ R.T + t
+        model = None
+        if not p["legacy"]:
+            dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
+            model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=t, rmax=float(r.max()),
                                sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
-                               lim=np.asarray(p["angle_obs_limit"], float))
+                               lim=np.asarray(p["angle_obs_limit"], float), model=model)
 
     # -- sensor model ---------------------------------------------------------------------------
     def _oc(self, q, gp):
@@ -218,8 +253,25 @@ class GPISMap2D(GPISMapBase):
         g = np.stack([oc[:, 0] - oc[:, 1], oc[:, 2] - oc[:, 3]], 1) / self.delx
         obar = oc.mean(1)
         n, sp, sg = normal_noise(g, obar, s, scan.r ** 2, self.min_position_noise,
-                                 self.min_grad_noise, scan.R)
+                                 self.min_grad_noise, scan.R, model=scan.model)
         P = scan.hits
+        if scan.model is not None:
+            # no usable finite-difference gradient (the observation GP disagrees with this beam,
+            # e.g. a lone beam through a gap): the return is still a surface point with the
+            # range noise along its ray; it gets the normal facing the sensor, untrusted (the GP
+            # takes no gradient from it), so that the surfel field keeps a zero level there
+            # a normal facing away from the sensor cannot belong to the surface the beam hit
+            # (the observation GP smoothed across an edge): it is replaced the same way
+            deg = ((g * g).sum(1) <= 1e-6) | ((g * s).sum(1) > 0)
+            sp[deg] = scan.model.position(1.0)
+            sg[deg] = 1.0
+            # an untrusted finite-difference normal (a beam next to a range discontinuity, where
+            # the observation GP smooths across the edge) is no better than that guess either;
+            # only the surfel field uses it, and a wrong one there puts a zero level in free space
+            deg |= sg > _GRAD_GATE
+            if deg.any():
+                ray = s[deg] / np.linalg.norm(s[deg], axis=1)[:, None]
+                n[deg] = -ray @ scan.R.T
         bad = ~fd_ok
         return P, ok, bad, n, sp, sg
 
@@ -230,4 +282,4 @@ class GPISMap2D(GPISMapBase):
         n = N @ scan.R
         return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
                     lambda q: q @ scan.R.T + (scan.R @ scan.o + scan.t), scan.R, oc_skip=-0.1,
-                    rhat_dim=2)
+                    rhat_dim=2, model=scan.model)
