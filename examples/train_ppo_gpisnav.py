@@ -6,7 +6,7 @@ Usage:
 Every ``--eval-every`` steps the deterministic policy is scored on held-out worlds (episode
 seeds 10000, 10001, ...), beside a uniformly random policy on the same worlds. Writes
 ``curve.csv``, ``curve.png`` (success rate against training steps) and the model. CPU only
-(``pip install torch==2.13.0`` gives the CPU wheel); about 1-2 hours for 200k steps on 2 cores.
+(``pip install torch==2.13.0`` gives the CPU wheel); about 40 minutes for 200k steps on 2 cores.
 """
 
 import argparse

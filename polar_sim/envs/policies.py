@@ -10,7 +10,7 @@ import numpy as np
 
 from polar_sim.envs._gridplan import ObstacleMemory, cost_to_go
 
-__all__ = ["SDFReactive", "SDFNavigator", "PurePursuitVO", "VisualServoReach"]
+__all__ = ["SDFReactive", "SDFPotentialField", "SDFNavigator", "PurePursuitVO", "VisualServoReach"]
 
 
 def _angle(v):
@@ -144,6 +144,19 @@ class SDFReactive:
         v = 0.9 * max(np.cos(heading), 0.0) ** 2 * float(np.clip((ahead - 0.4) / 0.5, 0.0, 1.0))
         v *= min(1.0, dg)
         return np.array([v, omega], dtype=np.float32)
+
+
+class SDFPotentialField(SDFReactive):
+    """``SDFReactive`` without its follow state: head for the goal, pushed off surfaces nearer
+    than ``safe``. The classic potential field, and what a memoryless policy gets for free; it
+    stalls wherever a wall stands between the robot and the goal."""
+
+    def __call__(self, obs):
+        goal = np.asarray(obs["goal"], float)
+        dg = float(np.linalg.norm(goal))
+        s = self._surface_points(obs)
+        ds = np.linalg.norm(s, axis=1) if len(s) else np.zeros(0)
+        return self._steer(goal / max(dg, 1e-9) + 1.5 * self._repulsion(s, ds), s, dg)
 
 
 class SDFNavigator(SDFReactive):

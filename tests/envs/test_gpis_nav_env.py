@@ -207,3 +207,31 @@ def test_progress_reward_is_geodesic():
         assert info["geodesic_distance"] >= info["goal_distance"] - 0.071
     assert total == pytest.approx(start - info["geodesic_distance"], abs=1e-9)
     env.close()
+
+
+# make_async_vector_env: workers pinned one per CPU, same observations as a SyncVectorEnv.
+def test_pinned_async_vector_env():
+    import os
+
+    from polar_sim.envs.vector import make_async_vector_env
+
+    with pytest.raises(ValueError, match="num_envs"):
+        make_async_vector_env("polar_sim/GPISNav-v0", 0)
+    kw = dict(sdf_source="truth", **SMALL)
+    venv = make_async_vector_env("polar_sim/GPISNav-v0", 2, **kw)
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make("polar_sim/GPISNav-v0", **kw)] * 2)
+    try:
+        cpus = sorted(os.sched_getaffinity(0))
+        for k, proc in enumerate(venv.processes):
+            assert os.sched_getaffinity(proc.pid) == {cpus[k % len(cpus)]}
+        o1, _ = venv.reset(seed=[3, 4])
+        o2, _ = sync.reset(seed=[3, 4])
+        act = np.tile(np.array([0.3, -0.2], np.float32), (2, 1))
+        for _ in range(3):
+            o1, *_ = venv.step(act)
+            o2, *_ = sync.step(act)
+        for key in o1:
+            np.testing.assert_array_equal(o1[key], o2[key])
+    finally:
+        venv.close()
+        sync.close()
