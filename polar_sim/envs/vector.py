@@ -10,8 +10,10 @@ import gymnasium as gym
 __all__ = ["make_async_vector_env"]
 
 
-def _make_pinned(env_id, cpu, kwargs):
-    if cpu is not None:
+def _make_pinned(env_id, cpu, kwargs, parent_pid):
+    # AsyncVectorEnv also calls the first factory in the parent (to read the spaces): pin only
+    # the workers.
+    if cpu is not None and os.getpid() != parent_pid:
         os.sched_setaffinity(0, {cpu})
     return gym.make(env_id, **kwargs)
 
@@ -32,5 +34,6 @@ def make_async_vector_env(env_id, num_envs, *, pin_workers=True, context="spawn"
     if ":" not in env_id and env_id.startswith("polar_sim/"):
         env_id = "polar_sim:" + env_id  # the children import polar_sim to register the ids
     cpus = sorted(os.sched_getaffinity(0)) if pin_workers and hasattr(os, "sched_getaffinity") else [None]
-    fns = [functools.partial(_make_pinned, env_id, cpus[k % len(cpus)], kwargs) for k in range(int(num_envs))]
+    fns = [functools.partial(_make_pinned, env_id, cpus[k % len(cpus)], kwargs, os.getpid())
+           for k in range(int(num_envs))]
     return gym.vector.AsyncVectorEnv(fns, context=context)

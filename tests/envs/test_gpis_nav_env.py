@@ -138,27 +138,28 @@ def test_reactive_baseline_reaches_goal():
 
 def _run(env, pol, seed):
     obs, info = env.reset(seed=seed)
+    start = info["geodesic_distance"]
     pol.reset()
     done = False
     while not done:
         obs, r, term, trunc, info = env.step(pol(obs))
         done = term or trunc
-    return info
+    return info, start
 
 
 # Held-out worlds (default size) where the goal lies rooms away: the pure reactive controller
-# times out in both (checked on the exact SDF; it does on the map too); the navigator, planning
-# on what the map has shown it, gets there without touching anything, on either.
+# times out in both (checked on the exact SDF); the navigator, planning on what the map has
+# shown it, gets there without touching anything, on either map, by a path at most 1.3x the
+# shortest one (the geodesic distance at the start).
 @pytest.mark.parametrize("source", ["truth", "gpis"])
 def test_navigator_reaches_goals_the_reactive_controller_misses(source):
     env = gym.make("polar_sim/GPISNav-v0", sdf_source=source)
-    for seed in (10009, 10032):
+    for seed in (10006, 10009):
         if source == "truth":
-            assert not _run(env, SDFReactive(), seed)["is_success"]
-        info = _run(env, SDFNavigator(), seed)
+            assert not _run(env, SDFReactive(), seed)[0]["is_success"]
+        info, shortest = _run(env, SDFNavigator(), seed)
         assert info["is_success"] and not info["collision"]
-        # The path is within 1.6x the straight line: the goal was not found by wandering.
-        assert info["path_length"] < 1.6 * np.hypot(*(info["goal"] - env.unwrapped.world.meta["start_pose2d"][:2]))
+        assert info["path_length"] < 1.3 * shortest
     env.close()
 
 
@@ -218,10 +219,11 @@ def test_pinned_async_vector_env():
     with pytest.raises(ValueError, match="num_envs"):
         make_async_vector_env("polar_sim/GPISNav-v0", 0)
     kw = dict(sdf_source="truth", **SMALL)
+    cpus = sorted(os.sched_getaffinity(0))
     venv = make_async_vector_env("polar_sim/GPISNav-v0", 2, **kw)
     sync = gym.vector.SyncVectorEnv([lambda: gym.make("polar_sim/GPISNav-v0", **kw)] * 2)
     try:
-        cpus = sorted(os.sched_getaffinity(0))
+        assert sorted(os.sched_getaffinity(0)) == cpus  # the parent is not pinned
         for k, proc in enumerate(venv.processes):
             assert os.sched_getaffinity(proc.pid) == {cpus[k % len(cpus)]}
         o1, _ = venv.reset(seed=[3, 4])
