@@ -111,7 +111,7 @@ class LidarNavEnv(PolarMujocoEnv):
         self._geodesic = GeodesicDistance(w.meta["occupancy"], (x0, y0), w.meta["occupancy_res"], self._goal)
         self._truth = w.truth()
         self._pose = self._truth["robot_pose2d"]
-        self._prev_dist = self._geodesic(self._pose[:2])
+        self._geo = self._prev_dist = self._geodesic(self._pose[:2])
         self._path_length = 0.0
         self._collision = False
         self._scan = w.lidar("lidar")
@@ -124,6 +124,7 @@ class LidarNavEnv(PolarMujocoEnv):
         self._pose = self._truth["robot_pose2d"]
         self._path_length += float(np.hypot(*(self._pose[:2] - prev[:2])))
         self._collision = bool(self._truth["robot_collision"])
+        self._geo = self._geodesic(self._pose[:2])  # for the reward and the info alike
         self._scan = self._world.lidar("lidar")
         self._after_scan()
 
@@ -153,17 +154,16 @@ class LidarNavEnv(PolarMujocoEnv):
     def _get_info(self):
         d = self._goal_distance()
         return {"robot_pose2d": self._pose.copy(), "goal": self._goal.copy(), "goal_distance": d,
-                "geodesic_distance": self._geodesic(self._pose[:2]), "collision": self._collision,
+                "geodesic_distance": self._geo, "collision": self._collision,
                 "path_length": self._path_length,
                 "is_success": bool(d < GOAL_RADIUS and not self._collision), "layout_seed": self._layout_seed}
 
     def _get_reward(self):
         d = self._goal_distance()
-        geo = self._geodesic(self._pose[:2])
-        terms = {"progress": self._prev_dist - geo, "time": -TIME_COST,
+        terms = {"progress": self._prev_dist - self._geo, "time": -TIME_COST,
                  "collision": -COLLISION_PENALTY if self._collision else 0.0,
                  "success": SUCCESS_BONUS if (d < GOAL_RADIUS and not self._collision) else 0.0}
-        self._prev_dist = geo
+        self._prev_dist = self._geo
         terminated = self._collision or d < GOAL_RADIUS
         return sum(terms.values()), terminated, terms
 

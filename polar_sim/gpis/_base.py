@@ -306,9 +306,9 @@ class GPISMapBase:
                                             1.0 + float(self.map_noise), gate=self._SIGN_GATE)
             return dist, grad, var_far
         near, far = self._blend_band()
-        dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp,
+        dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                          self._surfel_radius(), self.free_,
-                                         1.0 + float(self.map_noise), near, far, sg=tr.sg,
+                                         1.0 + float(self.map_noise), near, far,
                                          gate=self._SIGN_GATE)
         sel = np.flatnonzero(w > 0)
         if len(sel):

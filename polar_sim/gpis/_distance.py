@@ -249,16 +249,13 @@ def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, 
     return nsel
 
 
-def far_weights(pts, kd, idx, pos, nrm, sp, r_s, free, var_unobs, near, far, k=4, sg=None,
-                gate=np.inf):
+def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, k=4, gate=np.inf):
     """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None)."""
     n, d = pts.shape
     k = min(k, len(idx))
     _, nn = kd.query(pts, k=k)
     gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
     dist, grad, var, w = np.empty(n), np.empty((n, d)), np.empty(n), np.empty(n)
-    if sg is None:
-        sg = np.zeros_like(sp)
     _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
                  free.grid, free.gshape, free.goff,
                  float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),

@@ -93,8 +93,8 @@ def _cholesky(K):
 @nb.njit(cache=True)
 def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout,
                nograd=NOGRAD_VALUE_NOISE, vfloor=0.0):
-    """kout[t] = kind (0 value, 1+c gradient c) * 2^32 + index of the sample's value obs."""
-    """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds.
+    """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds
+    (kout[t] = kind (0 value, 1+c gradient c) * 2^32 + index of the sample's value obs).
 
     ``nograd``: value noise of samples without a gradient observation; > 0 a constant (the
     spec's 2.0), <= 0 their own position noise plus ``-nograd``. ``vfloor`` is added to every

@@ -106,7 +106,7 @@ class GPISMap2D(GPISMapBase):
     # gradient observation), its value has no zero level; the surfel distance takes over
     _VAR_BLEND = True
     # a surfel whose normal fails the GP's gradient gate does not override observed free space
-    _SIGN_GATE = 0.1001
+    _SIGN_GATE = _GRAD_GATE
     # a sample without a trusted normal still has a trusted position (the range noise along its
     # ray): its value observation keeps its own position noise instead of the spec's 2.0
     _NOGRAD_NOISE = 0.0
