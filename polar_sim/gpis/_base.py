@@ -44,6 +44,8 @@ class GPISMapBase:
                             # far-field sign where observed free space says otherwise
     _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
                             # different faces and not subject to the sample spacing (None: off)
+    _IMLS_WIDTH = 0.0       # default mode: width of the far field's implicit-MLS sign, in units
+                            # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def get_params(self):
@@ -296,6 +298,10 @@ class GPISMapBase:
             self._kd_version = self.version_
         return self._kd_tree, self._kd_idx
 
+    def _sign_width(self):
+        """Width (m) of the far field's implicit-MLS sign (0: off)."""
+        return self._IMLS_WIDTH * self._spacing() if self._IMLS_WIDTH > 0 else 0.0
+
     def _faithful(self, pts):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
         kd, idx = self._kd()
@@ -303,13 +309,14 @@ class GPISMapBase:
         if kd is None:
             dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                             self._surfel_radius(), self.free_,
-                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE)
+                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE,
+                                            sign_h=self._sign_width())
             return dist, grad, var_far
         near, far = self._blend_band()
         dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                          self._surfel_radius(), self.free_,
                                          1.0 + float(self.map_noise), near, far,
-                                         gate=self._SIGN_GATE)
+                                         gate=self._SIGN_GATE, sign_h=self._sign_width())
         sel = np.flatnonzero(w > 0)
         if len(sel):
             out = self._gp_query(pts[sel])

@@ -9,7 +9,12 @@ the distance to the fused surface samples, each treated as a small disc ("surfel
 Sign: positive where the point lies in *observed free space* (a coarse grid of cells that some ray
 crossed before its return, :class:`FreeSpace`) and is more than one cell diagonal from the nearest
 surfel; elsewhere the sign of ``a`` of the closest surfel, i.e. negative behind (on the occluded
-side of) the surface.
+side of) the surface. With a sign width ``h`` > 0 (the 3D map's default), the sign there is instead that of the
+implicit moving-least-squares surface of the k nearest surfels (Kolluri 2005),
+``sum_j w_j a_j`` with ``w_j = exp(-|x - p_j|^2 / h^2)``: next to an edge of a sparsely sampled
+box, the closest *disc* often belongs to the adjacent face, whose plane the point lies behind
+although it is outside the object; the centre-distance weights let the face the point actually
+faces decide.
 
 Variance: in observed free space, the fused position variance of the closest sample (how well the
 surface that sets the distance is known); elsewhere, never-observed space, the GP prior variance
@@ -114,8 +119,44 @@ class FreeSpace:
 
 
 @nb.njit(cache=True)
+def _imls(pts, i, gi, pos, nrm, sg, gate, h, fallback):
+    """Implicit MLS value ``sum_j w_j a_j / sum_j w_j`` at point i over its surfels gi[i] (m),
+    ``w_j = exp(-(|x - p_j|^2 - min_j |x - p_j|^2) / h^2)`` (shifted by the nearest centre so
+    that it cannot underflow), over the surfels with a trusted normal (gradient noise <= gate);
+    ``fallback`` if there is none."""
+    d = pts.shape[1]
+    k = gi.shape[1]
+    r2min = np.inf
+    for j in range(k):
+        s = gi[i, j]
+        r2 = 0.0
+        for c in range(d):
+            e = pts[i, c] - pos[s, c]
+            r2 += e * e
+        r2min = min(r2min, r2)
+    num = 0.0
+    den = 0.0
+    for j in range(k):
+        s = gi[i, j]
+        nl = 0.0
+        r2 = 0.0
+        a = 0.0
+        for c in range(d):
+            e = pts[i, c] - pos[s, c]
+            r2 += e * e
+            a += e * nrm[s, c]
+            nl += nrm[s, c] * nrm[s, c]
+        if nl <= 0.25 or sg[s] > gate:
+            continue
+        wj = np.exp(-(r2 - r2min) / (h * h))
+        num += wj * a / np.sqrt(nl)
+        den += wj
+    return num / den if den > 0.0 else fallback
+
+
+@nb.njit(cache=True)
 def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
-             dtrust):
+             dtrust, sign_h=0.0):
     n, d = pts.shape
     k = gi.shape[1]
     v = np.empty(d)
@@ -175,7 +216,11 @@ def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, d
         # observed free space decides the sign beyond one cell diagonal of the surfel, and also
         # within it when the surfel's normal is not trusted (gradient noise above ``gate``)
         ok = seen[i] and (best > cell_diag or sg[s] > gate)
-        sign = 1.0 if (ok or ba >= 0) else -1.0
+        if ok:
+            sign = 1.0
+        else:
+            side = ba if sign_h <= 0.0 else _imls(pts, i, gi, pos, nrm, sg, gate, sign_h, ba)
+            sign = 1.0 if side >= 0 else -1.0
         dist[i] = sign * best
         for c in range(d):
             if gl > 0:
@@ -186,8 +231,9 @@ def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, d
         dtrust[i] = bt
 
 
-def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4, gate=np.inf):
-    """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs."""
+def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4, gate=np.inf, sign_h=0.0):
+    """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs
+    (``sign_h``: width of the implicit-MLS sign, m; 0 = the closest surfel's side)."""
     n, d = pts.shape
     if kd is None:
         return np.full(n, np.inf), np.zeros((n, d)), np.full(n, var_unobs)
@@ -197,7 +243,7 @@ def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4, gate=np
     dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
     # a free cell may straddle the surface: trust it only beyond one cell diagonal
     _surfels(pts, gi, pos, nrm, sp, sg, float(gate), float(r_s), free.observed(pts),
-             free.res * np.sqrt(d), float(var_unobs), dist, grad, var, np.empty(n))
+             free.res * np.sqrt(d), float(var_unobs), dist, grad, var, np.empty(n), float(sign_h))
     return dist, grad, var
 
 
@@ -225,14 +271,14 @@ def _observed(pts, grid, gshape, goff, res, seen):
 @nb.njit(cache=True)
 def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, goff, res,
                  cell_diag, var_unobs,
-                 near, far, dist, grad, var, w):
+                 near, far, dist, grad, var, w, sign_h=0.0):
     """Surfel distance, gradient, variance (``far_field``) and the GPIS blend weight (0..1)."""
     n = pts.shape[0]
     seen = np.empty(n, np.bool_)
     _observed(pts, grid, gshape, goff, res, seen)
     dtrust = np.empty(n)
     _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
-             dtrust)
+             dtrust, sign_h)
     nsel = 0
     for i in range(n):
         # the GPIS learned its shape from trusted normals only: its weight follows the distance
@@ -249,7 +295,8 @@ def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, 
     return nsel
 
 
-def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, k=4, gate=np.inf):
+def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, k=4, gate=np.inf,
+                sign_h=0.0):
     """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None)."""
     n, d = pts.shape
     k = min(k, len(idx))
@@ -259,7 +306,7 @@ def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far,
     _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
                  free.grid, free.gshape, free.goff,
                  float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),
-                 float(far), dist, grad, var, w)
+                 float(far), dist, grad, var, w, float(sign_h))
     return dist, grad, var, w
 
 

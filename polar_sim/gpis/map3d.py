@@ -56,7 +56,8 @@ class GPISMap3D(GPISMapBase):
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
-        None = 0.01 m.
+        None = 0.008 m, at most sqrt(3) times the default surfel radius, so that the surfel discs
+        of a face leave no holes in the far field.
     legacy : bool, default=False
         Reproduce the published implementation (3D line search that re-projects the original
         point, inverted normal-fusion weight, unnormalised rotation axis, chain-only spacing).
@@ -77,6 +78,10 @@ class GPISMap3D(GPISMapBase):
     _TRAIN_R = 2.0
     _UPDATE_R = 2.0
     _SURF_RES, _SURF_BAND, _SURF_VAR = 0.002, 0.01, 0.1
+    # the far field's sign from the implicit-MLS surface of the nearest surfels (_distance), over
+    # about one sample spacing: the closest disc alone gets the side wrong next to the edges of
+    # a small box
+    _IMLS_WIDTH = 1.0
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "obs_skip", "min_depth", "max_depth", "init_half",
                "cluster_half", "min_half", "max_half", "obs_scale", "obs_noise", "blend_near",
@@ -126,7 +131,7 @@ class GPISMap3D(GPISMapBase):
         return 0.75 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
 
     def _spacing(self):
-        return 0.01 if self.sample_spacing is None else float(self.sample_spacing)
+        return 0.008 if self.sample_spacing is None else float(self.sample_spacing)
 
     def _retrain_tol(self):
         return 0.0005 if self.retrain_tol is None else float(self.retrain_tol)

@@ -153,6 +153,32 @@ def orbit_poses(n, dist=0.6, height=0.15):
     return out
 
 
+# -- 3D box (a small cube by default) -----------------------------------------------------------
+BOX_C = np.array([0.0, 0.0, 0.0])
+BOX_HALF = np.array([0.0225, 0.0225, 0.0225])     # the 4.5 cm cube of object_orbit
+
+
+def render_box(T, K, W=640, H=480, centre=BOX_C, half=BOX_HALF):
+    """Depth image (H, W) of an axis-aligned box (slab ray casting); inf where the ray misses."""
+    jj, ii = np.meshgrid(np.arange(W), np.arange(H))
+    d = np.stack([(jj - K[0, 2]) / K[0, 0], (ii - K[1, 2]) / K[1, 1], np.ones_like(jj, float)], -1)
+    dw = d @ T[:3, :3].T                                       # not normalised: z_cam = 1
+    o = T[:3, 3] - centre
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-half - o) / dw
+        t2 = (half - o) / dw
+    tn = np.nanmax(np.minimum(t1, t2), -1)
+    tf = np.nanmin(np.maximum(t1, t2), -1)
+    return np.where((tn <= tf) & (tn > 0), tn, np.inf)
+
+
+def box_sdf(p, centre=BOX_C, half=BOX_HALF):
+    """Exact signed distance (n,) to the box, positive outside."""
+    q = np.abs(p - centre) - half
+    out = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    return out + np.minimum(q.max(1), 0.0)
+
+
 def observed_2d(points, poses, behind=0.3, fov=np.deg2rad(135.0), offset=(0.08, 0.0), max_range=30.0):
     """True where some scan saw the point: inside the field of view, at most ``behind`` metres
     behind the first surface along the ray from the laser (so free space and thin bands on
