@@ -396,60 +396,117 @@ def query_gp(pts, *args):
     return _query_gp_ser(pts, *args)
 
 
-@nb.njit(cache=True)
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01     # ln 2 in two parts (Cody-Waite): k * _LN2_HI is exact
+_LN2_LO = 1.90821492927058770002e-10
+
+
+@nb.njit(cache=True, fastmath=False)
+def _exp_neg(x, n, work):
+    """x[:n] = exp(x[:n]) in place for x <= 0, within 1 ulp of ``np.exp`` (0 below -708).
+
+    A loop that vectorises (numba's scalar ``exp`` is a libm call per element, and the query
+    takes one per training sample and point): exp(x) = 2^k exp(f), x = k ln 2 + f, |f| <= ln 2 / 2,
+    exp(f) by its Taylor polynomial of degree 13 (truncation < 1e-17 relative); 2^k is built
+    from its bits in ``work`` (float64, >= n, viewed as int64).
+    """
+    bits = work.view(np.int64)
+    for p in range(n):
+        v = max(x[p], -708.0)
+        k = np.floor(v * _LOG2E + 0.5)
+        f = (v - k * _LN2_HI) - k * _LN2_LO
+        y = 1.0 / 6227020800.0
+        y = y * f + 1.0 / 479001600.0
+        y = y * f + 1.0 / 39916800.0
+        y = y * f + 1.0 / 3628800.0
+        y = y * f + 1.0 / 362880.0
+        y = y * f + 1.0 / 40320.0
+        y = y * f + 1.0 / 5040.0
+        y = y * f + 1.0 / 720.0
+        y = y * f + 1.0 / 120.0
+        y = y * f + 1.0 / 24.0
+        y = y * f + 1.0 / 6.0
+        y = y * f + 0.5
+        y = y * f + 1.0
+        y = y * f + 1.0
+        x[p] = y if x[p] >= -708.0 else 0.0
+        bits[p] = (np.int64(k) + 1023) << 52
+    for p in range(n):
+        x[p] *= work[p]
+
+
+# reassociation lets the sums over the observations vectorise (no other fast-math licence)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _ks_mean(x, alpha, X, kinds, a, dim, z, eb, out):
     """One GP at x: the value cross-covariances k(x, obs) into z (m,), the mean [f, grad]
     into out.
 
-    Same arithmetic and summation order as ``_localgp._predict_one``; the per-sample
-    quantities (x - X, 1/r, exp) are computed once per sample and reused by its gradient
-    observations (``eb`` (m, dim + 2)), and the gradient cross-covariances go straight into
-    their sums.
+    The arithmetic of ``_localgp._predict_one``, summed in another order. The per-sample
+    quantities (x - X, r, exp, then 1/r) are computed once per sample, in loops over the
+    samples that vectorise, and reused by its gradient observations, whose cross-covariances go
+    straight into their sums. ``eb`` (dim + 3, >= m): rows r then 1/r, x - X (dim),
+    exp(-a r), and ``_exp_neg``'s work row.
     """
     m = X.shape[0]
     a2 = a * a
     nv = 0
     while nv < m and (kinds[nv] >> 32) == 0:
         nv += 1
+    ir = eb[0]
+    d0 = eb[1]
+    d1 = eb[2]
+    d2 = eb[dim]                    # (dim == 3 only)
+    ex = eb[dim + 1]
+    x0 = x[0]
+    x1 = x[1]
+    x2 = x[dim - 1]
+    for p in range(nv):
+        e0 = x0 - X[p, 0]
+        e1 = x1 - X[p, 1]
+        r2 = e0 * e0 + e1 * e1
+        if dim == 3:
+            e2 = x2 - X[p, 2]
+            r2 += e2 * e2
+            d2[p] = e2
+        d0[p] = e0
+        d1[p] = e1
+        ir[p] = np.sqrt(r2)
+    for p in range(nv):
+        ex[p] = -a * ir[p]
+    _exp_neg(ex, nv, eb[dim + 2])
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0
     s3 = 0.0
     for p in range(nv):
-        r2 = 0.0
-        for k in range(dim):
-            e = x[k] - X[p, k]
-            eb[p, 1 + k] = e
-            r2 += e * e
-        r = np.sqrt(r2)
-        ex = np.exp(-a * r)
-        eb[p, 0] = 1.0 / r if r > 0.0 else 0.0
-        eb[p, dim + 1] = ex
-        k0 = (1.0 + a * r) * ex
+        r = ir[p]
+        e = ex[p]
+        k0 = (1.0 + a * r) * e
         z[p] = k0
+        ir[p] = 1.0 / r if r > 0.0 else 0.0
         ap = alpha[p]
         s0 += k0 * ap
-        s1 += (-a2 * eb[p, 1] * ex) * ap
-        s2 += (-a2 * eb[p, 2] * ex) * ap
+        s1 += (-a2 * d0[p] * e) * ap
+        s2 += (-a2 * d1[p] * e) * ap
         if dim == 3:
-            s3 += (-a2 * eb[p, 3] * ex) * ap
+            s3 += (-a2 * d2[p] * e) * ap
     for p in range(nv, m):
         c = (kinds[p] >> 32) - 1
         u = kinds[p] & 0xFFFFFFFF
-        ex = eb[u, dim + 1]
-        dc = eb[u, 1 + c]
-        k0 = a2 * dc * ex
+        e = ex[u]
+        dc = eb[1 + c, u]
+        k0 = a2 * dc * e
         z[p] = k0
         ap = alpha[p]
         s0 += k0 * ap
-        inv_r = eb[u, 0]
-        v = (1.0 if c == 0 else 0.0) - a * eb[u, 1] * dc * inv_r
-        s1 += (a2 * v * ex) * ap
-        v = (1.0 if c == 1 else 0.0) - a * eb[u, 2] * dc * inv_r
-        s2 += (a2 * v * ex) * ap
+        inv_r = ir[u]
+        v = (1.0 if c == 0 else 0.0) - a * d0[u] * dc * inv_r
+        s1 += (a2 * v * e) * ap
+        v = (1.0 if c == 1 else 0.0) - a * d1[u] * dc * inv_r
+        s2 += (a2 * v * e) * ap
         if dim == 3:
-            v = (1.0 if c == 2 else 0.0) - a * eb[u, 3] * dc * inv_r
-            s3 += (a2 * v * ex) * ap
+            v = (1.0 if c == 2 else 0.0) - a * d2[u] * dc * inv_r
+            s3 += (a2 * v * e) * ap
     out[0] = s0
     out[1] = s1
     out[2] = s2
@@ -577,7 +634,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     best_d = np.empty(3)
     best_k = np.empty(3, np.int64)
     iw = np.empty(6 * dim, np.int64)
-    rbuf = np.empty((mmax, dim + 2))
+    rbuf = np.empty((dim + 3, mmax))
     Z = np.empty((4, mmax))
     acc = np.empty(4)
     ne = 0

@@ -1,0 +1,127 @@
+"""The batched GP query kernel against a plain per-point reference.
+
+``query_gp`` evaluates the points grouped by cluster, with the cross-covariances built in loops
+over the training samples and the variance solves done several points at a time. Here each
+point is recomputed on its own with dense numpy: the cross-covariances from the kernel formulas
+of ``_localgp``, the packed factor unpacked, one triangular solve per point.
+"""
+
+import numpy as np
+import pytest
+from scipy.linalg import solve_triangular
+
+from polar_sim.gpis import GPISMap2D, GPISMap3D
+from polar_sim.gpis._kernels import _exp_neg, _nearest3
+from polar_sim.gpis._localgp import _var_consts
+
+from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
+
+ANG = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
+
+
+def _map(dim, legacy):
+    if dim == 2:
+        m = GPISMap2D(legacy=legacy)
+        for pose in room_path(8):
+            m.update(ANG, scan_2d(pose, ANG), pose)
+        return m
+    m = GPISMap3D(legacy=legacy)
+    K = intrinsics(160, 120, 130.0)
+    for T in orbit_poses(3):
+        m.update(render_sphere(T, K, 160, 120), K, T)
+    return m
+
+
+def _near_points(m, n, spread, seed=0):
+    rng = np.random.default_rng(seed)
+    s = m.samples()["points"]
+    return s[rng.integers(0, len(s), n)] + rng.normal(scale=spread, size=(n, m.dim))
+
+
+def _nearest_gp(m, x):
+    """Slot of the nearest cluster with a current GP (the kernel's first choice), or -1."""
+    tr, g = m.tree_, m.gps_
+    W = m._QUERY_W if m._QUERY_W is not None else 4.0 * m.map_scale
+    best_s, best_d = np.zeros(3, np.int64), np.zeros(3)
+    n = _nearest3(x, float(W), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.node_sample,
+                  tr.node_internal, best_s, best_d, np.zeros(3, np.int64),
+                  np.zeros(6 * m.dim, np.int64))
+    for j in range(n):
+        s = best_s[j]
+        if g.gp_m[s] > 0 and m.gp_gen_[s] == m.slot_gen_[s]:
+            return s
+        if m.legacy:
+            return -1
+    return -1
+
+
+def _reference(m, s, x):
+    """[f, grad, var_f] of cluster s's GP at x, dense and per point."""
+    g, dim = m.gps_, m.dim
+    n, ob, tri = g.gp_m[s], g.gp_obs[s], g.gp_tri[s]
+    X, kinds, alpha = g.X[ob:ob + n], g.kinds[ob:ob + n], g.alpha[ob:ob + n]
+    L = np.zeros((n, n))
+    L[np.tril_indices(n)] = g.Lbuf[tri:tri + n * (n + 1) // 2]      # packed by rows
+    a = np.sqrt(3.0) / m.map_scale
+    d = x - X                                   # (n, dim)
+    r = np.linalg.norm(d, axis=1)
+    e = np.exp(-a * r)
+    inv_r = np.where(r > 0, 1.0 / np.where(r > 0, r, 1.0), 0.0)
+    c = (kinds >> 32) - 1                       # -1 value, else gradient component
+    grad_obs = c >= 0
+    cc = np.where(grad_obs, c, 0)
+    dc = d[np.arange(n), cc]
+    kf = np.where(grad_obs, a * a * dc * e, (1 + a * r) * e)          # cov(f(x), obs)
+    kg = np.empty((dim, n))                                          # cov(d_i f(x), obs)
+    for i in range(dim):
+        kg[i] = np.where(grad_obs,
+                         a * a * ((cc == i) - a * d[:, i] * dc * inv_r) * e,
+                         -a * a * d[:, i] * e)
+    v = solve_triangular(L, kf, lower=True)
+    var_f0, _ = _var_consts(dim, float(m.map_scale))
+    return np.concatenate([[kf @ alpha], kg @ alpha, [var_f0 - v @ v]])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("legacy", [False, True])
+def test_query_gp_matches_dense_reference(dim, legacy):
+    m = _map(dim, legacy)
+    pts = _near_points(m, 400, 0.2 if dim == 2 else 0.01)
+    m._T_BLEND = np.inf                # the nearest GP only, no blend: one reference per point
+    out = m._gp_query(pts)
+    d = dim
+    done = 0
+    for x, o in zip(pts, out):
+        s = _nearest_gp(m, x)
+        if s < 0:
+            continue
+        np.testing.assert_allclose(o[:d + 2], _reference(m, s, x), rtol=0, atol=1e-9)
+        assert np.isnan(o[d + 2:]).all()          # the query does not compute var_grad
+        done += 1
+    assert done > 300
+    # several points per cluster, so the blocks of points and their short ends are exercised
+    slots = [_nearest_gp(m, x) for x in pts]
+    assert np.bincount(np.array(slots)[np.array(slots) >= 0]).max() >= 9
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_query_gp_point_independent_of_batch(dim):
+    """A point's answer is bitwise the same whatever other points share its batch."""
+    m = _map(dim, False)
+    pts = _near_points(m, 200, 0.2 if dim == 2 else 0.01, seed=1)
+    full = m._gp_query(pts)
+    for k in (1, 2, 3, 5, 7, 13):
+        part = np.concatenate([m._gp_query(pts[i:i + k]) for i in range(0, len(pts), k)])
+        np.testing.assert_array_equal(part, full)
+    np.testing.assert_array_equal(m._gp_query(pts[::-1])[::-1], full)
+
+
+def test_exp_neg_matches_numpy():
+    x = np.concatenate([-np.geomspace(1e-300, 800.0, 20001), [0.0, -708.0, -708.5, -1e4]])
+    ref = np.exp(x)
+    y = x.copy()
+    _exp_neg(y, len(y), np.empty(len(y)))
+    ok = x >= -708.0
+    np.testing.assert_allclose(y[ok], ref[ok], rtol=2.3e-16, atol=0)
+    assert (y[~ok] == 0.0).all() and np.abs(ref[~ok]).max() < 3.4e-308
+    assert y[x == 0.0][0] == 1.0
