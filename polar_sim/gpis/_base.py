@@ -44,6 +44,7 @@ class GPISMapBase:
                             # far-field sign where observed free space says otherwise
     _FACE_COS = None        # default mode: samples whose normals' dot is below this are on
                             # different faces and not subject to the sample spacing (None: off)
+    _BEHIND = 0.5           # default mode: the blend band behind surfaces, as a fraction
     _IMLS_WIDTH = 0.0       # default mode: width of the far field's implicit-MLS sign, in units
                             # of the sample spacing (0: the side of the closest surfel)
 
@@ -316,7 +317,8 @@ class GPISMapBase:
         dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
                                          self._surfel_radius(), self.free_,
                                          1.0 + float(self.map_noise), near, far,
-                                         gate=self._SIGN_GATE, sign_h=self._sign_width())
+                                         gate=self._SIGN_GATE, sign_h=self._sign_width(),
+                                         behind=self._BEHIND)
         sel = np.flatnonzero(w > 0)
         if len(sel):
             out = self._gp_query(pts[sel])

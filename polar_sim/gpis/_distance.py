@@ -271,7 +271,7 @@ def _observed(pts, grid, gshape, goff, res, seen):
 @nb.njit(cache=True)
 def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, goff, res,
                  cell_diag, var_unobs,
-                 near, far, dist, grad, var, w, sign_h=0.0):
+                 near, far, dist, grad, var, w, sign_h=0.0, behind=0.5):
     """Surfel distance, gradient, variance (``far_field``) and the GPIS blend weight (0..1)."""
     n = pts.shape[0]
     seen = np.empty(n, np.bool_)
@@ -284,8 +284,9 @@ def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, 
         # the GPIS learned its shape from trusted normals only: its weight follows the distance
         # to the nearest trusted surfel (with gate = inf, every surfel: the nearest one)
         a = max(abs(dist[i]), dtrust[i]) if use_trust else abs(dist[i])
-        # behind surfaces the GP has no data: hand over to the surfel distance twice as early
-        sc = 0.5 if dist[i] < 0 else 1.0
+        # behind surfaces the GP has no data: with ``behind`` < 1 the surfel distance takes over
+        # that much earlier there
+        sc = behind if dist[i] < 0 else 1.0
         x = (far * sc - a) / ((far - near) * sc)
         x = min(max(x, 0.0), 1.0)
         x = x * x * (3.0 - 2.0 * x)               # smoothstep: C1 at both ends
@@ -296,8 +297,9 @@ def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, 
 
 
 def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, k=4, gate=np.inf,
-                sign_h=0.0):
-    """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None)."""
+                sign_h=0.0, behind=0.5):
+    """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None;
+    ``behind`` scales the blend band on the negative side)."""
     n, d = pts.shape
     k = min(k, len(idx))
     _, nn = kd.query(pts, k=k)
@@ -306,7 +308,7 @@ def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far,
     _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
                  free.grid, free.gshape, free.goff,
                  float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),
-                 float(far), dist, grad, var, w, float(sign_h))
+                 float(far), dist, grad, var, w, float(sign_h), float(behind))
     return dist, grad, var, w
 
 

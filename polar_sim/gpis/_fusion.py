@@ -235,12 +235,16 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
         # seen against a farther wall, an occluder): leave the sample as it is rather than
         # drag it into free space one scan at a time
         move = np.linalg.norm(qq - p[ii], axis=1)
-        # (the gate is on the measurement noises: the model floor is what the GPs cannot resolve)
-        far = move > np.maximum(3.0 * np.sqrt(sp + spo), _GATE_MIN)
+        # (the gate is on the measurement noises: the model floor is what the GPs cannot resolve;
+        # a sample about to be replaced counts the new noise only, its own says nothing)
+        far = move > np.maximum(3.0 * np.sqrt(sp + np.where(replace, 0.0, spo)), _GATE_MIN)
         # nor fuse a search that did not reach the observed surface (it stopped on the step
         # limit or an unobservable direction): moving such samples a little every scan lets
-        # them creep off edges into free space
-        act = np.where((far | ~found[ii]) & ~replace, 0, act)
+        # them creep off edges into free space. Replacing is no exception: a sample with an
+        # untrusted normal searched along it across a range jump lands where the observation
+        # GP interpolates between the near and the far return, in free space (office2d corner
+        # samples 10-18 cm off the surface)
+        act = np.where(far | ~found[ii], 0, act)
         # nor take a normal that faces away from the sensor (not the surface the scan sees)
         act = np.where((qq * np_).sum(1) > 0, 0, act)
     action[ii] = act

@@ -51,15 +51,19 @@ class GPISMap2D(GPISMapBase):
         growth limit, metres.
     obs_scale, obs_noise : float, default=0.5, 0.01
         Observation GP (Ornstein-Uhlenbeck) length scale in rad and noise variance.
-    blend_near, blend_far : float, default=0.1, 0.4
+    blend_near, blend_far : float, default=0.05, 0.25
         Default mode: the query is the GPIS within ``blend_near`` of the nearest surfel, the
         surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres. The
         GPIS weight is further scaled by ``clip(1 - var_f / 0.4, 0, 1)``: where the local GP is
-        uninformative (no gradient observations) the surfel distance is used.
+        uninformative (no gradient observations) the surfel distance is used. (On office2d the
+        GP's extrapolation past the end of a face, 0.1-0.4 m beyond a corner or into a door,
+        is the larger error there; the surfel distance to the end of the face is exact.)
     surfel_radius : float or None, default=None
         Radius of the disc each sample stands for in the far-field distance; None = min_half / 2.
     free_res : float or None, default=None
-        Cell size of the observed-free-space grid (sign and variance far away); None = 0.1 m.
+        Cell size of the observed-free-space grid (sign and variance far away); None = 0.05 m.
+        The grid sets the sign only beyond one cell diagonal of the nearest surfel; a coarser
+        one leaves the shadow of every corner to the surfel's side, negative.
     retrain_tol : float or None, default=None
         Default mode: a re-evaluated sample triggers retraining of the GPs that use it only once
         it has moved more than this (or its normal turned > 0.05 rad, or a noise changed > 2x)
@@ -113,6 +117,13 @@ class GPISMap2D(GPISMapBase):
     # the samples' position variances shrink with fusion (a well-seen sample resists being
     # dragged off an edge); the local GP adds its own model-error floor to every value noise
     _VALUE_FLOOR = _VFLOOR
+    # the far-field sign where free space is silent: the implicit-MLS side of the nearest
+    # surfels (width 0.5 x the 0.2 m spacing), not the closest disc's, which next to a corner is
+    # often the adjacent face's
+    _IMLS_WIDTH = 0.5
+    # the GPIS interpolates across gaps between the samples of a face, which the discs of the
+    # surfel distance leave (a wall seen at grazing incidence): the same band on both sides
+    _BEHIND = 1.0
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
@@ -122,7 +133,7 @@ class GPISMap2D(GPISMapBase):
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
                  sensor_offset=(0.08, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
-                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.1, blend_far=0.4,
+                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.05, blend_far=0.25,
                  surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
                  range_noise=0.01, legacy=False):
         self.map_scale = map_scale
@@ -155,7 +166,7 @@ class GPISMap2D(GPISMapBase):
         return check_params(self, vec2=("sensor_offset", "angle_obs_limit"))
 
     def _free_res(self):
-        return 0.1 if self.free_res is None else float(self.free_res)
+        return 0.05 if self.free_res is None else float(self.free_res)
 
     def _surfel_radius(self):
         return 0.5 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
