@@ -123,7 +123,9 @@ def _imls(pts, i, gi, pos, nrm, sg, gate, h, fallback):
     """Implicit MLS value ``sum_j w_j a_j / sum_j w_j`` at point i over its surfels gi[i] (m),
     ``w_j = exp(-(|x - p_j|^2 - min_j |x - p_j|^2) / h^2)`` (shifted by the nearest centre so
     that it cannot underflow), over the surfels with a trusted normal (gradient noise <= gate);
-    ``fallback`` if there is none."""
+    ``fallback`` if their weights sum below exp(-9), none lying within about 3 h of the nearest
+    centre's distance (a surface seen only with untrusted normals must not take its side from a
+    trusted one farther away)."""
     d = pts.shape[1]
     k = gi.shape[1]
     r2min = np.inf
@@ -151,7 +153,7 @@ def _imls(pts, i, gi, pos, nrm, sg, gate, h, fallback):
         wj = np.exp(-(r2 - r2min) / (h * h))
         num += wj * a / np.sqrt(nl)
         den += wj
-    return num / den if den > 0.0 else fallback
+    return num / den if den > np.exp(-9.0) else fallback
 
 
 @nb.njit(cache=True)
