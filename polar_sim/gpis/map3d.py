@@ -46,7 +46,8 @@ class GPISMap3D(GPISMapBase):
         Default mode: GPIS within blend_near of the nearest surfel, surfel distance beyond
         blend_far, smoothstep in between, metres.
     surfel_radius : float or None, default=None
-        Disc radius of each sample in the far-field distance; None = 0.75 * min_half.
+        Disc radius of each sample in the far-field distance; None = the sample spacing / sqrt(3)
+        (5.8 mm), so that the discs of a face sampled at that spacing leave no holes.
     free_res : float or None, default=None
         Cell size of the observed-free-space grid; None = cluster_half.
     retrain_tol : float or None, default=None
@@ -56,8 +57,7 @@ class GPISMap3D(GPISMapBase):
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
-        None = 0.008 m, at most sqrt(3) times the default surfel radius, so that the surfel discs
-        of a face leave no holes in the far field.
+        None = 0.01 m.
     legacy : bool, default=False
         Reproduce the published implementation (3D line search that re-projects the original
         point, inverted normal-fusion weight, unnormalised rotation axis, chain-only spacing).
@@ -128,10 +128,12 @@ class GPISMap3D(GPISMapBase):
         return float(self.cluster_half) if self.free_res is None else float(self.free_res)
 
     def _surfel_radius(self):
-        return 0.75 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
+        if self.surfel_radius is None:
+            return self._spacing() / np.sqrt(3.0)
+        return float(self.surfel_radius)
 
     def _spacing(self):
-        return 0.008 if self.sample_spacing is None else float(self.sample_spacing)
+        return 0.01 if self.sample_spacing is None else float(self.sample_spacing)
 
     def _retrain_tol(self):
         return 0.0005 if self.retrain_tol is None else float(self.retrain_tol)
