@@ -108,9 +108,8 @@ def test_office_far_field_legacy_cannot(office):
     assert office["legacy"]["far_mae_m"] > 5 * office["s"]["far_mae_m"]
 
 
-# object_orbit: SDF RMSE <= 2 mm within 1 cm of the observed surface (seed 0's 4.8 cm cube: 1.0 mm
-# at CI size; 2.3 mm before the far field's sign came from the implicit-MLS surface and the
-# samples were 8 mm apart)
+# object_orbit: SDF RMSE <= 2 mm within 1 cm of the observed surface (seed 0's 4.8 cm cube: 1.24 mm
+# at CI size; 2.3 mm before the far field's sign came from the implicit-MLS surface)
 def test_orbit_sdf_rmse(orbit):
     assert orbit["n_sdf_points"] > 500
     assert orbit["sdf_rmse_m"] <= 0.002
