@@ -9,12 +9,12 @@ the distance to the fused surface samples, each treated as a small disc ("surfel
 Sign: positive where the point lies in *observed free space* (a coarse grid of cells that some ray
 crossed before its return, :class:`FreeSpace`) and is more than one cell diagonal from the nearest
 surfel; elsewhere the sign of ``a`` of the closest surfel, i.e. negative behind (on the occluded
-side of) the surface. With a sign width ``h`` > 0 (the 3D map's default), the sign there is instead that of the
-implicit moving-least-squares surface of the k nearest surfels (Kolluri 2005),
-``sum_j w_j a_j`` with ``w_j = exp(-|x - p_j|^2 / h^2)``: next to an edge of a sparsely sampled
-box, the closest *disc* often belongs to the adjacent face, whose plane the point lies behind
-although it is outside the object; the centre-distance weights let the face the point actually
-faces decide.
+side of) the surface. With a sign width ``h`` > 0 (both maps' default mode), the sign there is
+instead that of the implicit moving-least-squares surface of the k nearest surfels with a trusted
+normal (Kolluri 2005), ``sum_j w_j a_j`` with ``w_j = exp(-|x - p_j|^2 / h^2)`` (the closest
+surfel's side where none is near): next to an edge or a corner, the closest *disc* often belongs
+to the adjacent face, whose plane the point lies behind although it is outside the object; the
+centre-distance weights let the face the point actually faces decide.
 
 Variance: in observed free space, the fused position variance of the closest sample (how well the
 surface that sets the distance is known); elsewhere, never-observed space, the GP prior variance
