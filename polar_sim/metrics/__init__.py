@@ -1,5 +1,6 @@
 """Plain metric functions over numpy arrays (no file I/O, no MuJoCo).
 
+- :mod:`~polar_sim.metrics.calibration`: expected calibration error, reliability diagrams.
 - :mod:`~polar_sim.metrics.odometry`: KITTI segment errors, ATE, RPE, trajectory file formats.
 - :mod:`~polar_sim.metrics.ground`: RANSAC ground success ps, its exponential fit, the Laplace
   scale of the speed error, classifier IoU and AUC.
@@ -8,6 +9,7 @@
 - :mod:`~polar_sim.metrics.surface`: Hausdorff, Chamfer, RMSE, SDF error.
 """
 
+from polar_sim.metrics.calibration import *  # noqa: F401,F403
 from polar_sim.metrics.ground import *  # noqa: F401,F403
 from polar_sim.metrics.odometry import *  # noqa: F401,F403
 from polar_sim.metrics.pose import *  # noqa: F401,F403
