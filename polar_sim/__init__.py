@@ -8,8 +8,11 @@ Heavy subpackages (``sim``, ``gpis``, ...) are imported on first use.
 __version__ = "0.1.0"
 
 from polar_sim.errors import NotUpdatedError, PolarSimError  # noqa: E402
-from polar_sim.envs import register_envs as _register_envs  # noqa: E402
-
-_register_envs()
+try:  # a core install without gymnasium has no envs to register
+    from polar_sim.envs import register_envs as _register_envs  # noqa: E402
+except ImportError:
+    pass
+else:
+    _register_envs()
 
 __all__ = ["__version__", "PolarSimError", "NotUpdatedError"]
