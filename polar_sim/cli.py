@@ -70,6 +70,8 @@ def _cmd_render(args):
     _positive_int(args.height, "--height", 8192)
     if not 0 <= args.steps <= 1_000_000:
         raise ValueError(f"--steps: expected an integer in [0, 1000000], got {args.steps}")
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
     _out_dir(args.out)
     from polar_sim.sim.pictures import render_scene_pictures
 
@@ -204,6 +206,8 @@ def _cmd_eval(args):
     if args.env_id not in ENV_IDS:
         raise ValueError(f"env_id: unknown environment {args.env_id!r}; valid: {', '.join(ENV_IDS)}")
     _positive_int(args.episodes, "--episodes", 1_000_000)
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
     try:
         kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     except json.JSONDecodeError as exc:

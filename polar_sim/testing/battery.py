@@ -53,6 +53,10 @@ class EntryPoint:
     extra: Callable | None = None   # extra(target, tmp, rng) -> more BadInputs (e.g. tampered files)
 
 
+class Graceful(Exception):
+    """Raised by an entry point's ``call`` for an outcome its documentation names as graceful."""
+
+
 def _fresh_tmp(prefix="polar_battery_"):
     return tempfile.mkdtemp(prefix=prefix)
 
@@ -129,6 +133,8 @@ def _classify_call(ep, bad, target, tmp):
     before = fp(target) if target is not None else None
     try:
         ep.call(target, args)
+    except Graceful:
+        return "graceful", "a documented graceful outcome"
     except (ValueError, TypeError, FileNotFoundError) as exc:
         if not _names_ok(ep, bad, exc):
             return "unclear", f"{type(exc).__name__} not naming {bad.arg!r}: {str(exc)[:160]}"
