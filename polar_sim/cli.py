@@ -132,6 +132,8 @@ def _timeout(value, name="--trial-timeout"):
 
 def _out_dir(path):
     """Check that an --out folder can be created (a one-line error, not a traceback)."""
+    if "\x00" in str(path):
+        raise ValueError(f"--out: {str(path)[:200]!r} is not a folder path (it holds a NUL byte)")
     p = Path(path).expanduser()
     try:
         if p.exists() and not p.is_dir():
@@ -212,6 +214,8 @@ def _cmd_eval(args):
         kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     except json.JSONDecodeError as exc:
         raise ValueError(f"--env-kwargs: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ValueError("--env-kwargs: JSON nested too deeply") from None
     if not isinstance(kwargs, dict):
         raise ValueError(f"--env-kwargs: expected a JSON object like {{\"sdf_source\": \"truth\"}}, got {args.env_kwargs}")
     out = str(_out_dir(args.out or f"polar_sim_out/eval/{args.env_id.replace('/', '_')}"))

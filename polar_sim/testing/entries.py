@@ -516,9 +516,13 @@ def _cli_argvs(tmp):
     for v in ["nohost:1", "127.0.0.1:1", "::::", "x" * 300]:
         cases.append(("--address", f"address:{v[:12]}", ["run", "sensors", "--quick", "--backend", "ray", "--address", v,
                                                          "--out", out_ok]))
+    run = Path(tmp) / "run_a"            # a minimal run folder, so compare gets as far as --metric / --by
+    run.mkdir(exist_ok=True)
+    (run / "results.csv").write_text("trial_key,status,method,seed,err_m\nk1,ok,a,0,0.1\nk2,ok,a,1,0.2\n"
+                                     "k3,ok,b,0,0.3\nk4,ok,b,1,0.4\n")
     for v in ["no_such_metric", "", "ñ"]:
-        cases.append(("--metric", f"metric:{v}", ["compare", out_ok, out_ok, "--metric", v]))
-        cases.append(("--by", f"by:{v}", ["compare", out_ok, out_ok, "--by", v]))
+        cases.append(("--metric", f"metric:{v}", ["compare", str(run), str(run), "--metric", v, "--out", out_ok]))
+        cases.append(("--by", f"by:{v}", ["compare", str(run), str(run), "--by", v, "--out", out_ok]))
     for v in ["bogus=1", "novalue", "=3", "seed=[", "seed=abc", "seed=-1", "seed=1.5", "seed=[]", "scene=[moon]",
               "scene=", "seed=true", "seed={}", "method=nope:x"]:
         cases.append(("--set", f"set:{v}", ["run", "sensors", "--quick", "--set", v, "--out", out_ok]))
