@@ -170,10 +170,11 @@ def vector_workers_closed(env_id, *, n_envs=2, steps=3, seed=0):
 
     import polar_sim.envs  # noqa: F401
 
-    before = _children()
     fns = [lambda: gym.make(f"polar_sim.envs:{env_id}") for _ in range(n_envs)]
     venv = gym.vector.AsyncVectorEnv(fns, context="spawn")
-    workers = _children() - before
+    # the workers themselves (multiprocessing's resource tracker, also a child, lives on by design)
+    workers = {p.pid for p in venv.processes}
+    assert workers <= _children(), "the worker processes were not found among the children"
     try:
         venv.reset(seed=seed)
         for _ in range(steps):
