@@ -264,6 +264,8 @@ class Experiment:
         for key, value in (overrides or {}).items():
             if key == "seed":
                 seeds = [_as_seed(s) for s in _as_list(value)]
+                if not seeds:
+                    raise ValueError(f"seed: {self.name}: --set seed={value!r} gives no seeds to run")
                 continue
             if key not in self.grid:
                 valid = ", ".join(sorted(self.grid)) + ", seed"

@@ -197,6 +197,9 @@ def bad_inputs(kind, valid, arg, rng, *, tmp=None):
     if kind == "depth":
         v = np.asarray(valid)
         out = c + _array_families(arg, v, rng, nan="either", negative="refuse", empty="refuse", length="either")
+        # another image size is a valid depth image (K says where its pixels look)
+        out = [dataclasses.replace(b, expect="either") if b.label in ("shape:last-axis", "shape:transposed") else b
+               for b in out]
         out.append(BadInput(arg, "dtype:float16", v.astype(np.float16), "either"))
         out.append(BadInput(arg, "zeros", np.zeros_like(v), "either"))
         return out
