@@ -49,8 +49,8 @@ import numpy as np
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.sensors import DepthNoise
 
-__all__ = ["SEQUENCES", "SequenceSpec", "PHASES", "list_sequences", "record_sequence", "sequence_world",
-           "depth_realism", "NOISE"]
+__all__ = ["SEQUENCES", "TEST_SEQUENCES", "SPLITS", "SequenceSpec", "PHASES", "list_sequences", "split_sequences",
+           "sequence_spec", "record_sequence", "sequence_world", "depth_realism", "NOISE"]
 
 logger = logging.getLogger(__name__)
 
@@ -61,16 +61,24 @@ PHASES = ("rest", "reach", "descend", "touch", "withdraw", "push", "release", "g
 
 @dataclasses.dataclass(frozen=True)
 class SequenceSpec:
-    """A scripted sequence: a scene, its options, a length and what happens in it."""
+    """A scripted sequence: a scene, its options, a length and what happens in it; its split
+    (``dev``: tuning data, ``test``: held out) and the seed it is scored at."""
 
     scene: str
     options: dict
     frames: int
     description: str
+    split: str = "dev"
+    seed: int = 0
 
 
 def _tt(script, target, frames, description, **extra):
     return SequenceSpec("tabletop", dict(script=script, target=target, **extra), frames, description)
+
+
+def _test(script, target, frames, seed, appearance, description):
+    return SequenceSpec("tabletop", dict(script=script, target=target, appearance=appearance), frames,
+                        description, split="test", seed=seed)
 
 
 #: The sequence suite (name -> spec). Occlusion ranges are measured by
@@ -99,23 +107,68 @@ SEQUENCES = {
 }
 
 
-def list_sequences():
-    """Names of the sequences, in suite order."""
-    return list(SEQUENCES)
+#: The held-out sequences (the ``test`` split): seeds >= 10,000, untextured and multi-coloured
+#: objects, and the appearance families never used while tuning (``gloved``, ``studio``; and
+#: ``random``). Every figure the tracking experiments headline is scored on these.
+TEST_SEQUENCES = {
+    "blocks_touch_studio": _test("touch", "blocks", 450, 10000, "studio",
+                                 "untextured 3-part object, the palm on it and the fingers over its front"),
+    "blocks_push_gloved": _test("push", "blocks", 450, 10001, "gloved", "3-part object pushed right and back by a glove"),
+    "blocks_turn_primary": _test("turn", "blocks", 600, 10002,
+                                 {"family": "studio", "colours": {"blocks": ["blue", "yellow", "red"]}},
+                                 "blue body, yellow post, red block (no texture): lifted, turned and rolled, twice"),
+    "bottle_touch_studio": _test("touch", "bottle", 450, 10003, "studio",
+                                 "untextured bottle (symmetric) standing still under the palm"),
+    "can_pass_gloved": _test("pass", "can", 480, 10004, {"family": "gloved", "objects": "textured"},
+                             "printed can (symmetric) standing still while a glove passes in front, twice"),
+    "mug_lift_gloved": _test("lift", "mug", 450, 10005, "gloved", "a gloved hand lifts, tilts and turns the mug"),
+    "drill_turn_studio": _test("turn", "drill", 600, 10006, "studio", "untextured drill turned and rolled, twice"),
+    "box_fast_random": _test("fast", "box", 450, 10007, "random", "held and shaken fast, random appearance"),
+    "bracket_push_random": _test("push", "bracket", 450, 10008, "random", "pushed right and back, random appearance"),
+    "cube_push_studio": _test("push", "cube", 450, 10009, "studio", "small untextured cube pushed right and back"),
+    "mug_touch_random": _test("touch", "mug", 450, 10010, "random", "the palm rests on the mug twice"),
+    "bottle_light_gloved": _test("light", "bottle", 570, 10011, "gloved",
+                                 "lighting ramp while a glove touches and turns the bottle"),
+    "box_pass_studio": _test("pass", "box", 480, 10012, "studio", "an untextured box; the hand crosses in front twice"),
+}
+SPLITS = ("dev", "test")
+
+
+def list_sequences(split="dev"):
+    """Names of the sequences of ``split`` ("dev": the 16 tuning sequences, "test": the held-out
+    ones, "all"), in suite order."""
+    if split == "all":
+        return list(SEQUENCES) + list(TEST_SEQUENCES)
+    if split not in SPLITS:
+        raise ValueError(f"split: unknown split {split!r}; expected one of 'dev', 'test', 'all'")
+    return list(SEQUENCES if split == "dev" else TEST_SEQUENCES)
+
+
+def split_sequences(split):
+    """``[(name, seed), ...]`` of a split: the dev sequences at seed 0, the test ones at their seeds."""
+    return [(n, _spec(n).seed) for n in list_sequences(split)]
+
+
+def sequence_spec(name):
+    """The :class:`SequenceSpec` of a dev or test sequence."""
+    return _spec(name)
 
 
 def _spec(name):
-    if name not in SEQUENCES:
-        raise ValueError(f"name: unknown sequence {name!r}; expected one of {', '.join(SEQUENCES)}")
-    return SEQUENCES[name]
+    if name in SEQUENCES:
+        return SEQUENCES[name]
+    if name in TEST_SEQUENCES:
+        return TEST_SEQUENCES[name]
+    raise ValueError(f"name: unknown sequence {name!r}; expected one of {', '.join(list_sequences('all'))}")
 
 
-def sequence_world(name, seed=0):
-    """The :class:`~polar_sim.sim.World` of sequence ``name`` at its first frame."""
+def sequence_world(name, seed=None):
+    """The :class:`~polar_sim.sim.World` of sequence ``name`` at its first frame (``seed``: the
+    sequence's own by default)."""
     from polar_sim.sim.world import World
 
     s = _spec(name)
-    return World(s.scene, seed=seed, **s.options)
+    return World(s.scene, seed=s.seed if seed is None else seed, **s.options)
 
 
 def depth_realism(depth, K, rng, *, max_incidence_deg=75.0, noise=None):
@@ -164,16 +217,17 @@ def _cache_name(name, seed, n, width, height, noise):
     return f"{name}_s{seed}_n{n}_{width}x{height}_{'noisy' if noise else 'clean'}.npz"
 
 
-def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_dir=None, width=640,
+def record_sequence(name, seed=None, n_frames=None, noise=True, out=None, *, cache_dir=None, width=640,
                     height=480, progress=False) -> Recording:
     """Run sequence ``name`` and record every camera frame with its truth (see the module doc).
 
     Parameters
     ----------
     name : str
-        A key of :data:`SEQUENCES`.
-    seed : int
-        Scene layout, colours and sensor noise; the same seed gives the same bytes.
+        A key of :data:`SEQUENCES` (dev) or :data:`TEST_SEQUENCES` (test).
+    seed : int, optional
+        Scene layout, colours and sensor noise; the same seed gives the same bytes. Default: the
+        sequence's own seed (0 for the dev sequences, >= 10,000 for the test ones).
     n_frames : int, optional
         Record only the first ``n_frames`` frames (the suite's length by default), e.g. for CI.
     noise : bool
@@ -193,7 +247,7 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
     from polar_sim.sim.truth import LABELS
 
     s = _spec(name)
-    seed = as_int(seed, "seed")
+    seed = as_int(s.seed if seed is None else seed, "seed")
     n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
     width, height = as_int(width, "width", minimum=16), as_int(height, "height", minimum=16)
     cache = None
@@ -224,6 +278,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
             "noise": dataclasses.asdict(NOISE) | {"max_incidence_deg": 75.0} if noise else None,
             "depth_unit": "m", "depth_missing": "inf", "phases": list(PHASES),
         }
+        if s.split != "dev" or "appearance" in w.meta:  # (the dev recordings' headers stay as they were)
+            meta.update(split=s.split, appearance=w.meta.get("appearance"))
         rec = Recording(meta)
         it = range(n)
         if progress:
