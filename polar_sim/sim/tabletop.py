@@ -321,10 +321,11 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
     if target_colour is not None:
         _check(target_colour, tuple(COLOURS), "target_colour")
     _check(camera_motion, CAMERA_MOTIONS, "camera_motion")
-    app = resolve_appearance(appearance, seed)
+    context = f"{script}/{target}"
+    app = resolve_appearance(appearance, seed, context)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7101]))
     # the appearance draws from its own stream: the layout's draws below stay those of the default
-    arng = appearance_rng(seed) if app is not None else None
+    arng = appearance_rng(seed, context) if app is not None else None
     spec.option.timestep = TIMESTEP
     table = _wood_texture(rng)
     # "wood" is the scene's own wood (the default's, from the layout stream)

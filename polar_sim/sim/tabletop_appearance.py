@@ -28,8 +28,9 @@ colours        ``{object name: [c0, c1, c2]}``: colour names (:data:`~polar_sim.
                of an object's body, accent and third part (the label tile; ``blocks``' small block)
 =============  ================================================================================
 
-The scene's layout (which objects, where, which yaw) is drawn from the seed exactly as without an
-appearance, from a separate random stream: one seed gives the same table under every appearance,
+The choices are drawn from the seed, the family and the scene's script and target (so one seed
+gives different looks to different scripts). The scene's layout (which objects, where, which
+yaw) is drawn from the seed exactly as without an appearance, from a separate random stream: one seed gives the same table under every appearance,
 so the label renders (target, occluder, amodal masks) and the depth are identical, and only the
 colours change. All textures are procedural (no shipped images).
 """
@@ -200,8 +201,11 @@ def _check_colours(colours):
     return out
 
 
-def resolve_appearance(appearance, seed):
+def resolve_appearance(appearance, seed, context=""):
     """The concrete :class:`AppearanceSpec` of ``appearance`` for ``seed``, or None (the default scene).
+
+    ``context`` (a string, e.g. the script and target) is mixed into the draws, so that scenes of
+    one seed and family but different scripts or targets look different.
 
     Raises ``ValueError`` naming an unknown family (listing the valid ones), an unknown spec field
     (listing the valid fields) or a malformed field value.
@@ -228,7 +232,8 @@ def resolve_appearance(appearance, seed):
                          f"got {type(appearance).__name__}")
     # the family's name is part of the seed: one seed draws differently in each family
     base_name = appearance if isinstance(appearance, str) else appearance.get("family", "default")
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7104, zlib.crc32(base_name.encode())]))
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7104, zlib.crc32(base_name.encode()),
+                                                        zlib.crc32(str(context).encode())]))
     # every field is drawn (in a fixed order) even when given, so a given field never shifts the others
     drawn = {k: _draw(base[k], rng) for k in ("objects", "hand", "sleeve", "table")}
     drawn["light"] = {k: _draw(base["light"].get(k, _DEFAULT_LIGHT[k]), rng) for k in LIGHT_FIELDS}
@@ -250,9 +255,9 @@ def resolve_appearance(appearance, seed):
     return AppearanceSpec(family=family, **spec)
 
 
-def appearance_rng(seed):
+def appearance_rng(seed, context=""):
     """The random stream of the appearance's textures and per-object choices (apart from the layout's)."""
-    return np.random.default_rng(np.random.SeedSequence([int(seed), 7105]))
+    return np.random.default_rng(np.random.SeedSequence([int(seed), 7105, zlib.crc32(str(context).encode())]))
 
 
 # -- textures --------------------------------------------------------------------------------

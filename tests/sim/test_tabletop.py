@@ -360,11 +360,11 @@ def test_bad_appearance_raises(appearance, match):
 def test_test_split_sequences_are_held_out():
     # the test split: seeds >= 10,000, untextured and multi-part objects, held-out appearance families only
     from polar_sim.sim.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
-    from polar_sim.sim.tabletop_sequences import TEST_SEQUENCES, split_sequences
+    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, TEST_SEQUENCES, list_sequences
 
-    test = split_sequences("test")
-    assert len(test) >= 10 and all(seed >= 10_000 for _, seed in test)
-    assert {n for n, s in split_sequences("dev")} == set(SEQUENCES) and {s for _, s in split_sequences("dev")} == {0}
+    assert len(list_sequences("test")) >= 10 and min(SPLIT_SEEDS["test"]) >= 10_000
+    assert list_sequences("dev") == list(SEQUENCES) and SPLIT_SEEDS["dev"] == (0,)
+    assert not set(TEST_SEQUENCES) & set(SEQUENCES)
     fams = set()
     for s in TEST_SEQUENCES.values():
         a = s.options["appearance"]
