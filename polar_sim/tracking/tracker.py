@@ -429,7 +429,7 @@ class ObjectTracker:
         """Prediction map P (h, w), prior pi (h, w) and silhouette S (h, w) around pose T (spec 3.3-3.4)."""
         m, f = self._model, float(self._K[0, 0])
         zb = proj.z_mean
-        S = splat_silhouette(proj.uv[proj.vis], zb, f, m.spacing, roi)
+        S = splat_silhouette(proj.uv[proj.vis], zb, f, m.local_spacing[proj.vis], roi)
         if self.spatial_prior:
             sigma_px = max(self.sigma_min_px, f * sig_pos / zb)
             blur = cv2.GaussianBlur(S.astype(np.float32), (0, 0), sigma_px)
@@ -496,7 +496,7 @@ class ObjectTracker:
         out = np.empty(D.shape, np.float32)
         roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                       np.ascontiguousarray(Ti[:3, :3]), np.ascontiguousarray(Ti[:3, 3]),
-                      m.origin, m.inv_h, m.knn, m.P, m.N, vis, float(kappa), out)
+                      m.origin, m.inv_h, m.knn, m.P, m.N, vis, float(kappa), m.slack, out)
         return out
 
     def _backproject(self, D, roi, flat):
@@ -514,7 +514,7 @@ class ObjectTracker:
         pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing, zbuffer=vis is None)
         if vis is not None:
             pr.vis = vis
-        S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.spacing, roi)
+        S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.local_spacing[pr.vis], roi)
         inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
         outer = cv2.dilate(S, disc(2)) > 0
         # distances only where they can matter: inside the dilated silhouette's bounding box
