@@ -145,7 +145,7 @@ class _Lock:
 
 def cut_of(name, quick):
     """(first frame, end frame, width, height) tracked for sequence ``name`` at the chosen size."""
-    from polar_sim.sim.tabletop_sequences import SEQUENCES
+    from polar_sim.sim.tabletop_sequences import sequence_spec
 
     if quick:
         if name in QUICK_CUTS:
@@ -153,14 +153,14 @@ def cut_of(name, quick):
         else:
             a, b = 0, 40
         return a, b, *QUICK_SIZE
-    return 0, SEQUENCES[name].frames, *FULL_SIZE
+    return 0, sequence_spec(name).frames, *FULL_SIZE
 
 
 def recording_path(name, seed, n_frames, width, height):
     """Path of the cached recording (recorded now if missing; deterministic in name and seed)."""
-    from polar_sim.sim.tabletop_sequences import SEQUENCES, _cache_name
+    from polar_sim.sim.tabletop_sequences import _cache_name, sequence_spec
 
-    n = SEQUENCES[name].frames if n_frames is None else int(n_frames)
+    n = sequence_spec(name).frames if n_frames is None else int(n_frames)
     d = cache_dir()
     path = d / _cache_name(name, seed, n, width, height, True)
     if path.is_file():

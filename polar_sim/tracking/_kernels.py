@@ -203,3 +203,4 @@ def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
         H[5, 1] += -mu2 * s1[0]
         H[3, 2] += -mu2 * s1[1]
         H[4, 2] += mu2 * s1[0]
+
