@@ -56,6 +56,9 @@ SCENES = {
                              "the rover_terrain route and obstacles on flat ground"),
     "office2d": SceneEntry("office2d.xml", "polar_sim.sim.office:build_office",
                            "30 x 30 m lab floor: rooms, doors, furniture; indoor rover with a 2D lidar"),
+    "warehouse2d": SceneEntry("warehouse2d.xml", "polar_sim.sim.worlds2d:build_warehouse",
+                              "randomised warehouse: shelf rows and racks, thin and curved walls, pillars, "
+                              "crates, clutter, an open yard; indoor rover with a 2D lidar"),
     "navworld": SceneEntry("navworld.xml", "polar_sim.sim.navworld:build_navworld",
                            "seeded rooms, doors and clutter with a start and a reachable goal (GPISNav)"),
     "tabletop": SceneEntry("tabletop.xml", "polar_sim.sim.tabletop:build_tabletop",
