@@ -1,9 +1,11 @@
 """Tracking sequences: scripted ``tabletop`` (and one ``object_orbit``) runs rendered from the
 RGB-D camera with exact truth, for the tracking chapter (issue 6, tracking spec Sec. 9.6).
 
->>> from polar_sim.sim.tabletop_sequences import SEQUENCES, record_sequence
->>> rec = record_sequence("mug_touch", seed=0, n_frames=30, cache_dir="~/.cache/polar_sim")
+>>> from polar_sim.sim.tabletop_sequences import cached_sequence, record_sequence
+>>> rec = record_sequence("mug_touch", seed=0, n_frames=30)       # in memory
 >>> rec.meta["K"], rec.stack("T_cam_obj").shape          # (3, 3) list, (30, 4, 4)
+>>> r = cached_sequence("mug_touch", seed=0)             # recorded once into $POLAR_SIM_CACHE/tabletop
+>>> for i, frame in r.frames(0, 10): ...                 # a lazy reader: one frame in memory at a time
 
 Each frame of the :class:`~polar_sim.sim.recording.Recording` holds
 
@@ -42,7 +44,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import zlib
-from pathlib import Path
 
 import numpy as np
 
@@ -50,7 +51,8 @@ from polar_sim.sim.recording import Recording
 from polar_sim.sim.sensors import DepthNoise
 
 __all__ = ["SEQUENCES", "DEV_APPEARANCE_SEQUENCES", "TEST_SEQUENCES", "SPLITS", "SequenceSpec", "PHASES", "list_sequences", "SPLIT_SEEDS",
-           "sequence_spec", "record_sequence", "sequence_world", "depth_realism", "NOISE"]
+           "sequence_spec", "record_sequence", "cached_sequence", "sequence_world", "depth_realism", "NOISE",
+           "RECORDING_VERSION"]
 
 logger = logging.getLogger(__name__)
 
@@ -225,12 +227,33 @@ def _grazing(depth, K, max_incidence_deg):
     return out & ok
 
 
-def _cache_name(name, seed, n, width, height, noise):
-    return f"{name}_s{seed}_n{n}_{width}x{height}_{'noisy' if noise else 'clean'}.npz"
+#: Version of the recording code (the cache key's ``version``): bump when what is recorded changes.
+RECORDING_VERSION = 1
 
 
-def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_dir=None, width=640,
-                    height=480, progress=False) -> Recording:
+def _cache_key(name, seed, n, width, height, noise):
+    s = _spec(name)
+    return {"sequence": name, "scene": s.scene, "options": dict(s.options), "seed": int(seed), "frames": int(n),
+            "width": int(width), "height": int(height), "noise": bool(noise)}
+
+
+def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, height=480, progress=False):
+    """The recording of :func:`record_sequence` from the one cache (:mod:`polar_sim.sim.sequences`,
+    kind ``"tabletop"``), recorded on first use under the cache's lock; a lazy
+    :class:`~polar_sim.sim.recording.RecordingReader` (``len``, ``meta``, ``stack``, ``frames``)."""
+    from polar_sim._validation import as_int
+    from polar_sim.sim import sequences
+
+    s = _spec(name)
+    n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
+    key = _cache_key(name, as_int(seed, "seed"), n, as_int(width, "width", minimum=16),
+                     as_int(height, "height", minimum=16), noise)
+    return sequences.cached("tabletop", key, lambda: record_sequence(name, seed, n, noise, width=width, height=height,
+                                                                     progress=progress), version=RECORDING_VERSION)
+
+
+def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=640, height=480,
+                    progress=False) -> Recording:
     """Run sequence ``name`` and record every camera frame with its truth (see the module doc).
 
     Parameters
@@ -245,9 +268,7 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
     noise : bool
         Apply Kinect-like depth noise and RGB noise (``depth_clean`` is always exact).
     out : path, optional
-        Also save the recording there (``.npz``).
-    cache_dir : path, optional
-        Load the recording from this folder if it is there, else record and save it there.
+        Also save the recording there (``.npz``). :func:`cached_sequence` keeps it in the cache.
     width, height : int
         Image size; the intrinsics scale with it (fovy is fixed).
     progress : bool
@@ -262,17 +283,6 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
     seed = as_int(seed, "seed")
     n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
     width, height = as_int(width, "width", minimum=16), as_int(height, "height", minimum=16)
-    cache = None
-    if cache_dir is not None:
-        cache = Path(cache_dir).expanduser() / _cache_name(name, seed, n, width, height, noise)
-        if cache.is_file():
-            try:
-                rec = Recording.load(cache)
-                if out is not None:
-                    rec.save(out)
-                return rec
-            except ValueError:
-                logger.warning("cached recording %s is unreadable; recording it again", cache)
     w = sequence_world(name, seed)
     try:
         target = w.meta["target"]
@@ -322,8 +332,6 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
             })
     finally:
         w.close()
-    if cache is not None:
-        rec.save(cache)
     if out is not None:
         rec.save(out)
     return rec

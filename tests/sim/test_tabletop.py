@@ -182,15 +182,24 @@ def test_reset_replays_the_script_exactly():
     assert np.array_equal(np.array(a), np.array(b))
 
 
-def test_recorded_sequence_is_deterministic_and_cached(tmp_path):
-    # Same name and seed: byte-identical frames; a cached recording loads back identical.
-    a = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120, cache_dir=tmp_path)
+def test_recorded_sequence_is_deterministic_and_cached(tmp_path, monkeypatch):
+    # Same name and seed: byte-identical frames; the cached recording (polar_sim.sim.sequences) reads
+    # back identical, frame by frame, and a second call reads the cache instead of recording
+    from polar_sim.sim.tabletop_sequences import cached_sequence
+
+    monkeypatch.setenv("POLAR_SIM_CACHE", str(tmp_path))
+    a = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
     b = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
-    c = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120, cache_dir=tmp_path)
-    assert a.keys == b.keys
+    c = cached_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
+    assert a.keys == b.keys and set(a.keys) == set(c.keys)
     for k in a.keys:
         assert np.array_equal(a.stack(k), b.stack(k)) and np.array_equal(a.stack(k), c.stack(k)), k
-    assert a.meta == c.meta and a.meta["object"] == "mug" and np.array(a.meta["K"]).shape == (3, 3)
+    files = list((tmp_path / "tabletop").glob("*.npz"))
+    assert len(files) == 1
+    mtime = files[0].stat().st_mtime_ns
+    d = cached_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
+    assert files[0].stat().st_mtime_ns == mtime and len(d) == 3
+    assert c.meta["object"] == a.meta["object"] == "mug" and np.array(a.meta["K"]).shape == (3, 3)
     f = a[2]
     missing = ~np.isfinite(f["depth"])
     assert missing.mean() > 0.005 and np.isfinite(f["depth_clean"]).all()
