@@ -137,8 +137,43 @@ def tabletop(scripts, seeds, n, variants):
                       f"{1000 * np.median(cpu[1:]):.1f} |", flush=True)
 
 
-def sequences(names, seed, variants, repeats, max_frames=None):
-    """Item 7: CPU per frame on recorded 640x480 sequences against the object's image size and the scene."""
+def _model(obj, how):
+    """3000 model points and normals: area-uniform, or 1000 per part (``parts``: the atlas tiles, e.g.
+    blocks' body, post and small block), which leaves a large part sparse (issue 13 item 4)."""
+    import trimesh
+
+    from polar_sim.sim import objects
+
+    mesh = objects.load_mesh(obj)
+    if how == "uniform":
+        P, face = trimesh.sample.sample_surface(mesh, 3000, seed=0)
+        return np.asarray(P), np.asarray(mesh.face_normals[face])
+    tiles = objects._face_tiles(obj, mesh)
+    Ps, Ns = [], []
+    for k in np.unique(tiles):
+        sub = mesh.submesh([np.flatnonzero(tiles == k)], append=True)
+        p, f = trimesh.sample.sample_surface(sub, 3000 // len(np.unique(tiles)), seed=0)
+        Ps.append(np.asarray(p)), Ns.append(np.asarray(sub.face_normals[f]))
+    return np.vstack(Ps), np.vstack(Ns)
+
+
+def _part_recall(obj, f, T, K, mask):
+    """Recall of the mask on each atlas part of the object's visible pixels (blocks: body, post, block)."""
+    from polar_sim.sim import objects
+
+    v, u = np.nonzero(f["mask_visible"])
+    z = f["depth_clean"][v, u]
+    X = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], 1)
+    Y = (X - T[:3, 3]) @ T[:3, :3]
+    mesh = objects.load_mesh(obj)
+    _, _, tri = mesh.nearest.on_surface(Y)
+    part = objects._face_tiles(obj, mesh)[tri]
+    return {int(k): (float(mask[v, u][part == k].mean()), int((part == k).sum())) for k in np.unique(part)}
+
+
+def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
+    """Item 7: CPU per frame on recorded 640x480 sequences against the object's image size and the scene.
+    With ``model="parts"`` also the mask's recall per part of the object (item 4)."""
     from scipy.stats import spearmanr
 
     from polar_sim.sim.tabletop_sequences import cached_sequence, list_sequences
@@ -147,21 +182,16 @@ def sequences(names, seed, variants, repeats, max_frames=None):
         names = list_sequences(names)
     else:
         names = names.split(",")
-    import trimesh
-
-    from polar_sim.sim import objects
-
-    print("| sequence | appearance | variant | frames | CPU ms median | p95 | frames/s | object px median | ROI px median |")
+    print("| sequence | appearance | variant | frames | CPU ms median | p95 | frames/s | object px median | ROI px median |"
+          " mask recall per part (part: recall, pixels) |")
     print("|---|---|---|---|---|---|---|---|---|")
     pooled = {v: {"cpu": [], "tgt": [], "roi": [], "st": [], "fam": []} for v in variants}
     for name in names:
         rec = cached_sequence(name, seed)
         n = len(rec) if max_frames is None else min(len(rec), max_frames)
-        frames = [f for _, f in rec.frames(0, n, keys=("rgb", "depth", "mask_full"))]
+        frames = [f for _, f in rec.frames(0, n, keys=("rgb", "depth", "mask_full", "mask_visible", "depth_clean"))]
         G, ts = rec.stack("T_cam_obj"), rec.stack("t")
-        mesh = objects.load_mesh(rec.meta["object"])
-        P, face = trimesh.sample.sample_surface(mesh, 3000, seed=0)
-        P, N = np.asarray(P), np.asarray(mesh.face_normals[face])
+        P, N = _model(rec.meta["object"], model)
         K = np.array(rec.meta["K"])
         fam = (rec.meta.get("appearance") or {}).get("family", "default")
         tgt = np.array([f["mask_full"].sum() for f in frames])
@@ -169,11 +199,14 @@ def sequences(names, seed, variants, repeats, max_frames=None):
             best = None
             for _ in range(repeats):
                 tr = ObjectTracker(P, K, G[0], model_normals=N, **VARIANTS[v])
-                cpu, roi, st = [], [], []
+                cpu, roi, st, parts = [], [], [], {}
                 for i, f in enumerate(frames):
                     c0 = time.process_time()
                     r = tr.process(f["rgb"], f["depth"], float(ts[i]))
                     cpu.append(1000 * (time.process_time() - c0))
+                    if model == "parts" and i % 10 == 0:
+                        for k, (rc, npx) in _part_recall(rec.meta["object"], f, G[i], K, r.mask).items():
+                            parts.setdefault(k, []).append((rc * npx, npx))
                     roi.append((r.roi[2] - r.roi[0]) * (r.roi[3] - r.roi[1]))
                     st.append([1000 * r.stage_times.get(k, 0.0) for k in STAGES])
                 cpu = np.array(cpu)
@@ -183,7 +216,9 @@ def sequences(names, seed, variants, repeats, max_frames=None):
                 pooled[v][k].append(x)
             pooled[v]["fam"] += [fam] * len(c)
             print(f"| {name} | {fam} | {v} | {len(c)} | {np.median(c):.1f} | {np.percentile(c, 95):.1f} | "
-                  f"{1000 / np.median(c):.0f} | {np.median(tgt):.0f} | {np.median(R):.0f} |", flush=True)
+                  f"{1000 / np.median(c):.0f} | {np.median(tgt):.0f} | {np.median(R):.0f} | "
+                  + ", ".join(f"{k}: {sum(a for a, _ in x) / max(sum(b for _, b in x), 1):.2f} ({sum(b for _, b in x)})"
+                              for k, x in sorted(parts.items())) + " |", flush=True)
     for v, d in pooled.items():
         c, t, R, st = (np.concatenate(d[k]) for k in ("cpu", "tgt", "roi", "st"))
         fam = np.array(d["fam"])
@@ -223,6 +258,8 @@ def main(argv=None):
     ap.add_argument("--sequences", default=None,
                     help="a split (dev, test, dev_appearance) or comma list of recorded sequences (item 7)")
     ap.add_argument("--seed", type=int, default=10000, help="seed of the recorded sequences (with --sequences)")
+    ap.add_argument("--model", default="uniform", choices=("uniform", "parts"),
+                    help="model points: area-uniform, or 1000 per part (with --sequences; prints recall per part)")
     ap.add_argument("--repeats", type=int, default=None,
                     help="runs per variant; per-frame times are the fastest run (default 3, quick 2)")
     a = ap.parse_args(argv)
@@ -232,7 +269,7 @@ def main(argv=None):
         print(f"# bench_tracking --sequences {a.sequences} --seed {a.seed}: 640x480, one thread, "
               f"best of {a.repeats or 1} runs per frame; {platform.processor() or platform.machine()}, load average "
               f"{os.getloadavg()[0]:.2f} at start")
-        sequences(a.sequences, a.seed, (a.variants or "ww").split(","), a.repeats or 1, a.frames)
+        sequences(a.sequences, a.seed, (a.variants or "ww").split(","), a.repeats or 1, a.frames, a.model)
         print(f"# load average {os.getloadavg()[0]:.2f} at end")
         return
     if a.tabletop:

@@ -108,11 +108,17 @@ def recording(name, seed, quick):
 
 
 def _source_hash():
+    """Hash of the code that decides a memoised run's numbers: the tracker, the metrics it is scored
+    with and the run loop below (a built-in method's configuration is part of the key)."""
+    import inspect
+
     import polar_sim
 
     root = Path(polar_sim.__file__).parent
-    h = hashlib.sha1(str(SCORING_VERSION).encode())
-    for p in sorted([*(root / "tracking").glob("*.py"), *(root / "metrics").glob("*.py"), Path(__file__)]):
+    h = hashlib.sha1(f"{SCORING_VERSION}{inspect.getsource(_run)}{inspect.getsource(_bins)}".encode())
+    files = [*(root / "tracking").glob("*.py"), *(root / "metrics" / f for f in ("pose.py", "segmentation.py",
+                                                                                  "calibration.py"))]
+    for p in sorted(files):
         h.update(p.read_bytes())
     return h.hexdigest()[:16]
 
@@ -137,7 +143,10 @@ def track(name, seed, method, *, quick, on_frame=None, stop=None, tracker_kw=Non
     rec, start, end = recording(name, seed, quick)
     end = end if stop is None else min(end, int(stop))
     memo = on_frame is None and tracker_kw is None and ":" not in method and os.environ.get("POLAR_SIM_TRACK_MEMO", "1") != "0"
-    key = {"recording": rec.path.name, "start": start, "end": end, "method": method, "code": _source_hash()}
+    from polar_sim.runner.methods import TRACKERS
+
+    key = {"recording": rec.path.name, "start": start, "end": end, "method": method,
+           "config": TRACKERS.get(method, ({},))[0], "code": _source_hash()}
 
     def run():
         return _run(rec, start, end, get_method("tracker", method), tracker_kw or {}, on_frame)

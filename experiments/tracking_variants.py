@@ -38,22 +38,28 @@ def _spearman(x, y):
     return float(spearmanr(x, y).statistic) if len(x) >= 3 else float("nan")
 
 
+def _ref(table):
+    """The method the checks and per-sequence figures are about: ww, or the only one run."""
+    methods = list(dict.fromkeys(r["method"] for r in table))
+    return "ww" if "ww" in methods else methods[0]
+
+
 def _size_rows(table):
     """Fig. 5.8: one row per sequence of ww (not pooled over variants), with the object's size and shape."""
     rows = [{"sequence": r["sequence"], "object": r["object"], "diameter_cm": r["diameter_cm"],
              "shape": SHAPE.get(r["object"], "?"), "add_ok": r["add_ok"], "add_auc": r["add_auc"],
-             "iou_ok": r["iou_ok"]} for r in C.by(table, "method", "ww")]
+             "iou_ok": r["iou_ok"]} for r in C.by(table, "method", _ref(table))]
     return sorted(rows, key=lambda r: -r["diameter_cm"])
 
 
 def _cost(table, ctx):
     """CPU ms per frame against the ROI and the object's image size (all ww frames)."""
     cpu, roi, tgt = [], [], []
-    for r in C.by(table, "method", "ww"):
+    for r in C.by(table, "method", _ref(table)):
         z = ctx.arrays(r)
         cpu.append(z["cpu_ms"][1:]), roi.append(z["roi_px"][1:]), tgt.append(z["target_px"][1:])
     cpu, roi, tgt = map(np.concatenate, (cpu, roi, tgt))
-    slope, icpt = np.polyfit(tgt / 1e4, cpu, 1)
+    slope, icpt = np.polyfit(tgt / 1e4, cpu, 1) if np.ptp(tgt) > 0 else (float("nan"), float(np.median(cpu)))
     return dict(frames=len(cpu), rho_target=_spearman(tgt, cpu), rho_roi=_spearman(roi, cpu), slope=slope, icpt=icpt,
                 q=np.percentile(cpu, [50, 95]), cpu=cpu, tgt=tgt)
 
@@ -65,7 +71,8 @@ def summarize(table, ctx):
     import matplotlib.pyplot as plt
 
     head = C.group(table, ctx.split)
-    vrows = C.rate_rows(head, "method", C.VARIANTS)
+    methods = list(dict.fromkeys(r["method"] for r in table))
+    vrows = C.rate_rows(head, "method", [m for m in C.VARIANTS if m in methods] + [m for m in methods if m not in C.VARIANTS])
     cols = ["method", "sequences", "frames", "add_ok", "add_ok_seqmin", "add_strict_ok", "add_auc", "s5cm5deg",
             "iou_ok", "iou_mean", "hand_as_target", "drift_deg_max", "lost", "cpu_ms_median"]
     write_csv_table(vrows, cols, ctx.out_dir / "tracking_variants_table.csv")
@@ -90,7 +97,7 @@ def summarize(table, ctx):
              markdown_table(srows, list(srows[0])), "",
              f"Spearman correlation of diameter with ADD(-S) AUC over the {len(srows)} sequences: {fmt(rho)}.", "",
              "### Speed", "",
-             f"ww, {cost['frames']} frames: CPU ms per frame median {cost['q'][0]:.1f}, 95th percentile "
+             f"{_ref(table)}, {cost['frames']} frames: CPU ms per frame median {cost['q'][0]:.1f}, 95th percentile "
              f"{cost['q'][1]:.1f} ({1000 / cost['q'][0]:.0f} frames/s; ICG takes {C.ICG_MS} ms). Spearman "
              f"correlation with the object's pixels {fmt(cost['rho_target'])}, with the ROI's {fmt(cost['rho_roi'])}; "
              f"fit {cost['icpt']:.1f} ms + {cost['slope']:.2f} ms per 10,000 object pixels.", ""]
@@ -108,7 +115,7 @@ def summarize(table, ctx):
     for r in srows:
         ax[2].scatter(r["diameter_cm"], 100 * r["add_auc"], marker={"distinct": "o", "cuboid": "s"}.get(r["shape"], "^"))
         ax[2].annotate(r["sequence"], (r["diameter_cm"], 100 * r["add_auc"]), fontsize=6)
-    ax[2].set(xlabel="object diameter, cm", ylabel="ww ADD(-S) AUC 0-10 cm, %", title="per sequence (o distinct, s cuboid, ^ revolved)")
+    ax[2].set(xlabel="object diameter, cm", ylabel=f"{_ref(table)} ADD(-S) AUC 0-10 cm, %", title="per sequence (o distinct, s cuboid, ^ revolved)")
     for a in ax:
         a.grid(alpha=0.3)
     ax[0].legend(fontsize=8), ax[1].legend(fontsize=8)
@@ -117,29 +124,31 @@ def summarize(table, ctx):
     fig, a = plt.subplots(figsize=(5, 4))
     a.scatter(cost["tgt"] / 1e3, cost["cpu"], s=2, alpha=0.3)
     a.set(xlabel="object pixels (amodal mask), thousands", ylabel="CPU ms per frame (one thread)",
-          title="ww: cost against the object's image size")
+          title=f"{_ref(table)}: cost against the object's image size")
     a.grid(alpha=0.3)
     fig.tight_layout()
     return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_variants_cost")])
 
 
 def checks(table, ctx):
-    head = C.group(table, ctx.split)
-    ww = next(r for r in C.rate_rows(head, "method", ["ww"]))
-    out = [Check("ww (the default): ADD(-S) < 0.1 d on >= 95 % of frames", ww["add_ok"] >= 0.95,
+    head, m = C.group(table, ctx.split), _ref(table)
+    ww = next(r for r in C.rate_rows(head, "method", [m]))
+    out = [Check(f"{m}: ADD(-S) < 0.1 d on >= 95 % of frames", ww["add_ok"] >= 0.95,
                  f"{100 * ww['add_ok']:.1f} % (lowest sequence {100 * ww['add_ok_seqmin']:.1f} %)"),
-           Check("ww: IoU > 0.5 on >= 95 % of frames", ww["iou_ok"] >= 0.95, f"{100 * ww['iou_ok']:.1f} %")]
+           Check(f"{m}: IoU > 0.5 on >= 95 % of frames", ww["iou_ok"] >= 0.95, f"{100 * ww['iou_ok']:.1f} %")]
     if not ctx.quick:   # 300-frame rests and speed at 640x480 (the quick size: 45-frame cuts at 320x240)
         ms = ww["cpu_ms_median"]
-        out += [Check("ww: an object at rest drifts <= 2 deg in rotation over 300 frames", ww["drift_deg_max"] <= 2.0,
+        out += [Check(f"{m}: an object at rest drifts <= 2 deg in rotation over 300 frames", ww["drift_deg_max"] <= 2.0,
                       f"largest drift {ww['drift_deg_max']:.2f} deg"),
-                Check("ww >= 30 frames/s at 640x480 on one thread (CPU time)", 1000 / ms >= 30,
+                Check(f"{m} >= 30 frames/s at 640x480 on one thread (CPU time)", 1000 / ms >= 30,
                       f"{1000 / ms:.0f} frames/s ({ms:.1f} ms, median of the sequences' medians)")]
     return out
 
 
 def findings(table, ctx):
     vr = C.rate_rows(C.group(table, ctx.split), "method", ["su", "sw", "wu", "ww"])
+    if len(vr) < 4:
+        return []
     lo, hi = min(r["add_ok"] for r in vr), max(r["add_ok"] for r in vr)
     srows = _size_rows(table)
     rho = _spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])

@@ -111,7 +111,16 @@ class ShapeModel:
         self.inv_h = 1.0 / h
         axes = [lo[i] + (np.arange(dims[i]) + 0.5) * h for i in range(3)]
         C = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        _, nb = self.tree.query(C, k=self.k)
+        if (self.slack > 0).any():
+            # a non-uniform model: rank candidates by distance in units of their own spacing, so a
+            # cell over a sparse face keeps that face's points rather than a dense face's nearby
+            kk = min(4 * self.k, len(self.P))
+            dd, nb = self.tree.query(C, k=kk)
+            nb = nb.reshape(len(C), kk)
+            order = np.argsort(dd.reshape(len(C), kk) / self.local_spacing[nb], axis=1, kind="stable")[:, : self.k]
+            nb = np.take_along_axis(nb, order, axis=1)
+        else:
+            _, nb = self.tree.query(C, k=self.k)
         self.knn = np.ascontiguousarray(nb.reshape(*dims, self.k).astype(np.int32))
 
     def nearest_visible(self, Y, vis, *, exact=False):

@@ -144,8 +144,14 @@ class ObjectTracker:
         216-bin HSV Naive Bayes; "none" the shape-and-motion-only ablation (gamma = 0).
     motion : {"ekf", "alpha-beta", "none"}, default="ekf"
         Constant-velocity filter; "none" predicts the last pose (motion-prior-off ablation).
-    spatial_prior : bool, default=True
-        Blurred predicted silhouette as the prior pi; False gives pi = 0.5 in the ROI.
+    spatial_prior : bool, default=False
+        Blurred predicted silhouette as the prior pi (the spec's form, with floor ``epsilon``);
+        False gives pi = 0.5 in the ROI, which the ROI (the predicted silhouette's box, grown by
+        3 sigma) still bounds. Off by default since issue 13: at epsilon = 0.02 the prior's
+        log-odds (+-3.9) outweighs the depth term (at most +3.1), so wherever the prediction is off
+        the map copies the predicted silhouette and a mispredicted object cannot re-enter the
+        registration; chosen on the dev split, where no prior and a softened one (epsilon = 0.1)
+        score alike (see benchmarks/RESULTS.md).
     registration : {"weighted", "plain"}, default="weighted"
         "plain": robust ICP on every ROI point with depth (no label weighting) - the baseline.
     correspondence : {"grid", "kdtree"}, default="grid"
@@ -214,7 +220,7 @@ class ObjectTracker:
     """
 
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
-                 motion="ekf", spatial_prior=True, registration="weighted", correspondence="grid",
+                 motion="ekf", spatial_prior=False, registration="weighted", correspondence="grid",
                  fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
                  fitness_min=0.5, min_inliers=50, min_coverage=0.1, learn_coverage=0.25, max_jump=(0.5, 0.1),
                  max_mahalanobis=50.0,

@@ -127,4 +127,7 @@ def splat_silhouette(uv, z_mean, f, spacing, roi):
     dt = cv2.distanceTransform(cv2.copyMakeBorder(D, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1), cv2.DIST_L2,
                                cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
     S = ((D > 0) & (dt > e)).astype(np.uint8)
-    return cv2.dilate(S, disc(1))
+    # the outermost samples of a sparse patch lie about half their spacing inside its edge: grow the
+    # closed silhouette back by half the local radius (one pixel where the samples are dense)
+    ds = cv2.distanceTransform(1 - S, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return ((ds <= np.maximum(1.0, 0.5 * np.where(e < big, e, 0))) & (D > 0) | (S > 0)).astype(np.uint8)

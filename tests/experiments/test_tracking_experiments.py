@@ -54,8 +54,9 @@ def test_tracker_plugin_runs_and_fails_when_it_should(tmp_path, monkeypatch):
     res = _run("tracking_variants", tmp_path, overrides={"method": ["my_tracker:HoldTracker"], "sequence": ["drill_lift"]})
     (row,) = res.table
     assert row["add_ok"] < 0.95 and row["iou_ok"] == 0.0
-    status = {c.name.split(":")[1].strip()[:20]: c.status for c in res.checks}
-    assert status["ADD(-S) < 0.1 d on >= 95"] == "FAIL" and status["IoU > 0.5 on >= 95 % o"] == "FAIL"
+    status = {c.name: c.status for c in res.checks}
+    assert status["my_tracker:HoldTracker: ADD(-S) < 0.1 d on >= 95 % of frames"] == "FAIL"
+    assert status["my_tracker:HoldTracker: IoU > 0.5 on >= 95 % of frames"] == "FAIL"
 
 
 # Masks reach IoU > 0.5 on >= 95 % of frames, <= 5 % of the touching hand's pixels are labelled target, and
