@@ -123,17 +123,18 @@ def appearance_pictures(out_dir):
     return path
 
 
-def sequence_stats(width=320, height=240, only=None):
-    """Per sequence: occlusion range, frames in contact / held, peak speeds, displacement."""
-    from polar_sim.sim.tabletop_sequences import SEQUENCES, sequence_world
+def sequence_stats(width=320, height=240, only=None, split="dev"):
+    """Per sequence of a split: occlusion range, frames in contact / held, peak speeds, displacement."""
+    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, list_sequences, sequence_spec, sequence_world
     from polar_sim.sim.truth import LABELS
 
     rows = []
-    for name, spec in SEQUENCES.items():
+    for name in list_sequences(split):
+        spec = sequence_spec(name)
         if only and name not in only:
             continue
         t0 = time.time()
-        w = sequence_world(name, 0)
+        w = sequence_world(name, SPLIT_SEEDS[split][0])
         tgt = w.meta["target"]
         occ, contact, held, v, om, phases = [], 0, 0, [], [], []
         p0 = w.truth()["objects"][tgt][:3, 3]
@@ -170,12 +171,13 @@ def main(argv=None):
     ap.add_argument("--stats", action="store_true", help="also print the sequence statistics table")
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--only", nargs="*", help="sequences for --stats (default: all)")
+    ap.add_argument("--split", default="dev", help="sequences for --stats: dev, dev_appearance or test")
     a = ap.parse_args(argv)
     if not a.no_pictures:
         for p in scene_pictures(a.out) + [appearance_pictures(a.out)]:
             print("wrote", p)
     if a.stats:
-        rows = sequence_stats(only=a.only)
+        rows = sequence_stats(only=a.only, split=a.split)
         print("\n| sequence | object | frames | occlusion min-max (median) | contact frames | held frames |"
               " peak speed | peak rotation | net displacement |")
         print("|---|---|---|---|---|---|---|---|---|")

@@ -35,7 +35,9 @@ def trial(params, seed, ctx):
 def _spearman(x, y):
     from scipy.stats import spearmanr
 
-    return float(spearmanr(x, y).statistic) if len(x) >= 3 else float("nan")
+    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:   # undefined for constant inputs
+        return float("nan")
+    return float(spearmanr(x, y).statistic)
 
 
 def _ref(table):
@@ -103,7 +105,7 @@ def summarize(table, ctx):
              f"fit {cost['icpt']:.1f} ms + {cost['slope']:.2f} ms per 10,000 object pixels.", ""]
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
     th, tt = np.linspace(0, 0.3, 61), np.linspace(0, 1, 101)
-    for v in C.VARIANTS:
+    for v in [r["method"] for r in vrows]:
         rs = C.by(head, "method", v)
         if rs:
             e = np.concatenate([ctx.arrays(r)["err_d"] for r in rs])

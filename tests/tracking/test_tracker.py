@@ -19,7 +19,8 @@ def mug():
 
 
 def _track(seq, P, N, frames, **kw):
-    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, **kw)
+    kw.setdefault("model_normals", N)
+    tr = ObjectTracker(P, seq.K, seq.poses[0], **kw)
     return tr, [tr.process(f["rgb"], f["depth"]) for f in frames]
 
 
@@ -267,3 +268,25 @@ def test_accepts_strided_views(mug):
     a = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(bgr[..., ::-1], f["depth"].astype(float))
     b = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(f["rgb"], f["depth"])
     assert np.array_equal(a.pose, b.pose) and np.array_equal(a.mask, b.mask)
+
+
+def test_sparse_faces_of_a_non_uniform_model_are_segmented():
+    # a box model with 2700 points on its two small faces and 300 on the four large ones (9x sparser): the
+    # mask still recalls >= 78 % of the true visible pixels at >= 95 % precision (issue 13 item 4: with one
+    # global point spacing the sparse faces fell out of the silhouette and the labels, recall 0.65)
+    import trimesh
+
+    seq = make_sequence(20, "box", hand=False)
+    frames = [seq.frame(i) for i in range(20)]
+    mesh = seq.target.mesh
+    small = np.abs(mesh.face_normals[:, 0]) > 0.9
+
+    def sample(faces, n, seed):
+        sub = mesh.submesh([np.flatnonzero(faces)], append=True)
+        p, f = trimesh.sample.sample_surface(sub, n, seed=seed)
+        return np.asarray(p), sub.face_normals[f]
+
+    (P1, N1), (P2, N2) = sample(small, 2700, 0), sample(~small, 300, 1)
+    _, res = _track(seq, np.vstack([P1, P2]), None, frames, model_normals=np.vstack([N1, N2]))
+    prec, rec = metrics.precision_recall(np.stack([r.mask for r in res]), np.stack([f["mask"] for f in frames]))
+    assert rec >= 0.78 and prec >= 0.95, (prec, rec)
