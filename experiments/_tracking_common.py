@@ -17,6 +17,7 @@ registry).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import time
@@ -107,9 +108,11 @@ def recording(name, seed, quick):
     return cached_sequence(name, seed, end if quick else None, width=w, height=h), start, end
 
 
+@functools.lru_cache(maxsize=1)
 def _source_hash():
     """Hash of the code that decides a memoised run's numbers: the tracker, the metrics it is scored
-    with and the run loop below (a built-in method's configuration is part of the key)."""
+    with and the run loop below (a built-in method's configuration is part of the key). Computed
+    once per process, so it describes the code the process imported."""
     import inspect
 
     import polar_sim
@@ -254,6 +257,27 @@ def trial_arrays(ctx, a, meta):
     ctx.save_arrays(err_d=e / d, iou=a["iou"], cpu_ms=a["cpu_ms"], roi_px=a["roi_px"], target_px=a["target_px"],
                     cal_bins=a["cal_bins"], raw_bins=a["raw_bins"], in_contact=a["in_contact"],
                     occlusion=a["occlusion"])
+
+
+def spearman(x, y):
+    """Spearman rank correlation (NaN for fewer than 3 values or a constant input)."""
+    from scipy.stats import spearmanr
+
+    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:   # undefined for constant inputs
+        return float("nan")
+    return float(spearmanr(x, y).statistic)
+
+
+def cost_vs_size(table, ctx, method):
+    """CPU ms per frame of ``method`` (all frames of the table) against the object's and the ROI's pixels."""
+    cpu, roi, tgt = [], [], []
+    for r in by(table, "method", method):
+        z = ctx.arrays(r)
+        cpu.append(z["cpu_ms"][1:]), roi.append(z["roi_px"][1:]), tgt.append(z["target_px"][1:])
+    cpu, roi, tgt = map(np.concatenate, (cpu, roi, tgt))
+    slope, icpt = np.polyfit(tgt / 1e4, cpu, 1) if np.ptp(tgt) > 0 else (float("nan"), float(np.median(cpu)))
+    return dict(frames=len(cpu), rho_target=spearman(tgt, cpu), rho_roi=spearman(roi, cpu), slope=slope, icpt=icpt,
+                q=np.percentile(cpu, [50, 95]), cpu=cpu, tgt=tgt)
 
 
 def by(table, key, value):

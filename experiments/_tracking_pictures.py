@@ -132,3 +132,27 @@ def stack_pngs(paths, out):
     imgs = [cv2.copyMakeBorder(i, 0, 0, 0, w - i.shape[1], cv2.BORDER_CONSTANT, value=(255, 255, 255)) for i in imgs]
     cv2.imwrite(str(out), np.vstack(imgs))
     return True
+
+
+def success_curves(table, ctx, methods, ax_pose=None, ax_iou=None):
+    """Pose success over k (ADD(-S) < k d) and mask success over the IoU threshold, per method,
+    all frames of ``table`` pooled (from each trial's saved arrays)."""
+    th, tt = np.linspace(0, 0.3, 61), np.linspace(0, 1, 101)
+    for m in methods:
+        rows = [r for r in table if r["method"] == m]
+        if not rows:
+            continue
+        z = [ctx.arrays(r) for r in rows]
+        ls = "--" if m in ("shape-only", "plain-icp") else "-"
+        if ax_pose is not None:
+            e = np.concatenate([a["err_d"] for a in z])
+            ax_pose.plot(th, [(e < t).mean() for t in th], ls, label=m)
+        if ax_iou is not None:
+            u = np.concatenate([a["iou"] for a in z])
+            ax_iou.plot(tt, [(u > t).mean() for t in tt], ls, label=m)
+    for ax, xl, title in ((ax_pose, "threshold k (ADD(-S) < k x diameter)", "pose success"),
+                          (ax_iou, "IoU threshold", "2D segmentation success")):
+        if ax is not None:
+            ax.set(xlabel=xl, ylabel="fraction of frames", title=title)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)

@@ -20,8 +20,10 @@ from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
 try:  # the registry imports this module as polar_sim.experiments.tracking_segmentation
     from polar_sim.experiments import _tracking_common as C
+    from polar_sim.experiments import _tracking_pictures as pictures
 except ImportError:  # pragma: no cover
     import _tracking_common as C
+    import _tracking_pictures as pictures
 
 ORDER = C.VARIANTS + ["shape-only"]
 HAND_MAX, ECE_MAX = 0.05, 0.05
@@ -74,14 +76,7 @@ def summarize(table, ctx):
              "reference, not a variant.", "", markdown_table(rows, cols), "",
              "### Hand labelled target while touching, and ECE, per sequence", "", markdown_table(hrows, hcols), ""]
     fig, ax = plt.subplots(1, 3, figsize=(16, 4.4))
-    tt = np.linspace(0, 1, 101)
-    for v in ORDER:
-        rs = C.by(head, "method", v)
-        if rs:
-            u = np.concatenate([ctx.arrays(r)["iou"] for r in rs])
-            ax[0].plot(tt, [(u > t).mean() for t in tt], label=v, ls="--" if v == "shape-only" else "-")
-    ax[0].set(xlabel="IoU threshold", ylabel="fraction of frames with IoU above it", title="2D segmentation success")
-    ax[0].legend(fontsize=8), ax[0].grid(alpha=0.3)
+    pictures.success_curves(head, ctx, ORDER, ax_iou=ax[0])
     w = 0.8 / len(ORDER)
     for k, v in enumerate(ORDER):
         ax[1].bar(np.arange(len(hrows)) + (k - len(ORDER) / 2 + 0.5) * w, [100 * (h.get(v) or np.nan) for h in hrows],

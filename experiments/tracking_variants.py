@@ -18,8 +18,10 @@ from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_tabl
 
 try:  # the registry imports this module as polar_sim.experiments.tracking_variants
     from polar_sim.experiments import _tracking_common as C
+    from polar_sim.experiments import _tracking_pictures as pictures
 except ImportError:  # pragma: no cover
     import _tracking_common as C
+    import _tracking_pictures as pictures
 
 #: distinct = asymmetric and non-convex; cuboid = flat faces; revolved = symmetric about an axis
 SHAPE = {"drill": "distinct", "mug": "distinct", "bracket": "distinct", "blocks": "distinct", "box": "cuboid",
@@ -30,14 +32,6 @@ def trial(params, seed, ctx):
     a, meta = C.track(params["sequence"], seed, params["method"], quick=ctx.quick)
     C.trial_arrays(ctx, a, meta)
     return C.summarize_run(a, meta)
-
-
-def _spearman(x, y):
-    from scipy.stats import spearmanr
-
-    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:   # undefined for constant inputs
-        return float("nan")
-    return float(spearmanr(x, y).statistic)
 
 
 def _ref(table):
@@ -52,18 +46,6 @@ def _size_rows(table):
              "shape": SHAPE.get(r["object"], "?"), "add_ok": r["add_ok"], "add_auc": r["add_auc"],
              "iou_ok": r["iou_ok"]} for r in C.by(table, "method", _ref(table))]
     return sorted(rows, key=lambda r: -r["diameter_cm"])
-
-
-def _cost(table, ctx):
-    """CPU ms per frame against the ROI and the object's image size (all ww frames)."""
-    cpu, roi, tgt = [], [], []
-    for r in C.by(table, "method", _ref(table)):
-        z = ctx.arrays(r)
-        cpu.append(z["cpu_ms"][1:]), roi.append(z["roi_px"][1:]), tgt.append(z["target_px"][1:])
-    cpu, roi, tgt = map(np.concatenate, (cpu, roi, tgt))
-    slope, icpt = np.polyfit(tgt / 1e4, cpu, 1) if np.ptp(tgt) > 0 else (float("nan"), float(np.median(cpu)))
-    return dict(frames=len(cpu), rho_target=_spearman(tgt, cpu), rho_roi=_spearman(roi, cpu), slope=slope, icpt=icpt,
-                q=np.percentile(cpu, [50, 95]), cpu=cpu, tgt=tgt)
 
 
 def summarize(table, ctx):
@@ -87,8 +69,8 @@ def summarize(table, ctx):
                                                     if any(f"{m}_{v}" in p for p in prow)]
     write_csv_table(prow, pcols, ctx.out_dir / "tracking_variants_sequences.csv")
     srows = _size_rows(table)
-    rho = _spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
-    cost = _cost(table, ctx)
+    rho = C.spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
+    cost = C.cost_vs_size(table, ctx, _ref(table))
     lines = [f"Split **{ctx.split}**, {len(seqs)} sequences at {table[0]['width']} px wide, seeds "
              f"{sorted({r['seed'] for r in table})}. The pooled rows use {len({r['sequence'] for r in head})} "
              "sequences (on dev the 16 of every earlier run). `add_ok`: ADD(-S) < 0.1 d over all frames; "
@@ -104,23 +86,12 @@ def summarize(table, ctx):
              f"correlation with the object's pixels {fmt(cost['rho_target'])}, with the ROI's {fmt(cost['rho_roi'])}; "
              f"fit {cost['icpt']:.1f} ms + {cost['slope']:.2f} ms per 10,000 object pixels.", ""]
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
-    th, tt = np.linspace(0, 0.3, 61), np.linspace(0, 1, 101)
-    for v in [r["method"] for r in vrows]:
-        rs = C.by(head, "method", v)
-        if rs:
-            e = np.concatenate([ctx.arrays(r)["err_d"] for r in rs])
-            u = np.concatenate([ctx.arrays(r)["iou"] for r in rs])
-            ax[0].plot(th, [(e < t).mean() for t in th], label=v)
-            ax[1].plot(tt, [(u > t).mean() for t in tt], label=v)
-    ax[0].set(xlabel="threshold k (ADD(-S) < k x diameter)", ylabel="fraction of frames", title="pose success")
-    ax[1].set(xlabel="IoU threshold", ylabel="fraction of frames", title="mask success")
+    pictures.success_curves(head, ctx, [r["method"] for r in vrows], ax[0], ax[1])
     for r in srows:
         ax[2].scatter(r["diameter_cm"], 100 * r["add_auc"], marker={"distinct": "o", "cuboid": "s"}.get(r["shape"], "^"))
         ax[2].annotate(r["sequence"], (r["diameter_cm"], 100 * r["add_auc"]), fontsize=6)
     ax[2].set(xlabel="object diameter, cm", ylabel=f"{_ref(table)} ADD(-S) AUC 0-10 cm, %", title="per sequence (o distinct, s cuboid, ^ revolved)")
-    for a in ax:
-        a.grid(alpha=0.3)
-    ax[0].legend(fontsize=8), ax[1].legend(fontsize=8)
+    ax[2].grid(alpha=0.3)
     fig.tight_layout()
     lines += [savefig(fig, ctx.out_dir, "tracking_variants_curves"), ""]
     fig, a = plt.subplots(figsize=(5, 4))
@@ -153,7 +124,7 @@ def findings(table, ctx):
         return []
     lo, hi = min(r["add_ok"] for r in vr), max(r["add_ok"] for r in vr)
     srows = _size_rows(table)
-    rho = _spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
+    rho = C.spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
     return [Finding("Ch. 5, Fig. 5.6", "the four implementations perform similarly",
                     f"ADD(-S) < 0.1 d {100 * lo:.1f}-{100 * hi:.1f} % over Su, Sw, Wu, Ww ({ctx.split})",
                     "held" if hi - lo <= 0.03 else "partly held",
