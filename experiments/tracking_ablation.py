@@ -2,7 +2,8 @@
 
 The full method (``ww``, every default) beside configurations that switch one part (spec 7.4):
 ``shape-only`` (appearance off), ``no-motion`` (the prediction is the last pose), ``spatial-prior``
-(the blurred predicted silhouette as the prior pi, the spec's form, off by default since issue 13),
+(the blurred predicted silhouette as the prior pi, the spec's form with epsilon 0.02, off by default
+since issue 13) and ``spatial-prior-0.1`` (the same prior softened to epsilon 0.1),
 ``alpha-beta`` (the spec's fallback filter), ``no-hold`` (velocity integrated along directions the
 points do not constrain, as before issue 13) and ``plain-icp`` (robust ICP on every ROI point, no
 appearance, no label weighting). Not run: oracle-mask ICP, appearance without shape and learned
@@ -25,7 +26,7 @@ try:  # the registry imports this module as polar_sim.experiments.tracking_ablat
 except ImportError:  # pragma: no cover
     import _tracking_common as C
 
-ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "alpha-beta", "no-hold", "plain-icp"]
+ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "spatial-prior-0.1", "alpha-beta", "no-hold", "plain-icp"]
 ORDER = C.VARIANTS + ABLATIONS
 
 

@@ -75,7 +75,7 @@ def test_tracking_segmentation_quick(tmp_path):
 def test_tracking_ablation_quick(tmp_path):
     res = _run("tracking_ablation", tmp_path)
     _passed(res)
-    assert len(res.table) == 22
+    assert len(res.table) == 24
     plain = [r for r in res.table if r["method"] == "plain-icp"]
     assert all(r["occl_frames"] > 10 for r in plain) and sum(r["lost"] for r in plain) > 0
 
