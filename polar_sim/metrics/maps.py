@@ -31,7 +31,7 @@ from polar_sim._validation import as_points, as_positive_float
 
 __all__ = ["hit_points", "beam_cells", "ObservedArea", "scan_hit_counts", "sdf_gradient", "angle_deg",
            "sample_eval_points", "sdf_map_scores", "surface_scores_2d", "classify_worst", "class_report",
-           "object_map_scores", "polyline_points", "WORST_CLASSES"]
+           "object_map_scores", "polyline_points", "map_scores_2d", "WORST_CLASSES"]
 
 #: Classes of :func:`classify_worst`, in the order of its labels 0, 1, 2.
 WORST_CLASSES = ("corner", "sparse", "wall")
@@ -362,3 +362,46 @@ def object_map_scores(sdf_est, sdf_true, *, dist, visible, to_surface, vertex_gr
                surface_to_mesh_all_m=float(dist.mean()), normal_median_deg=float(np.median(ang)),
                normal_mean_deg=float(np.mean(ang)), normal_p90_deg=float(np.percentile(ang, 90)))
     return out
+
+
+def map_scores_2d(query, surface, sdf, obs: ObservedArea, corners, *, n_eval=60_000, seed=0, well_k=10,
+                  sparse_k=10, corner_r=0.3):
+    """Every 2D score of one map, as the GPIS experiments report them.
+
+    ``query(points) -> (d, grad, var or None)`` is the map's; ``surface`` (m, 2) its estimated
+    surface points (or None); ``sdf`` the exact SDF; ``obs`` the observed area of the scans the map
+    fused; ``corners`` (c, 2) the true corners. Scores: :func:`sdf_map_scores` on
+    :func:`sample_eval_points`; ``near_rmse_wellseen_m`` (near points whose nearest true surface
+    point is at least ``corner_r`` from a corner and was hit by at least ``well_k`` scans); a
+    per-class report (:func:`class_report`) of the near set by where its nearest true surface
+    point lies (corner / sparse: fewer than ``sparse_k`` scans / wall), with the 95 % coverage of
+    the map's variance; :func:`surface_scores_2d` with ``well_k``; :func:`classify_worst` with
+    ``sparse_k``. Returns (flat dict of scalars, dict of arrays for pictures).
+    """
+    E = sample_eval_points(obs, sdf, n_eval, seed)
+    d, g, var = query(E["P"])
+    row, e = sdf_map_scores(d, g, E)
+    near = E["near"]
+    gn = E["G"] / np.maximum(np.linalg.norm(E["G"], axis=1), 1e-9)[:, None]
+    q = E["P"] - E["gt"][:, None] * gn                      # nearest true surface point
+    corners = np.asarray(corners, float).reshape(-1, 2)
+    dc = cKDTree(corners).query(q)[0] if len(corners) else np.full(len(q), np.inf)
+    cnt = obs.count(q)
+    corner, sparse = dc < corner_r, (dc >= corner_r) & (cnt < sparse_k)
+    well = near & (dc >= corner_r) & (cnt >= well_k)
+    row["near_rmse_wellseen_m"] = float(np.sqrt(np.mean(e[well] ** 2))) if well.any() else float("nan")
+    row["n_near_wellseen"] = int(well.sum())
+    classes = {"all": near, "corner": near & corner, "sparse": near & sparse, "wall": near & ~corner & ~sparse}
+    for c in class_report(e, var, classes):
+        for k in ("rmse_m", "coverage95", "n"):
+            if k in c:
+                row[f"{c['class']}_{k}" if c["class"] != "all" else f"near_{k}"] = c[k]
+    arrays = {"P": E["P"][near], "err": e[near]}
+    if surface is not None:
+        surf, det = surface_scores_2d(surface, sdf, obs, well_k=well_k)
+        row.update(surf)
+        shares, (wq, wcls) = classify_worst(det, sdf, obs, corners, corner_r=corner_r, sparse_k=sparse_k)
+        row.update(shares)
+        arrays.update(worst=wq, worst_cls=wcls, est=det["est"] if det else np.zeros((0, 2)),
+                      dA=det["dA"] if det else np.zeros(0))
+    return row, arrays

@@ -138,6 +138,13 @@ class ObjectTruth:
         return {"P": P[sel], "gt": gt[sel], "seen_fraction": float(seen.mean()), "samples": pts,
                 "normals": nrm, "seen": seen}
 
+    def section_xz(self, y):
+        """The true object's section by the vertical plane at ``y`` (m): (k, 2) points (x, z) of its
+        loops, separated by NaN rows (empty when the plane misses it)."""
+        sec = self.mesh.section(plane_origin=[0.0, float(y), 0.0], plane_normal=[0.0, 1.0, 0.0])
+        loops = [np.asarray(p)[:, [0, 2]] for p in sec.discrete] if sec is not None else []
+        return np.vstack([np.vstack([lp, [np.nan, np.nan]]) for lp in loops]) if loops else np.zeros((0, 2))
+
     def compare_mesh(self, vertices, faces, true_samples, *, n_dense=100_000):
         """Distances between a reconstructed mesh and the true mesh.
 
