@@ -27,6 +27,7 @@ try:
 except ImportError:  # pragma: no cover
     import _gpis_common as C
 
+KNOWN_MISS = {"warehouse2d"}      # recorded as missed in benchmarks/RESULTS.md (small clutter; see there)
 COLS = ["surface_rmse_m", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_m", "h_true_to_est_m",
         "near_rmse_m", "far_mae_m", "worst_corner_share", "worst_sparse_share", "worst_wall_share", "n_scans"]
 
@@ -72,7 +73,8 @@ def checks(table, ctx):
         if np.isnan([g, g5, g10]).any():
             continue
         out.append(Check(f"{scene}: at the sparsest rate ({sp:g} m) GPIS beats both grids on Hausdorff", bool(g < min(g5, g10)),
-                         f"mean over seeds: GPIS {g:.3f} m, grid 5 cm {g5:.3f} m, grid 10 cm {g10:.3f} m"))
+                         f"mean over seeds: GPIS {g:.3f} m, grid 5 cm {g5:.3f} m, grid 10 cm {g10:.3f} m",
+                         known_miss=scene in KNOWN_MISS))
     return out
 
 
