@@ -140,6 +140,34 @@ def describe_methods():
 # ---------------------------------------------------------------------------------------------
 
 # -- mapper2d / mapper3d / localizer2d (the GPIS experiments) --
+# Implementations: polar_sim.runner.gpis_methods (imports the heavy modules on first use).
+#
+# Besides the protocols above, the GPIS experiments use two optional parts: a mapper2d may offer
+# ``surface_points() -> (k, 2)`` (a point set, e.g. grid cells) instead of ``surface()``; and a
+# factory that names one of these keywords in its signature is given it when the experiment has it: ``seed`` (int, the
+# trial's seed), ``init_std`` ((3,) m, m, rad: the spread of the initial estimate, localisers),
+# ``exact_sdf`` (a callable points (k, 2) -> (k,): the scene's exact SDF, an oracle input that only
+# ground-truth baselines such as ``icpd_gt`` ask for). ``polar_sim.runner.gpis_methods.call_factory``
+# does this matching.
+from polar_sim.runner import gpis_methods as _gm  # noqa: E402  (light: no heavy imports at module level)
+
+for _name, _f, _d in [
+    ("gpis", _gm.gpis2d, "GPISMap2D, default mode, taking the sensor pose"),
+    ("gpis_legacy", _gm.gpis2d_legacy, "GPISMap2D(legacy=True): the published behaviour"),
+    ("grid5", lambda **kw: _gm.GridMapper2D(0.05, **kw), "5 cm occupancy grid; SDF = its signed EDT; surface = occupied cells next to free"),
+    ("grid10", lambda **kw: _gm.GridMapper2D(0.10, **kw), "10 cm occupancy grid (as grid5)"),
+    ("edt5", lambda **kw: _gm.EDTMapper2D(0.05, **kw), "signed EDT of a 5 cm grid; surface = its zero contour"),
+]:
+    register_method("mapper2d", _name, _f, description=_d)
+register_method("mapper3d", "gpis", _gm.gpis3d, description="GPISMap3D, default mode")
+register_method("mapper3d", "gpis_legacy", _gm.gpis3d_legacy, description="GPISMap3D(legacy=True)")
+for _n in (1000, 5000, 10000):
+    register_method("localizer2d", f"pf{_n}", _gm.pf_factory(_n),
+                    description=f"MCL, {_n} particles, likelihood field of a 5 cm grid")
+register_method("localizer2d", "icpd", _gm.ICPDLocalizer2D, description="ICP-D on the signed EDT of a 5 cm grid")
+register_method("localizer2d", "icpd_gt", _gm.icpd_gt,
+                description="ICP-D on the exact SDF sampled at 5 cm (the dissertation's ground-truth discrete SDF; oracle)")
+register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G on a GPISMap2D of the mapping drive")
 
 # -- vo (the ground experiments) --
 
