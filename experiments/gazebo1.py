@@ -1,7 +1,7 @@
 """gazebo1: GPISMap2D on the real ``gazebo1`` log (2879 scans) in default and legacy modes (issue 4).
 
 The map fuses every scan except the held-out ones (every 10th, offset 5: 288 scans) at the log's
-poses, with the log's laser offset (``GPISMap2D()`` defaults: sensor offset (0.08, 0); quick:
+poses, with the log's laser offset (``sensor_offset=g["sensor_offset"]``, (0.08, 0); quick:
 every 10th scan maps, every 20th offset 5 is held out). There is no ground truth for a real log,
 so the map is scored by *self-consistency* on the held-out scans: the |SDF| the map gives at
 their beam end points (which lie on the true surface, up to the log's pose and range errors),
@@ -59,7 +59,7 @@ def trial(params, seed, ctx):
     g = load_gazebo1()
     legacy = params["mode"] == "legacy"
     used, held = _split(len(g["ranges"]), ctx.quick)
-    m = GPISMap2D(legacy=legacy)
+    m = GPISMap2D(legacy=legacy, sensor_offset=g["sensor_offset"])
     cpu = []
     for k in used:
         t0 = time.process_time()
