@@ -104,6 +104,8 @@ class GPISNavEnv(ModuleEnv):
     - v0: first release (GPS+compass, no noise).
     """
 
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
     def __init__(self, *, render_mode=None, render_size=(480, 480), pose_source=None, localize_params=None,
                  obs_mode="stencil", sdf_source="gpis", sdf_params=None, stencil_rays=16,
                  stencil_radii=(0.5, 1.0, 2.0, 3.0), grid_size=32, grid_resolution=0.25, grid_visited=False,

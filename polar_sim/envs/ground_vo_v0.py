@@ -65,6 +65,8 @@ class GroundVOEnv(ModuleEnv):
       box's 1e-6 tolerance are clipped to it.)
     """
 
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
     def __init__(self, *, render_mode=None, render_size=(640, 360), image_obs=False, vo="groundvo", vo_params=None,
                  waypoint_lookahead=10.0, ground_prob_size=(80, 24), route_length=300.0, scene="rover_terrain",
                  max_speed=10.0, max_yaw_rate=1.0, max_accel=3.0, max_cross_track=6.0, camera_size=(621, 188),

@@ -23,12 +23,14 @@ class ModuleEnv(gym.Env):
     ``_module_step(obs, info)`` (feed the module the base's raw observation and truth),
     ``_get_obs(obs)`` and ``_get_info(info)``; ``_render_frame`` may add the module's view to the
     base's. Action, reward, termination and seeding are the base's: ``reset(seed=s)`` seeds the
-    base with ``s``, so a module environment replays its base bit for bit.
+    base with ``s``, so a module environment replays its base bit for bit. ``metadata`` is the
+    base's, set on the class (gymnasium reads it there).
     """
 
     def __init__(self, base):
+        if self.metadata != base.metadata:
+            raise TypeError(f"{type(self).__name__}.metadata must be its base's ({base.metadata})")
         self.base = base
-        self.metadata = dict(base.metadata)
         self.render_mode = base.render_mode
         self.action_space = base.action_space
 

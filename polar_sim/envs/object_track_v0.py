@@ -62,6 +62,8 @@ class ObjectTrackEnv(ModuleEnv):
       the box's 1e-6 tolerance are clipped to it.)
     """
 
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
     def __init__(self, *, render_mode=None, render_size=(480, 360), image_obs=False, tracker="objecttracker",
                  tracker_params=None, target=None, n_objects=4, camera_size=(320, 240), depth_noise=True, max_speed=0.3,
                  max_yaw_rate=1.5, pregrasp_clearance=0.08, success_position=0.02, success_yaw=10.0, **unknown):

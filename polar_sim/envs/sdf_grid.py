@@ -49,18 +49,18 @@ class SDFGrid:
 
 
 class VisitedMask:
-    """Where the robot has been, by its own estimate: cells of ``resolution`` m in the map frame
-    within ``radius`` m of an estimated robot position, over a square of half side ``extent`` m
+    """Where the robot has been, by its own estimate: the cells of ``resolution`` m in the map frame
+    that a disk of ``radius`` m around an estimated robot position touches, over a square of half side ``extent`` m
     around the map origin (positions beyond it are not marked)."""
 
     def __init__(self, extent, resolution=0.25, radius=0.3):
         self.res = float(resolution)
         self.half = float(extent)
         self.n = int(np.ceil(2 * self.half / self.res))
-        r = int(np.ceil(radius / self.res))
+        self.radius = float(radius)
+        r = int(np.ceil(radius / self.res)) + 1
         di, dj = np.mgrid[-r : r + 1, -r : r + 1]
-        keep = np.hypot(di, dj) * self.res <= radius + 1e-9
-        self._disk = np.stack([di[keep], dj[keep]], 1)
+        self._window = np.stack([di.ravel(), dj.ravel()], 1)
         self.reset()
 
     def reset(self):
@@ -70,8 +70,12 @@ class VisitedMask:
         return np.floor((np.asarray(xy, float) + self.half) / self.res).astype(np.int64)
 
     def add(self, xy):
-        """Mark the disk around a position (2,) in the map frame, m."""
-        ij = self._index(np.asarray(xy, float)[None])[0] + self._disk
+        """Mark every cell that the disk around a position (2,) in the map frame (m) touches."""
+        xy = np.asarray(xy, float)
+        ij = self._index(xy[None])[0] + self._window
+        lo = ij * self.res - self.half  # the cells' lower corners
+        gap = np.maximum(np.maximum(lo - xy, xy - (lo + self.res)), 0.0)  # point-to-box distance
+        ij = ij[np.hypot(gap[:, 0], gap[:, 1]) <= self.radius]
         ok = ((ij >= 0) & (ij < self.n)).all(1)
         self.mask[ij[ok, 0], ij[ok, 1]] = True
 
