@@ -195,6 +195,16 @@ class World:
         if self._script is not None:
             self._script.after_step(self.model, self.data)
 
+    def command_hand(self, velocity, yaw_rate):
+        """Command the scripted hand (scenes whose script takes commands, e.g. ``tabletop`` with
+        ``script="reach"``): velocity (3,) m/s in the world frame and yaw rate (rad/s, about world
+        z), held until the next call. Raises ``ValueError`` for a scene without such a hand, or
+        non-finite values (the command is then unchanged)."""
+        self._check_open()
+        if not callable(getattr(self._script, "command", None)):
+            raise ValueError(f"command_hand: scene {self.scene!r} has no commanded hand (tabletop, script='reach')")
+        self._script.command(velocity, yaw_rate)
+
     def _check_action(self, action):
         if action is None:
             return 0.0, 0.0
@@ -257,24 +267,40 @@ class World:
         else:
             self._noise[sensor] = model
 
-    def camera(self, name, *, width=None, height=None):
+    def camera(self, name, *, width=None, height=None, depth=True, labels=True):
         """Render camera ``name``: a :class:`CameraFrame` (rgb, depth, labels, geom ids, K, pose, t).
 
-        ``width``/``height`` default to the camera's resolution in the scene.
+        ``width``/``height`` default to the camera's resolution in the scene. ``depth=False`` and
+        ``labels=False`` skip those renders (faster): the frame's ``depth`` / ``labels`` and
+        ``geom_ids`` are then None (a camera with a noise model still renders depth for it).
         """
         self._check_open()
-        if _check_name(name, "name") not in self.cameras:
-            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
-        cid = self.model.camera(name).id
-        w, h = _image_size(self.model, cid, width, height)
+        cid = self._camera_id(name)
+        w, h = self._camera_size(cid, width, height)
         if self._rig is None:
             self._rig = CameraRig(self.model)
-        rgb, depth, labels, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels)
-        K = intrinsics(self.model.cam_fovy[cid], w, h)
         noise = self._noise.get(name)
+        rgb, d, lab, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels,
+                                             depth=bool(depth) or noise is not None, seg=bool(labels))
+        K = intrinsics(self.model.cam_fovy[cid], w, h)
         if noise is not None:
-            rgb, depth = noise.apply(rgb, depth, K[0, 0], self._rng)
-        return CameraFrame(rgb, depth, labels, gids, K, camera_pose(self.data, cid), self.time)
+            rgb, d = noise.apply(rgb, d, K[0, 0], self._rng)
+        if not labels:
+            lab = gids = None
+        return CameraFrame(rgb, d if depth else None, lab, gids, K, camera_pose(self.data, cid), self.time)
+
+    def camera_intrinsics(self, name, *, width=None, height=None):
+        """Intrinsics K (3, 3) (OpenCV) of camera ``name`` rendered at ``width`` x ``height`` px."""
+        cid = self._camera_id(name)
+        return intrinsics(self.model.cam_fovy[cid], *self._camera_size(cid, width, height))
+
+    def _camera_id(self, name):
+        if _check_name(name, "name") not in self.cameras:
+            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
+        return self.model.camera(name).id
+
+    def _camera_size(self, cid, width, height):
+        return _image_size(self.model, cid, width, height)
 
     def render_view(self, *, width=640, height=480, lookat=None, distance=None, azimuth=90.0,
                     elevation=-45.0):
@@ -320,12 +346,16 @@ class World:
             self._rig = CameraRig(self.model)
         return self._rig.render_target_mask(self.model, self.data, cid, w, h)
 
-    def lidar(self, name):
-        """Cast lidar ``name``: a :class:`LidarScan` (2D) or :class:`LidarScan3D`."""
+    def lidar(self, name, *, noise=True):
+        """Cast lidar ``name``: a :class:`LidarScan` (2D) or :class:`LidarScan3D`.
+
+        ``noise=False`` casts the exact scan, ignoring the sensor's noise model (and drawing
+        nothing from the noise generator, so the noisy scans that follow are unchanged).
+        """
         self._check_open()
         if _check_name(name, "name") not in self._lidars:
             raise ValueError(f"name: unknown lidar {name!r}; this scene has {list(self.lidars)}")
-        return self._lidars[name].scan(self.model, self.data, self._noise.get(name), self._rng)
+        return self._lidars[name].scan(self.model, self.data, self._noise.get(name) if noise else None, self._rng)
 
     def lidar_spec(self, name):
         """The declaration (beams, range limits, site) of lidar ``name``."""
