@@ -97,7 +97,8 @@ def trial(params, seed, ctx):
     return row
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     by = {r["mode"]: r for r in table}
     out = []
     if "default" in by:
@@ -107,19 +108,19 @@ def checks(table, quick):
     return out
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from polar_sim.runner.run import _trial_dir
 
     rows = sorted(table, key=lambda r: r["mode"])
     write_csv_table(rows, COLS, out_dir / "gazebo1.csv")
     fig, ax = plt.subplots(1, len(rows), figsize=(7.5 * len(rows), 6.5), squeeze=False)
     for a, r in zip(ax[0], rows):
-        z = np.load(_trial_dir(out_dir, {"mode": r["mode"]}, r["seed"]) / "map.npz")
+        z = np.load(ctx.trial_dir(r) / "map.npz")
         ext = [z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]]
         show = np.where(z["var"] < 1.0, z["sdf"], np.nan)      # never-observed space left blank
         im = a.imshow(np.clip(show, -1.0, 2.0), origin="lower", extent=ext, cmap="RdBu", vmin=-2.0, vmax=2.0)
@@ -151,9 +152,8 @@ EXPERIMENT = Experiment(
     name="gazebo1",
     description="issue 4: the real gazebo1 log in default and legacy modes; self-consistency on held-out scans",
     grid={"mode": ["default", "legacy"]},
-    seeds=[0],
-    quick_grid={"mode": ["default", "legacy"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"mode": ["default", "legacy"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -146,7 +146,8 @@ TARGETS = [  # (scene, metric, bound, "<=" or ">", label)
 ]
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     out = []
     for scene, key, bound, op, label in TARGETS:
         rows = _rows(table, scene)
@@ -163,7 +164,8 @@ def checks(table, quick):
     return out
 
 
-def _office_figure(table, out_dir):
+def _office_figure(table, ctx):
+    out_dir = ctx.out_dir
     import matplotlib
 
     matplotlib.use("Agg")
@@ -173,9 +175,8 @@ def _office_figure(table, out_dir):
     if not rows:
         return ""
     r = rows[0]
-    from polar_sim.runner.run import _trial_dir
 
-    z = np.load(_trial_dir(out_dir, {"scene": "office2d"}, r["seed"]) / "office.npz")
+    z = np.load(ctx.trial_dir(r) / "office.npz")
     fig, ax = plt.subplots(1, 2, figsize=(15, 7.2))
     ax[0].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0)
     sc = ax[0].scatter(z["P"][:, 0], z["P"][:, 1], c=np.abs(z["err"]), s=1.5, cmap="inferno_r", vmin=0, vmax=0.1, lw=0)
@@ -200,7 +201,8 @@ def _office_figure(table, out_dir):
     return savefig(fig, out_dir, "gpis_accuracy_office2d")
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     parts = []
     off = _rows(table, "office2d")
     if off:
@@ -220,7 +222,7 @@ def summarize(table, out_dir, quick):
                   "least 10 scans (scaled to the scan rate) and the surface within ~7 cm of such points. "
                   "Both are for diagnosis only; the checks use the definitions above. Table: "
                   "`gpis_accuracy_office2d.csv`.", ""]
-        parts.append(_office_figure(table, out_dir))
+        parts.append(_office_figure(table, ctx))
     orb = _rows(table, "object_orbit")
     if orb:
         rows = sorted(orb, key=lambda r: r["seed"])
@@ -229,7 +231,7 @@ def summarize(table, out_dir, quick):
         parts += ["", "### object_orbit (RGB-D orbit, Kinect-like noise)", "", markdown_table(rows, cols[:-1]), "",
                   "Table: `gpis_accuracy_object_orbit.csv`."]
     tl = ["", "### Targets (issue 3)", "", "| target | worst measured | status |", "|---|---|---|"]
-    for c in checks(table, quick):
+    for c in checks(table, ctx):
         tl.append(f"| {c.name} | {c.detail} | {'met' if c.passed else '**missed**'} |")
     return "\n".join(parts + tl)
 
@@ -238,9 +240,8 @@ EXPERIMENT = Experiment(
     name="gpis_accuracy",
     description="issue 3: GPIS default-mode accuracy against exact SDF (office2d lidar drive, object_orbit RGB-D)",
     grid={"scene": ["office2d", "object_orbit"]},
-    seeds=range(5),
-    quick_grid={"scene": ["office2d", "object_orbit"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": range(5)}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"scene": ["office2d", "object_orbit"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

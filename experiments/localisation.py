@@ -151,12 +151,11 @@ def trial(params, seed, ctx):
     return row
 
 
-def _pooled(out_dir, table):
-    from polar_sim.runner.run import _trial_dir
+def _pooled(ctx, table):
 
     pooled = {k: [] for k in METHODS}
     for r in table:
-        z = np.load(_trial_dir(out_dir, {"odometry": r["odometry"]}, r["seed"]) / "errors.npz")
+        z = np.load(ctx.trial_dir(r) / "errors.npz")
         for k in METHODS:
             pooled[k].append(z[f"{k}_err"])
     return {k: np.vstack(v) for k, v in pooled.items()}
@@ -186,7 +185,8 @@ def budget_pf(table):
     return k, times[k], g
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     # From the per-seed rows: the worst seed's median error, and failures over all steps.
     med = lambda k: float(np.median([r[f"{k}_pos_median_m"] for r in table]))  # noqa: E731
     g_pos = max(r["icpg_pos_median_m"] for r in table)
@@ -209,13 +209,14 @@ def checks(table, quick):
     ]
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pooled = _pooled(out_dir, table)
+    pooled = _pooled(ctx, table)
     st = _stats(table, pooled)
     cols = ["method", "steps", "seeds", "pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg",
             "fail_steps", "seeds_with_failure", "cpu_ms_median", "wall_ms_median"]
@@ -251,9 +252,8 @@ EXPERIMENT = Experiment(
     name="localisation",
     description="issue 4: PF (grid) vs ICP-D vs ICP-G localisation on maps built in office2d, noisy odometry",
     grid={"odometry": ["noisy"]},
-    seeds=range(20),
-    quick_grid={"odometry": ["noisy"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": range(20)}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"odometry": ["noisy"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -118,17 +118,17 @@ def trial(params, seed, ctx):
     return row
 
 
-def _series(out_dir, table):
-    from polar_sim.runner.run import _trial_dir
+def _series(ctx, table):
 
     out = {}
     for r in table:
-        z = np.load(_trial_dir(out_dir, {"tiles": r["tiles"]}, r["seed"]) / "cost.npz")
+        z = np.load(ctx.trial_dir(r) / "cost.npz")
         out[(r["tiles"], r["seed"])] = {k: z[k] for k in z.files}
     return out
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     by = {}
     for r in table:
         by.setdefault(r["tiles"], []).append(r["cpu_ms_median"])
@@ -142,7 +142,8 @@ def checks(table, quick):
     return out
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -153,7 +154,7 @@ def summarize(table, out_dir, quick):
             "cpu_ms_max", "wall_ms_median", "wall_ms_p99", "n_samples", "map_mb", "load"]
     write_csv_table(rows, cols, out_dir / "mapping_cost.csv")
     tcols = ["tiles", "seed"] + [f"cpu_ms_median_tile{k}" for k in (1, 4, 16, 64)]
-    ser = _series(out_dir, table)
+    ser = _series(ctx, table)
     fig, ax = plt.subplots(1, 2, figsize=(13, 4.2))
     bins = np.linspace(0, max(np.percentile(v["cpu_ms"][WARMUP:], 99.5) for v in ser.values()) * 1.1, 60)
     for (n, s), v in sorted(ser.items()):
@@ -191,9 +192,8 @@ EXPERIMENT = Experiment(
     name="mapping_cost",
     description="issue 4: GPIS update time per scan and its (in)dependence on map size, tiled office worlds 1x-64x",
     grid={"tiles": [1, 2, 4, 8]},
-    seeds=[0],
-    quick_grid={"tiles": [1, 2]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"tiles": [1, 2]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -82,21 +82,22 @@ def trial(params, seed, ctx):
     return row
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     bad = [r["object"] for r in table if not r["chamfer_m"] <= 0.003]
     worst = max(table, key=lambda r: r["chamfer_m"])
     return [Check(f"Chamfer <= 3 mm for every object ({len(table)} objects)", not bad,
                   f"worst {worst['object']} {1e3 * worst['chamfer_m']:.2f} mm" + (f"; above: {bad}" if bad else ""))]
 
 
-def _figures(table, out_dir):
+def _figures(table, ctx):
+    out_dir = ctx.out_dir
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from polar_sim.runner.run import _trial_dir
 
     rows = sorted(table, key=lambda r: (OBJECTS.index(r["object"]) if r["object"] in OBJECTS else 99, r["seed"]))
     seen = []
@@ -104,7 +105,7 @@ def _figures(table, out_dir):
     n = len(rows)
     fig = plt.figure(figsize=(3.2 * n, 6.6))
     for j, r in enumerate(rows):
-        z = np.load(_trial_dir(out_dir, {"object": r["object"]}, r["seed"]) / "object.npz")
+        z = np.load(ctx.trial_dir(r) / "object.npz")
         a = fig.add_subplot(2, n, j + 1)
         ext = [z["xs"][0], z["xs"][-1], z["zs"][0], z["zs"][-1]]
         im = a.imshow(np.clip(z["sdf"], -0.02, 0.02), origin="lower", extent=ext, cmap="RdBu", vmin=-0.02, vmax=0.02)
@@ -137,20 +138,20 @@ def _figures(table, out_dir):
     return [savefig(fig, out_dir, "gpis_objects3d")]
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     rows = sorted(table, key=lambda r: (OBJECTS.index(r["object"]) if r["object"] in OBJECTS else 99, r["seed"]))
     write_csv_table(rows, COLS, out_dir / "objects3d.csv")
     return "\n".join(["Distances in metres (observed part of each object; see `_gpis_common.score_3d`).", "",
-                      markdown_table(rows, COLS), "", "Table: `objects3d.csv`.", ""] + _figures(table, out_dir))
+                      markdown_table(rows, COLS), "", "Table: `objects3d.csv`.", ""] + _figures(table, ctx))
 
 
 EXPERIMENT = Experiment(
     name="objects3d",
     description="issue 4: GPISMap3D object reconstructions from RGB-D orbits: Chamfer, normal error, SDF slices",
     grid={"object": OBJECTS},
-    seeds=[0],
-    quick_grid={"object": ["box"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"object": ["box"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -118,7 +118,8 @@ def _long(table):
     return out
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     sparsest = max(r["spacing_m"] for r in table)
     rows = [r for r in table if r["spacing_m"] == sparsest]
     g = _mean(rows, "gpis_hausdorff_m")
@@ -130,14 +131,13 @@ def checks(table, quick):
                   f"GPIS lower than both in {wins}/{len(rows)} seeds")]
 
 
-def _figures(table, out_dir):
+def _figures(table, ctx):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from polar_sim.runner.run import _trial_dir
-
+    out_dir = ctx.out_dir
     lines = []
     long = _long(table)
     sps = sorted({r["spacing_m"] for r in table})
@@ -159,7 +159,7 @@ def _figures(table, out_dir):
     seeds = sorted({r["seed"] for r in table})
     sp = sps[-1]
     r0 = [r for r in table if r["spacing_m"] == sp and r["seed"] == seeds[0]][0]
-    z = np.load(_trial_dir(out_dir, {"spacing_m": sp}, seeds[0]) / "surfaces.npz")
+    z = np.load(ctx.trial_dir(r0) / "surfaces.npz")
     fig, ax = plt.subplots(2, 2, figsize=(13, 13))
     cols = np.array(["tab:red", "tab:purple", "tab:green"])
     for a, k in zip(ax.ravel(), METHODS):
@@ -179,7 +179,8 @@ def _figures(table, out_dir):
     return lines
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     long = _long(table)
     cols = ["spacing_m", "method", "seeds", "n_scans", "surface_rmse_m", "hausdorff_m", "hausdorff_max_m",
             "hausdorff_wellseen_m", "h_est_to_true_m", "h_true_to_est_m", "p99_est_to_true_m", "p99_true_to_est_m",
@@ -191,7 +192,7 @@ def summarize(table, out_dir, quick):
         [f"{k}_surface_rmse_m" for k in METHODS]
     write_csv_table(per_seed, pcols, out_dir / "surface_vs_rate_per_seed.csv")
     wl = markdown_table(long, ["spacing_m", "method", "worst_corner_share", "worst_sparse_share", "worst_wall_share"])
-    figs = _figures(table, out_dir)
+    figs = _figures(table, ctx)
     return "\n".join([
         "Means over seeds (metres). `hausdorff_max_m`: worst seed. `near_rmse_m` / `far_mae_m`: SDF error of "
         "the two distance fields near surfaces and in observed free space (as in `gpis_accuracy`).", "",
@@ -205,9 +206,8 @@ EXPERIMENT = Experiment(
     name="surface_vs_rate",
     description="issue 4: surface RMSE and Hausdorff of GPIS, grids (5/10 cm) and EDT vs scan spacing in office2d",
     grid={"spacing_m": [0.1, 0.25, 0.5, 1.0]},
-    seeds=range(5),
-    quick_grid={"spacing_m": [1.0]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": range(5)}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"spacing_m": [1.0]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

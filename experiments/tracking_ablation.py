@@ -59,7 +59,8 @@ def _rows(table):
     return rows
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -106,7 +107,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     rows = {r["config"]: r for r in _rows(table)}
     p = rows["plain-icp"]
     beat = {v: rows[v]["occl_add_ok"] > p["occl_add_ok"] and rows[v]["occl_iou_ok"] > p["occl_iou_ok"]
@@ -124,9 +126,8 @@ EXPERIMENT = Experiment(
     description="ablations of the tracker (appearance off, motion prior off, spatial prior off, alpha-beta filter, "
                 "plain ICP on all ROI points) against the variants, under occlusion by touch",
     grid={"sequence": list(C.SEQUENCE_ORDER), "config": ORDER},
-    seeds=[0],
-    quick_grid={"sequence": list(C.QUICK_CUTS), "config": ORDER},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": list(C.QUICK_CUTS), "config": ORDER}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -62,7 +62,8 @@ def _seg_rows(table):
     return rows
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,7 +139,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     rows = {r["variant"]: r for r in _seg_rows(table)}
     best = C.best_of(C.rate_rows(table, "variant", VARIANT_ORDER), "variant")
     b = rows[best]
@@ -161,9 +163,8 @@ EXPERIMENT = Experiment(
     description="2D segmentation success by IoU of the appearance variants on the tabletop sequences, and the "
                 "hand pixels labelled target while touching",
     grid={"sequence": list(C.SEQUENCE_ORDER), "variant": ORDER},
-    seeds=[0],
-    quick_grid={"sequence": list(C.QUICK_CUTS), "variant": ORDER},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": list(C.QUICK_CUTS), "variant": ORDER}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

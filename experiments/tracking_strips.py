@@ -191,7 +191,8 @@ def _trial_png(out_dir, sequence):
     return hits[0] if hits else None
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     order = [s for s in C.SEQUENCE_ORDER if any(r["sequence"] == s for r in table)]
     rows = sorted(table, key=lambda r: order.index(r["sequence"]))
     cols = ["sequence", "variant", "object", "frame", "occlusion", "in_contact", "add_over_d", "iou"]
@@ -209,7 +210,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     n_ok = sum(1 for r in table if r.get("iou") is not None)
     return [Check("a strip is drawn for every sequence", n_ok == len(table) and n_ok > 0, f"{n_ok} strips")]
 
@@ -219,9 +221,8 @@ EXPERIMENT = Experiment(
     description="picture strip per tabletop sequence: point cloud with the registered model, appearance "
                 "prediction, attention map, final mask",
     grid={"sequence": list(C.SEQUENCE_ORDER), "variant": ["ww"]},
-    seeds=[0],
-    quick_grid={"sequence": ["mug_touch"], "variant": ["ww"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": ["mug_touch"], "variant": ["ww"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

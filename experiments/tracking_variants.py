@@ -87,7 +87,8 @@ def _spearman(x, y):
     return float(spearmanr(x, y).statistic)
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -196,7 +197,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     vrows = C.rate_rows(table, "variant", VARIANT_ORDER)
     best = C.best_of(vrows, "variant")
     b = next(r for r in vrows if r["variant"] == best)
@@ -229,9 +231,8 @@ EXPERIMENT = Experiment(
     description="pose and mask success of the appearance variants (H, Su, Sw, Wu, Ww) on the 16 tabletop "
                 "sequences; per sequence, object size and shape; speed at 640x480",
     grid={"sequence": list(C.SEQUENCE_ORDER), "variant": VARIANT_ORDER},
-    seeds=[0],
-    quick_grid={"sequence": list(C.QUICK_CUTS), "variant": VARIANT_ORDER},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": list(C.QUICK_CUTS), "variant": VARIANT_ORDER}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,
