@@ -8,7 +8,7 @@ POLAR_SIM_FULL=1 runs 200 per entry point, the size of benchmarks/bench_battery.
 
 import pytest
 
-from conftest import size
+from ci_sizes import size
 from polar_sim.testing import check_module, check_polar_env
 
 N_BAD = size(200, 12)
