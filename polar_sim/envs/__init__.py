@@ -1,7 +1,8 @@
 """Gymnasium environments: closed-loop evaluation of the modules against exact truth.
 
-Importing ``polar_sim`` (or ``polar_sim.envs``) registers the ids; ``gym.make("polar_sim/GPISNav-v1")``
-then builds one. The module-prefixed id ``gym.make("polar_sim:polar_sim/GPISNav-v1")`` imports and
+Importing ``polar_sim.envs`` registers the ids (``import polar_sim`` alone does not, so the
+modules and metrics import without gymnasium); ``gym.make("polar_sim/GPISNav-v1")`` then builds
+one. The module-prefixed id ``gym.make("polar_sim.envs:polar_sim/GPISNav-v1")`` imports and
 registers by itself, which is what ``spawn``/``forkserver`` vector-env workers need.
 """
 
