@@ -204,7 +204,8 @@ COLS = ["route", "method", "frames", "length_m", "n_boundaries", "n_settled", "i
         "iou_grass", "iou_dirt", "recovery_s_max"]
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     rows = sorted(table, key=lambda r: (r["route"], r["method"]))
     write_csv_table(rows, COLS, out_dir / "ground_appearance_table.csv")
     lines = [f"Classifier IoU (P(ground) > 0.5 against the true ground mask, whole image) on settled frames (≥ {WARMUP_S:.0f} s "
@@ -216,7 +217,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     out = []
     for r in sorted(table, key=lambda r: (r["route"], r["method"])):
         if r["method"] != "w6":
@@ -231,9 +233,8 @@ EXPERIMENT = Experiment(
     name="ground_appearance",
     description="ground classifier IoU over time as the ground texture changes along the route (4 zones)",
     grid={"route": ["terrain_00", "terrain_04", "flat_00", "flat_02"], "method": ["w6", "u6"]},
-    seeds=[0],
-    quick_grid={"route": [G.QUICK_ROUTE], "method": ["w6"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"route": [G.QUICK_ROUTE], "method": ["w6"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

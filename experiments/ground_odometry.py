@@ -230,7 +230,8 @@ def _per_route(table):
     return rows
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -286,7 +287,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     w6 = [r for r in table if r["method"] == "w6"]
     mono = {r["route"]: r for r in table if r["method"] == "mono"}
     out = []
@@ -322,9 +324,8 @@ EXPERIMENT = Experiment(
     description="KITTI odometry errors of GroundVO (u2, w2, u6, w6) per route and pooled, beside a monocular "
                 "held-scale baseline and an oracle-scale bound",
     grid={"route": list(G.ALL_ROUTES), "method": list(METHODS)},
-    seeds=[0],
-    quick_grid={"route": [G.QUICK_ROUTE], "method": ["w6", "mono"]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": [0]}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"route": [G.QUICK_ROUTE], "method": ["w6", "mono"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

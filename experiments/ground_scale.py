@@ -73,7 +73,8 @@ def _rows(table):
     return rows
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -112,7 +113,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     rows = _rows(table)
     out = []
     for cfg in _configs(table):
@@ -128,9 +130,8 @@ EXPERIMENT = Experiment(
     description="scale error ΔV_mean (Laplace scale of the raw RANSAC speed error): weighted vs uniform "
                 "sampling vs iterations (spec §8.4)",
     grid={"data": ["routes10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"]},
-    seeds=range(10),
-    quick_grid={"data": ["quick"], "config": ["2p", "6p_lam0.1"], "sampling": ["uniform", "weighted"]},
-    quick_seeds=range(5),
+    splits={"dev": {"seeds": range(10)}},
+    sizes={"quick": {"n_seeds": 5, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "sampling": ["uniform", "weighted"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -77,7 +77,8 @@ def _rows(table):
     return rows
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
@@ -140,7 +141,8 @@ def summarize(table, out_dir, quick):
     return "\n".join(lines)
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     rows = _rows(table)
     out = []
     for cfg in _configs(table):
@@ -156,9 +158,8 @@ EXPERIMENT = Experiment(
     description="RANSAC ground success rate ps vs iterations: weighted vs uniform sampling, 2- and 6-parameter "
                 "models (spec §8.2-8.3)",
     grid={"data": ["routes10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"]},
-    seeds=range(30),
-    quick_grid={"data": ["quick"], "config": ["2p", "6p_lam0.1"], "sampling": ["uniform", "weighted"]},
-    quick_seeds=range(10),
+    splits={"dev": {"seeds": range(30)}},
+    sizes={"quick": {"n_seeds": 10, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "sampling": ["uniform", "weighted"]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

@@ -80,7 +80,8 @@ METRICS = ["lidar2d_max_abs_sdf_m", "lidar3d_max_abs_sdf_m", "depth_max_abs_sdf_
            "depth_p99_abs_sdf_m", "ground_label_agreement", "kinematic_max_error_m"]
 
 
-def summarize(table, out_dir, quick):
+def summarize(table, ctx):
+    out_dir, quick = ctx.out_dir, ctx.quick
     rows = group_rows(table, ["scene"], METRICS, stats=("max",))
     for r in rows:
         r["ground_label_agreement_min"] = min(t["ground_label_agreement"] for t in table if t["scene"] == r["scene"])
@@ -95,7 +96,8 @@ def _worst(table, key, fn=max):
     return fn(vals) if vals else float("nan")
 
 
-def checks(table, quick):
+def checks(table, ctx):
+    quick = ctx.quick
     l2, l3 = _worst(table, "lidar2d_max_abs_sdf_m"), _worst(table, "lidar3d_max_abs_sdf_m")
     d5 = _worst(table, "depth_max_abs_sdf_within5m_m")
     ag = _worst(table, "ground_label_agreement", min)
@@ -112,9 +114,8 @@ EXPERIMENT = Experiment(
     name="sensors",
     description="exactness of lidar, depth, labels and the kinematic rover against the scene geometry",
     grid={"scene": ["rover_terrain", "rover_flat", "office2d"], "frames": [4]},
-    seeds=range(5),
-    quick_grid={"scene": ["rover_terrain", "office2d"], "frames": [1]},
-    quick_seeds=[0],
+    splits={"dev": {"seeds": range(5)}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"scene": ["rover_terrain", "office2d"], "frames": [1]}}, "full": {}},
     trial=trial,
     summarize=summarize,
     checks=checks,

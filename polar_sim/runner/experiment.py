@@ -1,34 +1,41 @@
 """The declarative experiment format.
 
 An experiment is a module in ``experiments/`` (shipped as ``polar_sim.experiments``) that defines
-one module-level ``EXPERIMENT = Experiment(...)``::
+one module-level ``EXPERIMENT = Experiment(...)``. It declares; the library does the work::
 
-    from polar_sim.runner import Experiment, Check
+    from polar_sim.runner import Check, Experiment, Finding, get_method
 
     def trial(params, seed, ctx):
-        # params: one point of the grid (dict); seed: int; ctx.out_dir: a folder for this
-        # trial's artefacts (npz, png); ctx.quick: True in the CI size.
+        # params: one point of the grid (a dict); seed: an int of the split;
+        # ctx: TrialContext (out_dir for artefacts, size, split, save_arrays)
+        loc = get_method("localizer2d", params["method"])()
         ...
-        return {"rmse_m": 0.01, "hausdorff_m": 0.05}      # flat dict of scalars/strings
+        ctx.save_arrays(errors=errs)                  # per-trial arrays for the summary
+        return {"pos_median_m": 0.004}                # one row: flat dict of scalars/strings
 
-    def summarize(table, out_dir, quick):
-        # table: list of row dicts (params + "seed" + metrics); write figures into out_dir,
-        # return the markdown body of summary.md
-        ...
+    def summarize(table, ctx):                        # ctx: RunContext (out_dir, size, split, arrays)
+        errs = [ctx.arrays(r)["errors"] for r in table]
+        return "markdown body of summary.md"
 
-    def checks(table, quick):
-        # the headline inequalities, evaluated on the finished table
-        return [Check("gpis beats grid on Hausdorff", ok, "0.05 m < 0.09 m")]
+    def checks(table, ctx):                           # the headline inequalities
+        return [Check("ICP-G median <= 5 cm", ok, "0.34 cm")]
+
+    def findings(table, ctx):                         # the dissertation's findings, for reproduce
+        return [Finding("Ch. 7, Fig. 7.20", "ICP-G beats the PF", "0.34 vs 1.5 cm", "held")]
 
     EXPERIMENT = Experiment(
-        name="surface_accuracy",
-        description="GPIS vs grid maps against exact SDF, versus data rate",
-        grid={"method": ["gpis", "grid5", "grid10", "edt"], "spacing_m": [0.1, 0.25, 0.5, 1.0]},
-        seeds=range(5),
-        quick_grid={"method": ["gpis", "grid10"], "spacing_m": [1.0]},
-        quick_seeds=[0],
-        trial=trial, summarize=summarize, checks=checks,
+        name="localisation", description="PF vs ICP-D vs ICP-G on office2d",
+        grid={"method": ["pf1000", "icpd", "icpg"], "duration_s": [60.0]},
+        methods={"method": "localizer2d"},            # axis -> plug-in kind (validated up front)
+        splits={"dev": {"seeds": range(20)}, "test": {"seeds": range(10_000, 10_020)}},
+        sizes={"quick": {"n_seeds": 1, "grid": {"method": ["icpg"], "duration_s": [20.0]}}, "full": {}},
+        trial=trial, summarize=summarize, checks=checks, findings=findings,
     )
+
+**Resolution.** The grid of a run is ``grid``, then the split's ``"grid"`` overrides, then the
+size's, then the user's ``overrides`` (``--set``). Its seeds are the split's ``"seeds"``, cut to
+the size's first ``"n_seeds"``, unless ``overrides`` has ``"seed"``. Parameters and defaults are
+chosen on ``dev``; headline figures come from ``test`` (seeds >= 10,000, held-out families).
 
 Every trial must be deterministic given ``(params, seed)``; the runner may run trials in any
 order, in other processes, or on a Ray cluster.
@@ -38,32 +45,140 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
+import os
+import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
-__all__ = ["Experiment", "Check", "TrialContext"]
+import numpy as np
+
+__all__ = ["Experiment", "Check", "Finding", "TrialContext", "RunContext", "VERDICTS", "SIZES"]
+
+SIZES = ("quick", "full")
+VERDICTS = ("held", "partly held", "not held", "not tested the same way")
 
 
 @dataclasses.dataclass(frozen=True)
 class Check:
-    """One headline inequality of an experiment: its name, whether it held, and the figures."""
+    """One headline inequality of an experiment: its name, whether it held, and the figures.
+
+    ``known_miss=True`` marks a target recorded as missed in ``benchmarks/RESULTS.md``: a failed
+    known miss is reported as *missed*, not as a failure, and fails a run only under ``--strict``.
+    """
 
     name: str
     passed: bool
     detail: str = ""
+    known_miss: bool = False
+
+    @property
+    def status(self) -> str:
+        """``"pass"``, ``"missed"`` (a recorded miss) or ``"FAIL"`` (a regression)."""
+        if self.passed:
+            return "pass"
+        return "missed" if self.known_miss else "FAIL"
+
+
+@dataclasses.dataclass(frozen=True)
+class Finding:
+    """One row of the dissertation-findings table that ``polar-sim reproduce`` writes.
+
+    ``source``: where the published claim is (chapter, figure or table); ``claim``: the published
+    claim or number; ``ours``: our figure; ``verdict``: one of :data:`VERDICTS`; ``note``: what
+    differs from the published setting (say it when our experiment tests something else).
+    """
+
+    source: str
+    claim: str
+    ours: str
+    verdict: str
+    note: str = ""
+
+    def __post_init__(self):
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"verdict: {self.verdict!r} is not one of {', '.join(VERDICTS)}")
+
+
+def _save_npz_atomic(path: Path, arrays: Mapping[str, Any]):
+    clean = {}
+    for k, v in arrays.items():
+        a = np.asarray(v)
+        if a.dtype == object:
+            raise TypeError(f"{k}: object arrays cannot be saved (they would need pickle)")
+        clean[k] = a
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez_compressed(fh, **clean)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _check_array_name(name):
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"name: expected an identifier-like string, got {name!r}")
 
 
 @dataclasses.dataclass(frozen=True)
 class TrialContext:
-    """What a trial gets besides its parameters: a folder for its artefacts and the size flag."""
+    """What a trial gets besides its parameters: its artefact folder, the size and the split."""
 
     out_dir: Path
-    quick: bool
+    size: str = "full"
+    split: str = "dev"
+
+    @property
+    def quick(self) -> bool:
+        return self.size == "quick"
+
+    def save_arrays(self, name: str = "arrays", **arrays) -> Path:
+        """Save per-trial arrays to ``<out_dir>/<name>.npz`` (atomically, no pickle), for the
+        summary to read back with :meth:`RunContext.arrays`."""
+        _check_array_name(name)
+        return _save_npz_atomic(Path(self.out_dir) / f"{name}.npz", arrays)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunContext:
+    """What ``summarize``, ``checks`` and ``findings`` get: the run folder, size and split, and
+    access to each row's saved arrays."""
+
+    out_dir: Path
+    size: str = "full"
+    split: str = "dev"
+
+    @property
+    def quick(self) -> bool:
+        return self.size == "quick"
+
+    def trial_dir(self, row) -> Path:
+        """The artefact folder of the trial that produced ``row``."""
+        from polar_sim.runner.results import trial_dir
+
+        return trial_dir(self.out_dir, row["trial_key"])
+
+    def arrays(self, row, name: str = "arrays") -> dict:
+        """The arrays the trial of ``row`` saved with ``ctx.save_arrays(name, ...)``."""
+        _check_array_name(name)
+        path = self.trial_dir(row) / f"{name}.npz"
+        if not path.is_file():
+            raise FileNotFoundError(f"row: trial {row['trial_key']} saved no arrays named {name!r} ({path})")
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
+
+def _as_list(v):
+    return list(v) if isinstance(v, (list, tuple, range)) else [v]
 
 
 @dataclasses.dataclass(frozen=True)
 class Experiment:
-    """A declared sweep: the parameter grid, the seeds, the trial, the summary and the checks.
+    """A declared sweep: the grid, splits, sizes, the trial, the summary, checks and findings.
 
     Parameters
     ----------
@@ -72,43 +187,115 @@ class Experiment:
     description : str
         One line for ``polar-sim list``.
     grid : mapping of str to list
-        Full parameter grid; the trials are its Cartesian product times ``seeds``.
-    seeds : iterable of int
-    trial : callable ``(params, seed, ctx) -> dict``
-    summarize : callable ``(table, out_dir, quick) -> str`` (markdown), optional
-    checks : callable ``(table, quick) -> list[Check]``, optional
-    quick_grid, quick_seeds : the CI size (must finish in under 2 minutes on 2 cores).
+        The parameter grid; the trials are its Cartesian product times the seeds.
+    trial : callable ``(params, seed, ctx: TrialContext) -> dict``
+    splits : mapping of split name to ``{"seeds": iterable of int, "grid": {axis: values}}``
+        ``dev`` (tuning) and ``test`` (held out: seeds >= 10,000, families never tuned on).
+    sizes : mapping of size name to ``{"n_seeds": int, "grid": {axis: values}}``
+        ``quick`` (the CI size) and ``full``.
+    methods : mapping of axis name to plug-in kind
+        Axes whose values are methods (``polar_sim.runner.methods``); checked before any trial.
+    summarize : callable ``(table, ctx: RunContext) -> str`` (markdown), optional
+    checks : callable ``(table, ctx: RunContext) -> list[Check]``, optional
+    findings : callable ``(table, ctx: RunContext) -> list[Finding]``, optional
+    default_split : str, optional
+        The split a run uses unless told; ``"test"`` when there is one.
     """
 
     name: str
     description: str
     grid: Mapping[str, list]
-    seeds: Iterable[int]
     trial: Callable[[dict, int, TrialContext], dict]
-    summarize: Callable[[list, Path, bool], str] | None = None
-    checks: Callable[[list, bool], list] | None = None
-    quick_grid: Mapping[str, list] | None = None
-    quick_seeds: Iterable[int] | None = None
+    splits: Mapping[str, Mapping] = dataclasses.field(default_factory=lambda: {"dev": {"seeds": [0]}})
+    sizes: Mapping[str, Mapping] = dataclasses.field(default_factory=lambda: {"quick": {}, "full": {}})
+    methods: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    summarize: Callable[[list, RunContext], str] | None = None
+    checks: Callable[[list, RunContext], list] | None = None
+    findings: Callable[[list, RunContext], list] | None = None
+    default_split: str | None = None
 
-    def points(self, quick: bool = False, overrides: Mapping[str, Any] | None = None):
-        """The list of ``(params, seed)`` trials, in a fixed order.
+    def __post_init__(self):
+        for split, spec in self.splits.items():
+            bad = set(spec) - {"seeds", "grid"}
+            if bad or "seeds" not in spec:
+                raise ValueError(f"{self.name}: split {split!r} must give 'seeds' (and optionally 'grid'); got {sorted(spec)}")
+        for size, spec in self.sizes.items():
+            bad = set(spec) - {"n_seeds", "grid"}
+            if bad:
+                raise ValueError(f"{self.name}: size {size!r} takes 'n_seeds' and 'grid', not {sorted(bad)}")
+        for where, g in [("grid", {"": self.grid})] + [(f"split {k}", {"": v.get("grid", {})}) for k, v in self.splits.items()] \
+                + [(f"size {k}", {"": v.get("grid", {})}) for k, v in self.sizes.items()]:
+            unknown = set(g[""]) - set(self.grid)
+            if unknown:
+                raise ValueError(f"{self.name}: {where} overrides unknown axes {sorted(unknown)}")
+        unknown = set(self.methods) - set(self.grid)
+        if unknown:
+            raise ValueError(f"{self.name}: methods names axes not in the grid: {sorted(unknown)}")
+        if self.default_split is not None and self.default_split not in self.splits:
+            raise ValueError(f"{self.name}: default_split {self.default_split!r} is not a split")
 
-        ``overrides`` replaces grid axes (a scalar or a list); an unknown key raises ``ValueError``
-        listing the valid ones.
-        """
-        grid = dict(self.quick_grid if (quick and self.quick_grid is not None) else self.grid)
-        seeds = list(self.quick_seeds if (quick and self.quick_seeds is not None) else self.seeds)
+    @property
+    def split_names(self):
+        return list(self.splits)
+
+    def pick_split(self, split=None) -> str:
+        """The split to run: ``split`` if given (checked), else the default."""
+        if split is None:
+            split = self.default_split or ("test" if "test" in self.splits else next(iter(self.splits)))
+        if split not in self.splits:
+            raise ValueError(f"split: {self.name} has no split {split!r}; valid: {', '.join(self.splits)}")
+        return split
+
+    def pick_size(self, size) -> str:
+        if size not in self.sizes:
+            raise ValueError(f"size: {self.name} has no size {size!r}; valid: {', '.join(self.sizes)}")
+        return size
+
+    def resolve(self, size="full", split=None, overrides=None):
+        """The grid (dict of axis -> list) and the seeds (list of int) of one run."""
+        size, split = self.pick_size(size), self.pick_split(split)
+        grid = {k: _as_list(v) for k, v in self.grid.items()}
+        for layer in (self.splits[split].get("grid", {}), self.sizes[size].get("grid", {})):
+            grid.update({k: _as_list(v) for k, v in layer.items()})
+        seeds = [int(s) for s in self.splits[split]["seeds"]]
+        n = self.sizes[size].get("n_seeds")
+        if n is not None:
+            seeds = seeds[: int(n)]
         for key, value in (overrides or {}).items():
             if key == "seed":
-                seeds = list(value) if isinstance(value, (list, tuple, range)) else [value]
+                seeds = [_as_seed(s) for s in _as_list(value)]
+                if not seeds:
+                    raise ValueError(f"seed: {self.name}: --set seed={value!r} gives no seeds to run")
                 continue
             if key not in self.grid:
                 valid = ", ".join(sorted(self.grid)) + ", seed"
                 raise ValueError(f"{self.name}: unknown parameter {key!r}; valid: {valid}")
-            grid[key] = list(value) if isinstance(value, (list, tuple)) else [value]
+            grid[key] = _as_list(value)
+        for key, values in grid.items():
+            if not values:
+                raise ValueError(f"{self.name}: axis {key!r} has no values")
+            for v in values:
+                try:
+                    json.dumps(v)
+                except TypeError:
+                    raise ValueError(f"{self.name}: value {v!r} of axis {key!r} is not JSON-serialisable") from None
+        if not seeds:
+            raise ValueError(f"{self.name}: no seeds to run (split {split!r}, size {size!r})")
+        return grid, seeds
+
+    def points(self, size="full", split=None, overrides=None):
+        """The list of ``(params, seed)`` trials of one run, in a fixed order."""
+        grid, seeds = self.resolve(size, split, overrides)
         keys = list(grid)
-        out = []
-        for combo in itertools.product(*(list(grid[k]) for k in keys)):
-            for seed in seeds:
-                out.append((dict(zip(keys, combo)), int(seed)))
-        return out
+        return [(dict(zip(keys, combo)), seed)
+                for combo in itertools.product(*(grid[k] for k in keys)) for seed in seeds]
+
+    def seeds_of(self, split) -> list:
+        return [int(s) for s in self.splits[self.pick_split(split)]["seeds"]]
+
+
+def _as_seed(s):
+    """A ``--set seed=...`` value: an int >= 0 (not 1.5, "abc", True or a dict)."""
+    from polar_sim._validation import as_int
+
+    return as_int(s, "seed", minimum=0)

@@ -1,19 +1,24 @@
-"""Running an experiment: trials on a local process pool or on Ray, rows written as they finish,
-then the summary, the figures and the headline checks.
+"""Running an experiment: trials in this process, on a local pool of worker processes or on Ray,
+rows written as they finish, then the summary, the figures, the checks and the findings.
 
-A run folder holds ``config.json`` (what was run), ``results.csv`` (one row per trial, appended
-as each finishes, so an interrupted run loses nothing and ``run`` resumes it), ``trials/``
-(per-trial artefacts), ``summary.md``, figures, and ``checks.json``.
+A run folder holds ``config.json`` (what was run, and where: version, commit, packages, machine),
+``results.csv`` (one row per trial, appended as each finishes, so an interrupted run loses nothing
+and running again resumes it), ``trials/`` (per-trial artefacts), ``summary.md``, figures,
+``checks.json`` and ``findings.json``. One folder holds one (split, size): running another size
+or split into it is refused.
+
+A trial that raises, runs past ``trial_timeout`` seconds, or kills its worker process is recorded
+as an ``error`` row; the sweep goes on.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
 import datetime as _dt
 import json
 import logging
 import multiprocessing as mp
+import multiprocessing.connection as mpc
 import os
 import time
 import traceback
@@ -22,9 +27,9 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 import polar_sim
-from polar_sim.runner.experiment import Check, TrialContext
+from polar_sim.runner.experiment import Check, RunContext, TrialContext
 from polar_sim.runner.registry import get_experiment
-from polar_sim.runner.results import ResultsFile, trial_key
+from polar_sim.runner.results import RESERVED, ResultsFile, trial_dir, trial_key
 
 __all__ = ["run_experiment", "RunResult", "default_out_dir"]
 
@@ -33,16 +38,28 @@ logger = logging.getLogger(__name__)
 
 @dataclasses.dataclass(frozen=True)
 class RunResult:
-    """What a run produced: its folder, the table of rows, the checks and the failed trials."""
+    """What a run produced: its folder, the rows, the checks, the findings and the failed trials."""
 
     out_dir: Path
     table: list
     checks: list
     failures: list
+    findings: list = dataclasses.field(default_factory=list)
+    config: dict = dataclasses.field(default_factory=dict)
 
     @property
-    def passed(self):
-        return all(c.passed for c in self.checks) and not self.failures
+    def passed(self) -> bool:
+        """No failed trial and no failed check other than a recorded miss."""
+        return not self.failures and all(c.status != "FAIL" for c in self.checks)
+
+    @property
+    def strict_passed(self) -> bool:
+        """No failed trial and every check met (recorded misses count as failures)."""
+        return not self.failures and all(c.passed for c in self.checks)
+
+    @property
+    def misses(self) -> list:
+        return [c for c in self.checks if c.status == "missed"]
 
 
 def default_out_dir(name, root="polar_sim_out"):
@@ -51,33 +68,39 @@ def default_out_dir(name, root="polar_sim_out"):
     return Path(root) / "runs" / name / stamp
 
 
-def _trial_dir(out_dir, params, seed):
-    slug = "_".join(f"{k}-{v}" for k, v in params.items()).replace("/", "-").replace(" ", "")
-    return out_dir / "trials" / f"{slug}_seed-{seed}"[:180]
+def _base_row(params, seed, size, split):
+    row = dict(params)
+    row.update(seed=int(seed), split=split, size=size)
+    return row
 
 
-def _execute(exp, params, seed, trial_dir, quick):
+def _error_row(params, seed, size, split, error, elapsed):
+    row = _base_row(params, seed, size, split)
+    row.update(status="error", error=error, elapsed_s=round(elapsed, 4), trial_key=trial_key(params, seed))
+    return row
+
+
+def _execute(exp, params, seed, tdir, size, split):
     """Run one trial (in this process or a worker). ``exp`` is an Experiment or a registered
     name (workers re-import registered experiments by name). Returns the result row."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     exp = get_experiment(exp)
-    trial_dir = Path(trial_dir)
-    trial_dir.mkdir(parents=True, exist_ok=True)
+    tdir = Path(tdir)
+    tdir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    row = dict(params)
-    row["seed"] = seed
+    row = _base_row(params, seed, size, split)
     try:
-        metrics = exp.trial(dict(params), seed, TrialContext(trial_dir, quick))
+        metrics = exp.trial(dict(params), int(seed), TrialContext(tdir, size, split))
         if not isinstance(metrics, dict):
             raise TypeError(f"trial returned {type(metrics).__name__}, expected a dict of metrics")
-        clash = set(metrics) & (set(params) | {"seed", "status", "error", "elapsed_s", "trial_key"})
+        clash = set(metrics) & (set(params) | RESERVED)
         if clash:
             raise ValueError(f"trial metrics reuse reserved or parameter names: {sorted(clash)}")
         row.update(status="ok", error="")
         row.update(metrics)
     except Exception as exc:  # a failed trial is recorded, not fatal to the sweep
         row.update(status="error", error=f"{type(exc).__name__}: {exc}")
-        (trial_dir / "error.txt").write_text(traceback.format_exc())
+        (tdir / "error.txt").write_text(traceback.format_exc())
     row["elapsed_s"] = round(time.perf_counter() - t0, 4)
     row["trial_key"] = trial_key(params, seed)
     return row
@@ -91,62 +114,234 @@ def _portable(exp):
     return exp.name if exp.name in list_experiments() and get_experiment(exp.name) is exp else exp
 
 
-def _run_ray(exp, todo, out_dir, quick, workers):
+# -- backends -------------------------------------------------------------------------------------
+def _run_serial(exp, todo, out_dir, size, split, workers, timeout, address):
+    for p, s in todo:
+        yield _execute(exp, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split)
+
+
+def _worker_main(conn):
+    """A pool worker: runs the trials it is sent, one at a time, until it gets ``None``."""
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg is None:
+            return
+        conn.send(_execute(*msg))
+
+
+class _Worker:
+    def __init__(self, ctx):
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child,), daemon=True)
+        self.proc.start()
+        child.close()
+        self.task = None      # (params, seed, started_at)
+
+    def stop(self, kill=False):
+        if kill and self.proc.is_alive():
+            self.proc.kill()
+        else:
+            try:
+                self.conn.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+        self.proc.join(timeout=5)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def _run_pool(exp, todo, out_dir, size, split, workers, timeout, address):
+    # spawn: a forked child of a parent that holds a GL context deadlocks.
+    ctx = mp.get_context("spawn")
+    portable = _portable(exp)
+    queue = list(todo)
+    pool = [_Worker(ctx) for _ in range(min(workers, max(len(queue), 1)))]
+    try:
+        while queue or any(w.task for w in pool):
+            for w in pool:
+                if w.task is None and queue:
+                    p, s = queue.pop(0)
+                    w.conn.send((portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split))
+                    w.task = (p, s, time.monotonic())
+            busy = [w for w in pool if w.task]
+            wait_s = 1.0 if timeout is None else max(0.05, min(w.task[2] + timeout for w in busy) - time.monotonic())
+            mpc.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], timeout=min(wait_s, 5.0))
+            for i, w in enumerate(pool):
+                if w.task is None:
+                    continue
+                p, s, t0 = w.task
+                row, restart = None, False
+                got = w.conn.poll()
+                if got:
+                    try:
+                        row = w.conn.recv()
+                    except (EOFError, OSError):   # the worker's end closed: it died
+                        w.proc.join(timeout=5)
+                        got = False
+                if got:
+                    pass
+                elif not w.proc.is_alive():
+                    row, restart = _error_row(p, s, size, split, f"worker process died (exit code {w.proc.exitcode})",
+                                              time.monotonic() - t0), True
+                elif timeout is not None and time.monotonic() - t0 > timeout:
+                    row, restart = _error_row(p, s, size, split, f"timed out after {timeout:g} s (trial_timeout)",
+                                              time.monotonic() - t0), True
+                if row is None:
+                    continue
+                w.task = None
+                if restart:
+                    w.stop(kill=True)
+                    pool[i] = _Worker(ctx)
+                yield row
+    finally:
+        for w in pool:
+            w.stop(kill=bool(w.task))
+
+
+def _ray_init(workers, address):
     try:
         import ray
     except ImportError as exc:
         raise ValueError("backend: 'ray' needs the cluster extra: pip install 'polar-sim[cluster]'") from exc
-    if not ray.is_initialized():
-        # RAY_ADDRESS in the environment joins an existing cluster; otherwise a local one starts.
-        ray.init(num_cpus=workers if not os.environ.get("RAY_ADDRESS") else None, log_to_driver=False,
+    if ray.is_initialized():
+        return ray
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    _check_reachable(address)
+    try:
+        # With an address (or RAY_ADDRESS) this joins a running cluster; otherwise a local one starts.
+        ray.init(address=address, num_cpus=None if address else workers, log_to_driver=False,
                  include_dashboard=False, ignore_reinit_error=True)
-    remote = ray.remote(num_cpus=1)(_execute)
-    pending = {remote.remote(_portable(exp), p, s, str(_trial_dir(out_dir, p, s)), quick): (p, s) for p, s in todo}
-    while pending:
-        done, _ = ray.wait(list(pending), num_returns=1)
-        for ref in done:
-            pending.pop(ref)
-            yield ray.get(ref)
+    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
+        raise ValueError(f"address: cannot join the Ray cluster at {address!r}: {type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''}") from None
+    return ray
 
 
-def _run_local(exp, todo, out_dir, quick, workers):
-    if workers <= 1:
-        for p, s in todo:
-            yield _execute(exp, p, s, str(_trial_dir(out_dir, p, s)), quick)
+def _check_reachable(address, timeout=5.0):
+    """Fail fast on a HOST:PORT nobody listens at (ray.init would retry for minutes)."""
+    import socket
+
+    if not address or address == "auto" or "://" in address:
         return
-    # spawn: a forked child of a parent that holds a GL context deadlocks.
-    ctx = mp.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futs = [pool.submit(_execute, _portable(exp), p, s, str(_trial_dir(out_dir, p, s)), quick) for p, s in todo]
-        for f in cf.as_completed(futs):
-            yield f.result()
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"address: expected 'auto' or HOST:PORT, got {address!r}")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise ValueError(f"address: cannot reach the Ray cluster at {address!r} ({exc.strerror or exc}); "
+                         "start it with `ray start --head` or check the address") from None
 
 
-def run_experiment(name, *, quick=False, out=None, workers=1, backend="local", overrides=None,
-                   progress=True):
-    """Run (or resume) an experiment and write its results, summary, figures and checks.
+def _run_ray(exp, todo, out_dir, size, split, workers, timeout, address):
+    ray = _ray_init(workers, address)
+    remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
+    portable = _portable(exp)
+    queue = list(todo)
+    in_flight = max(1, int(workers)) if address is None and not os.environ.get("RAY_ADDRESS") else \
+        max(1, int(ray.cluster_resources().get("CPU", workers)))
+    pending = {}
+    try:
+        while queue or pending:
+            while queue and len(pending) < in_flight:
+                p, s = queue.pop(0)
+                ref = remote.remote(portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split)
+                pending[ref] = (p, s, time.monotonic())
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0 if timeout is not None else None)
+            for ref in done:
+                p, s, t0 = pending.pop(ref)
+                try:
+                    yield ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    yield _error_row(p, s, size, split, f"worker failed: {type(exc).__name__}: "
+                                     f"{str(exc).splitlines()[0] if str(exc) else ''}", time.monotonic() - t0)
+            if timeout is not None:
+                for ref, (p, s, t0) in list(pending.items()):
+                    if time.monotonic() - t0 > timeout:
+                        ray.cancel(ref, force=True)
+                        pending.pop(ref)
+                        yield _error_row(p, s, size, split, f"timed out after {timeout:g} s (trial_timeout)",
+                                         time.monotonic() - t0)
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+
+
+# -- the run --------------------------------------------------------------------------------------
+def _check_methods(exp, grid):
+    from polar_sim.runner.methods import get_method
+
+    for axis, kind in exp.methods.items():
+        for value in grid[axis]:
+            get_method(kind, value)   # raises ValueError listing the valid names
+
+
+def _prepare_folder(out_dir, config):
+    """Refuse a folder that holds another size or split (rows would mix); write config.json."""
+    path = out_dir / "config.json"
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
+        for key in ("experiment", "size", "split"):
+            if key in old and old[key] != config[key]:
+                raise ValueError(f"out: {out_dir} holds a run of {old.get('experiment')!r} with {key} "
+                                 f"{old[key]!r}, not {config[key]!r}; choose another --out")
+    tmp = path.with_name(".config.json.tmp")
+    tmp.write_text(json.dumps(config, indent=2, default=str))
+    os.replace(tmp, path)
+
+
+def run_experiment(name, *, quick=False, size=None, split=None, out=None, workers=1, backend="local",
+                   address=None, overrides=None, trial_timeout=None, progress=True):
+    """Run (or resume) an experiment and write its results, summary, figures, checks, findings.
 
     Parameters
     ----------
     name : str or Experiment
     quick : bool
-        The CI size (small grid and seeds).
+        Shorthand for ``size="quick"`` (the CI size).
+    size : str, optional
+        A size the experiment declares (``"quick"``, ``"full"``); default ``"full"``.
+    split : str, optional
+        ``"dev"`` (tuning) or ``"test"`` (held out); default the experiment's (``test`` if it has one).
     out : path, optional
-        Run folder; default ``polar_sim_out/runs/<name>/<timestamp>``. An existing folder with a
-        ``results.csv`` is resumed: finished trials are not run again.
+        Run folder; default ``polar_sim_out/runs/<name>/<timestamp>``. A folder with a
+        ``results.csv`` of the same size and split is resumed: finished trials are not run again.
     workers : int
-        Parallel trials (local process pool or Ray tasks).
+        Parallel trials (local worker processes, or Ray tasks in flight).
     backend : {"local", "ray"}
+    address : str, optional
+        Ray cluster to join (``"auto"``, ``"HOST:PORT"``); default ``$RAY_ADDRESS`` or a local one.
     overrides : dict, optional
-        Replace grid axes, e.g. ``{"spacing_m": [1.0]}``; unknown keys raise ``ValueError``.
+        Replace grid axes or seeds, e.g. ``{"spacing_m": [1.0], "seed": [3]}``; unknown keys raise.
+    trial_timeout : float, optional
+        Seconds a trial may run before it is stopped and recorded as failed (runs trials in worker
+        processes even with one worker).
     """
     exp = get_experiment(name)
     if backend not in ("local", "ray"):
         raise ValueError(f"backend: unknown backend {backend!r}; expected 'local' or 'ray'")
-    if int(workers) < 1:
-        raise ValueError(f"workers: expected an integer >= 1, got {workers}")
-    points = exp.points(quick=quick, overrides=overrides)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if trial_timeout is not None and not (isinstance(trial_timeout, (int, float)) and trial_timeout > 0):
+        raise ValueError(f"trial_timeout: expected a positive number of seconds, got {trial_timeout!r}")
+    if backend == "ray":
+        _check_reachable(address or os.environ.get("RAY_ADDRESS") or None)
+    size = exp.pick_size(size or ("quick" if quick else "full"))
+    split = exp.pick_split(split)
+    grid, seeds = exp.resolve(size, split, overrides)
+    _check_methods(exp, grid)
+    points = exp.points(size, split, overrides)
     out_dir = Path(out) if out is not None else default_out_dir(exp.name)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"out: {out_dir} exists and is not a folder")
     out_dir.mkdir(parents=True, exist_ok=True)
     if out is None:
         latest = out_dir.parent / "latest"
@@ -156,19 +351,25 @@ def run_experiment(name, *, quick=False, out=None, workers=1, backend="local", o
             latest.symlink_to(out_dir.name)
         except OSError:
             pass
-    config = {"experiment": exp.name, "description": exp.description, "quick": bool(quick),
-              "overrides": overrides or {}, "n_trials": len(points), "polar_sim": polar_sim.__version__,
-              "backend": backend, "workers": int(workers),
-              "grid": {k: list(v) for k, v in (exp.quick_grid if quick and exp.quick_grid else exp.grid).items()}}
-    (out_dir / "config.json").write_text(json.dumps(config, indent=2, default=str))
+    from polar_sim.runner.provenance import provenance
+
+    t_start = time.time()
+    config = {"experiment": exp.name, "description": exp.description, "size": size, "split": split,
+              "quick": size == "quick", "overrides": overrides or {}, "n_trials": len(points),
+              "grid": grid, "seeds": seeds, "backend": backend, "workers": int(workers),
+              "polar_sim": polar_sim.__version__, "provenance": provenance()}
     results = ResultsFile(out_dir / "results.csv")
-    done = results.done_keys()
+    done = results.done_keys()            # reads (and checks) the file before anything is written
+    _prepare_folder(out_dir, config)
     todo = [(p, s) for p, s in points if trial_key(p, s) not in done]
-    runner = _run_ray if backend == "ray" else _run_local
+    if backend == "ray":
+        runner = _run_ray
+    else:
+        runner = _run_pool if (workers > 1 or trial_timeout is not None) else _run_serial
     bar = tqdm(total=len(points), initial=len(points) - len(todo), desc=exp.name, unit="trial",
                disable=not progress)
     try:
-        for row in runner(exp, todo, out_dir, quick, int(workers)):
+        for row in runner(exp, todo, out_dir, size, split, int(workers), trial_timeout, address):
             results.append(row)
             bar.update(1)
             if row["status"] != "ok":
@@ -179,15 +380,35 @@ def run_experiment(name, *, quick=False, out=None, workers=1, backend="local", o
     table = [r for r in results.read() if r.get("trial_key") in keys]
     ok_rows = [r for r in table if r.get("status") == "ok"]
     failures = [r for r in table if r.get("status") != "ok"]
-    body = exp.summarize(ok_rows, out_dir, quick) if (exp.summarize and ok_rows) else ""
-    checks = list(exp.checks(ok_rows, quick)) if (exp.checks and ok_rows) else []
+    rctx = RunContext(out_dir, size, split)
+    body = exp.summarize(ok_rows, rctx) if (exp.summarize and ok_rows) else ""
+    checks = list(exp.checks(ok_rows, rctx)) if (exp.checks and ok_rows) else []
+    findings = list(exp.findings(ok_rows, rctx)) if (exp.findings and ok_rows) else []
     if failures:
         checks.append(Check("every trial ran", False, f"{len(failures)} of {len(table)} trials failed; "
                                                       f"first: {failures[0]['error']}"))
+    config["wall_s"] = round(time.time() - t_start, 1)
+    _prepare_folder(out_dir, config)
+    _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings)
+    return RunResult(out_dir, table, checks, failures, findings, config)
+
+
+def _cell(text):
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings):
+    seed_txt = f"{seeds[0]}" if len(seeds) == 1 else f"{seeds[0]}..{seeds[-1]} ({len(seeds)})"
     lines = [f"# {exp.name}", "", exp.description, "",
-             f"{len(ok_rows)} trials ({'quick' if quick else 'full'} size), polar_sim {polar_sim.__version__}.", "",
-             body, "", "## Checks", "", "| check | result | figures |", "|---|---|---|"]
-    lines += [f"| {c.name} | {'pass' if c.passed else '**FAIL**'} | {c.detail} |" for c in checks]
+             f"{len(ok_rows)} trials, **{split}** split (seeds {seed_txt}), {size} size, polar_sim "
+             f"{polar_sim.__version__}.", "", body, "", "## Checks", "", "| check | result | figures |", "|---|---|---|"]
+    lines += [f"| {_cell(c.name)} | {c.status if c.status != 'FAIL' else '**FAIL**'} | {_cell(c.detail)} |"
+              for c in checks]
+    if findings:
+        lines += ["", "## Findings", "", "| source | published | ours | verdict | note |", "|---|---|---|---|---|"]
+        lines += [f"| {_cell(f.source)} | {_cell(f.claim)} | {_cell(f.ours)} | {f.verdict} | {_cell(f.note)} |"
+                  for f in findings]
     (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
-    (out_dir / "checks.json").write_text(json.dumps([dataclasses.asdict(c) for c in checks], indent=2, default=str))
-    return RunResult(out_dir, table, checks, failures)
+    (out_dir / "checks.json").write_text(json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
+                                                    indent=2, default=str))
+    (out_dir / "findings.json").write_text(json.dumps([dataclasses.asdict(f) for f in findings], indent=2))

@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils.env_checker import data_equivalence
 
 import polar_sim.envs  # noqa: F401  (registers the ids)
-from conftest import size
+from ci_sizes import size
 from polar_sim.envs.lidar_nav import LidarNavEnv
 from polar_sim.envs.noise import OdometryNoise
 from polar_sim.envs.policies import SDFReactive

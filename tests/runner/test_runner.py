@@ -19,16 +19,18 @@ def _trial(params, seed, ctx):
     return {"value": params["a"] * 10 + seed, "quick": ctx.quick}
 
 
-def _summary(table, out_dir, quick):
+def _summary(table, ctx):
     return f"rows: {len(table)}"
 
 
-def _checks(table, quick):
+def _checks(table, ctx):
     return [Check("values positive", all(r["value"] >= 0 for r in table), "")]
 
 
-TOY = Experiment("toy", "a toy sweep", grid={"a": [1, 2]}, seeds=[0, 1], trial=_trial,
-                 summarize=_summary, checks=_checks, quick_grid={"a": [1]}, quick_seeds=[0])
+TOY = Experiment("toy", "a toy sweep", grid={"a": [1, 2]}, trial=_trial,
+                 splits={"dev": {"seeds": [0, 1]}},
+                 sizes={"quick": {"n_seeds": 1, "grid": {"a": [1]}}, "full": {}},
+                 summarize=_summary, checks=_checks)
 
 
 # Every grid point x seed runs once; rows land in results.csv; summary and checks are written.
@@ -46,11 +48,11 @@ def test_run_writes_results(tmp_path):
 # Running again into the same folder resumes: finished trials are not run twice.
 def test_resume(tmp_path):
     CALLS.clear()
-    run_experiment(TOY, out=tmp_path, quick=True, progress=False)
-    assert CALLS == [(1, 0)]
+    run_experiment(TOY, out=tmp_path, overrides={"seed": [0]}, progress=False)
+    assert sorted(CALLS) == [(1, 0), (2, 0)]
     CALLS.clear()
     res = run_experiment(TOY, out=tmp_path, progress=False)
-    assert sorted(CALLS) == [(1, 1), (2, 0), (2, 1)]
+    assert sorted(CALLS) == [(1, 1), (2, 1)]
     assert len(res.table) == 4
 
 
@@ -74,9 +76,9 @@ def test_bad_names(tmp_path):
 
 # A process pool (spawn) gives the same rows as running in-process.
 def test_process_pool_matches_serial(tmp_path):
-    a = run_experiment("sensors", quick=True, out=tmp_path / "a", progress=False,
+    a = run_experiment("sensors", quick=True, split="dev", out=tmp_path / "a", progress=False,
                        overrides={"scene": ["office2d"], "seed": [0, 1]})
-    b = run_experiment("sensors", quick=True, out=tmp_path / "b", workers=2, progress=False,
+    b = run_experiment("sensors", quick=True, split="dev", out=tmp_path / "b", workers=2, progress=False,
                        overrides={"scene": ["office2d"], "seed": [0, 1]})
     key = lambda r: r["trial_key"]  # noqa: E731
     for ra, rb in zip(sorted(a.table, key=key), sorted(b.table, key=key)):
@@ -88,5 +90,95 @@ def test_process_pool_matches_serial(tmp_path):
 # The shipped sensors experiment's quick size passes its exactness checks.
 def test_sensors_quick(tmp_path):
     assert "sensors" in list_experiments()
-    res = run_experiment("sensors", quick=True, out=tmp_path, progress=False)
+    res = run_experiment("sensors", quick=True, split="dev", out=tmp_path, progress=False)
     assert res.passed, [(c.name, c.detail) for c in res.checks]
+
+
+def _slow_trial(params, seed, ctx):
+    import os
+    import time
+
+    if params["a"] == "sleep":
+        time.sleep(60)
+    if params["a"] == "die":
+        os._exit(3)
+    ctx.save_arrays(x=np.arange(3) + seed)
+    return {"value": float(seed)}
+
+
+def _arrays_summary(table, ctx):
+    return "sums: " + ", ".join(str(int(ctx.arrays(r)["x"].sum())) for r in sorted(table, key=lambda r: r["seed"]))
+
+
+FAULTY = Experiment("faulty", "trials that hang or kill their worker", grid={"a": ["ok", "sleep", "die"]},
+                    trial=_slow_trial, splits={"dev": {"seeds": [0, 1]}}, summarize=_arrays_summary)
+
+
+# Splits and sizes resolve as declared: split grid, then size grid, then overrides; n_seeds cuts the split.
+def test_splits_and_sizes_resolve():
+    exp = Experiment("e", "", grid={"m": ["a", "b"], "fam": ["dev1"]}, trial=_trial,
+                     splits={"dev": {"seeds": range(5)}, "test": {"seeds": range(10_000, 10_003), "grid": {"fam": ["held"]}}},
+                     sizes={"quick": {"n_seeds": 1, "grid": {"m": ["a"]}}, "full": {}})
+    assert exp.pick_split() == "test"
+    assert exp.resolve("full", "dev") == ({"m": ["a", "b"], "fam": ["dev1"]}, [0, 1, 2, 3, 4])
+    assert exp.resolve("quick", "test") == ({"m": ["a"], "fam": ["held"]}, [10_000])
+    assert exp.resolve("quick", "test", {"m": "b", "seed": [7, 8]}) == ({"m": ["b"], "fam": ["held"]}, [7, 8])
+    with pytest.raises(ValueError, match="valid: dev, test"):
+        exp.resolve("full", "train")
+    with pytest.raises(ValueError, match="valid: quick, full"):
+        exp.resolve("huge", "dev")
+    with pytest.raises(ValueError, match="unknown axes"):
+        Experiment("e", "", grid={"m": [1]}, trial=_trial, sizes={"quick": {"grid": {"x": [1]}}})
+
+
+# A trial that hangs past the timeout, or kills its worker, is an error row; the others finish,
+# and the summary reads the survivors' arrays through the public API.
+def test_timeout_and_dead_worker(tmp_path):
+    res = run_experiment(FAULTY, out=tmp_path, workers=2, trial_timeout=5, progress=False)
+    by = {(r["a"], r["seed"]): r for r in res.table}
+    assert len(by) == 6
+    assert by[("ok", 0)]["status"] == by[("ok", 1)]["status"] == "ok"
+    assert "timed out after 5 s" in by[("sleep", 0)]["error"]
+    assert "exit code 3" in by[("die", 1)]["error"]
+    assert "sums: 3, 6" in (tmp_path / "summary.md").read_text()
+    assert not res.passed
+
+
+# One folder holds one size and split: a full run into a quick run's folder is refused, and a
+# corrupt results.csv is reported and left as it was.
+def test_folder_guards(tmp_path):
+    run_experiment(TOY, out=tmp_path, quick=True, progress=False)
+    with pytest.raises(ValueError, match="size 'quick', not 'full'"):
+        run_experiment(TOY, out=tmp_path, progress=False)
+    bad = tmp_path / "corrupt"
+    bad.mkdir()
+    (bad / "results.csv").write_text("a,seed,trial_key\n1,2\n")
+    before = (bad / "results.csv").read_bytes()
+    with pytest.raises(ValueError, match="corrupt"):
+        run_experiment(TOY, out=bad, progress=False)
+    assert (bad / "results.csv").read_bytes() == before
+
+
+# Floats survive the CSV bit for bit, and each row says its split and size.
+def test_rows_round_trip_exactly(tmp_path):
+    def trial(params, seed, ctx):
+        return {"x": 0.1 + 0.2, "tiny": 1e-300 * 3.3}
+
+    exp = Experiment("exact", "", grid={"a": [1]}, trial=trial, splits={"dev": {"seeds": [0]}})
+    row = run_experiment(exp, out=tmp_path, progress=False).table[0]
+    assert row["x"] == 0.1 + 0.2 and row["tiny"] == 1e-300 * 3.3
+    assert row["split"] == "dev" and row["size"] == "full"
+    cfg = json.loads((tmp_path / "config.json").read_text())
+    assert cfg["provenance"]["python"] and cfg["seeds"] == [0]
+
+
+# Checks that are recorded misses are "missed", not failures, unless strict.
+def test_known_miss_status(tmp_path):
+    def checks(table, ctx):
+        return [Check("met", True), Check("recorded miss", False, "2.4 cm vs 2 cm", known_miss=True)]
+
+    exp = Experiment("miss", "", grid={"a": [1]}, trial=lambda p, s, c: {"v": 1}, checks=checks,
+                     splits={"dev": {"seeds": [0]}})
+    res = run_experiment(exp, out=tmp_path, progress=False)
+    assert res.passed and not res.strict_passed and [c.status for c in res.checks] == ["pass", "missed"]
+    assert "| recorded miss | missed |" in (tmp_path / "summary.md").read_text()
