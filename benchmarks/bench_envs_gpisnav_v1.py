@@ -138,6 +138,7 @@ def main():
     results = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").exists() else {}
     results["seeds"] = [int(seeds[0]), int(seeds[-1])]
     results["split"] = args.split
+    ran = {"seeds", "split"}
     if args.part in ("all", "localisation"):
         res = {}
         for ps in ("slam", "odometry", "truth"):
@@ -145,6 +146,7 @@ def main():
             res[ps] = {"summary": summarise(rows), "episodes": rows}
             print(ps, res[ps]["summary"], flush=True)
         results["localisation"] = res
+        ran.add("localisation")
     if args.part in ("all", "tiers"):
         res = {}
         for tier, env_id in TIERS.items():
@@ -153,6 +155,7 @@ def main():
                 res[f"{tier}/{pol}"] = {"summary": summarise(rows), "episodes": rows}
                 print(tier, pol, res[f"{tier}/{pol}"]["summary"], flush=True)
         results["tiers"] = res
+        ran.add("tiers")
     if args.part in ("all", "throughput"):
         runs = []
         for _ in range(args.repeats):
@@ -160,6 +163,10 @@ def main():
             runs.append(pair)
             print("throughput", pair, flush=True)
         results["throughput"] = {"runs": runs, "load": os.getloadavg()}
+        ran.add("throughput")
+    # Parts may run in parallel processes: merge with what the others wrote meanwhile.
+    latest = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").exists() else {}
+    results = {**latest, **{k: v for k, v in results.items() if k not in latest or k in ran}}
     out.with_suffix(".json").write_text(json.dumps(results))
 
     lines = [f"# GPISNav-v1 benchmark ({args.split} split: episode seeds {seeds[0]}-{seeds[-1]})", "",
