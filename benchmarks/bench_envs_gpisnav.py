@@ -23,7 +23,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
-import polar_sim  # noqa: E402,F401
+import polar_sim.envs  # noqa: E402,F401  (registers the ids)
 from polar_sim.envs.policies import SDFReactive  # noqa: E402
 from polar_sim.envs.vector import make_async_vector_env  # noqa: E402
 
@@ -139,7 +139,7 @@ class _TimedStep(gym.Wrapper):
 
 
 def _timed_env(source):
-    return _TimedStep(gym.make("polar_sim:polar_sim/GPISNav-v0", sdf_source=source))
+    return _TimedStep(gym.make("polar_sim.envs:polar_sim/GPISNav-v0", sdf_source=source))
 
 
 def lockstep_breakdown(source, steps, n):

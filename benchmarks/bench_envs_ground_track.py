@@ -22,7 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
-import polar_sim  # noqa: E402, F401
+import polar_sim.envs  # noqa: E402, F401  (registers the ids)
 from polar_sim.envs.policies import PurePursuitVO, VisualServoReach  # noqa: E402
 
 

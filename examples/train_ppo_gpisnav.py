@@ -85,6 +85,37 @@ def learned(model, normaliser, recurrent):
     return act, reset
 
 
+def plot_curve(rows, label, baselines, n_dev, title, path):
+    """Success against training steps (``rows`` of curve.csv) with the baselines' dev success as lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    ax.plot([r["steps"] for r in rows], [r["ppo_success"] for r in rows], "o-", color="C0", label=label)
+    styles = {"random": ("grey", ":"), "reactive": ("C1", "--"), "navigator": ("C2", "-.")}
+    labels = {"random": "random actions", "reactive": "SDFReactive", "navigator": "SDFNavigator"}
+    for b in baselines:
+        ax.axhline(rows[0][f"{b}_success"], color=styles[b][0], ls=styles[b][1], label=labels[b])
+    ax.set_xlabel("training steps")
+    ax.set_ylabel(f"success rate ({n_dev} dev worlds)")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def replot(curve_csv, title, path, n_dev):
+    """Plot a curve.csv written so far (e.g. by a run stopped before its end)."""
+    with open(curve_csv, newline="") as fh:
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    wanted = [b for b in ("random", "reactive", "navigator") if f"{b}_success" in rows[0]]
+    plot_curve(rows, "PPO (stencil)", wanted, n_dev, title, path)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tier", default="room", choices=sorted(TIER_IDS))
@@ -102,7 +133,12 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="polar_sim_out/ppo_gpisnav")
     ap.add_argument("--docs", default=None, help="also copy the plot into this folder (e.g. docs/img)")
+    ap.add_argument("--replot", nargs=2, metavar=("CURVE_CSV", "PNG"), default=None,
+                    help="only plot an existing curve.csv (with --title) and exit")
+    ap.add_argument("--title", default="", help="--replot: the plot's title")
     args = ap.parse_args()
+    if args.replot:
+        return replot(args.replot[0], args.title, args.replot[1], args.curve_episodes)
     if min(args.curve_episodes, args.test_episodes, args.envs, args.steps) < 1:
         ap.error("--curve-episodes, --test-episodes, --envs and --steps must be >= 1")
 
@@ -196,26 +232,10 @@ def main():
                "baselines_dev": base_dev, "curve": rows}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 3.8))
-    ax.plot([r["steps"] for r in rows], [r["ppo_success"] for r in rows], "o-", color="C0",
-            label=f"{recipe['algorithm']} ({args.obs_mode}{', LSTM' if args.recurrent else ''})")
-    styles = {"random": ("grey", ":"), "reactive": ("C1", "--"), "navigator": ("C2", "-.")}
-    labels = {"random": "random actions", "reactive": "SDFReactive", "navigator": "SDFNavigator"}
-    for b in wanted:
-        ax.axhline(base_dev[b]["success"], color=styles[b][0], ls=styles[b][1], label=labels[b])
-    ax.set_xlabel("training steps")
-    ax.set_ylabel(f"success rate ({len(dev)} dev worlds)")
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_title(f"{env_id.split('/')[1]} (pose_source={args.pose_source}), simulated; "
-                 f"held-out: PPO {final['success']:.0%}", fontsize=9)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(out / "curve.png", dpi=110)
+    title = (f"{env_id.split('/')[1]} (pose_source={args.pose_source}), simulated; "
+             f"held-out: PPO {final['success']:.0%}")
+    plot_curve(rows, f"{recipe['algorithm']} ({args.obs_mode}{', LSTM' if args.recurrent else ''})", wanted,
+               len(dev), title, out / "curve.png")
     if args.docs:
         Path(args.docs).mkdir(parents=True, exist_ok=True)
         shutil.copy(out / "curve.png", Path(args.docs) / f"ppo_gpisnav_{name}.png")

@@ -242,3 +242,24 @@ def test_tiers():
         half = base._rooms * base._room_size / 2
         assert np.all(np.abs(info["robot_pose2d"][:2]) < half) and np.all(np.abs(info["goal"]) < half)
         env.close()
+
+
+# A layout seed for which navworld has no reachable start/goal pair (one met in training on the
+# room tier) is replaced by a derived seed: a world is built, the same one every time, and a valid
+# layout seed keeps its own world.
+def test_unreachable_layout_is_redrawn_deterministically():
+    from polar_sim.sim import World
+
+    bad = 1686949517
+    base = gym.make("polar_sim/GPISNav-Room-v1").unwrapped.base
+    with pytest.raises(ValueError, match="no reachable start/goal pair"):
+        World("navworld", seed=bad, rooms=1, room_size=6.0, clutter=6, lidar_beams=base._n_beams)
+    w1 = base._make_world(bad)
+    s1, goal1 = base._layout_seed, np.array(w1.meta["goal"])
+    w2 = base._make_world(bad)
+    assert s1 != bad and base._layout_seed == s1 and np.array_equal(np.array(w2.meta["goal"]), goal1)
+    w3 = base._make_world(12345)
+    assert base._layout_seed == 12345
+    for w in (w1, w2, w3):
+        w.close()
+    base.close()

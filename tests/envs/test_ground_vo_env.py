@@ -1,5 +1,5 @@
 """GroundVO-v0 and its raw base RoverDrive-v0: the gymnasium contract, seeding, bad input, the
-GroundOdometry wrapper, vector environments and the pure-pursuit baseline, scored against truth."""
+composition, vector environments and the pure-pursuit baseline, scored against truth."""
 
 import os
 import warnings
@@ -12,9 +12,9 @@ import pytest  # noqa: E402
 from gymnasium.utils.env_checker import check_env, data_equivalence  # noqa: E402
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv  # noqa: E402
 
-import polar_sim  # noqa: E402, F401
+import polar_sim.envs  # noqa: E402, F401
 from polar_sim.envs.policies import PurePursuitVO  # noqa: E402
-from polar_sim.envs.wrappers import GroundOdometry  # noqa: E402
+from polar_sim.envs.rover_drive_v0 import RoverDriveEnv  # noqa: E402
 
 ENV_ID = "polar_sim/GroundVO-v0"
 KEYS = ["ground_prob", "pose", "twist", "waypoint"]
@@ -49,26 +49,44 @@ def test_check_env_gymnasium_and_sb3():
     env.close()
 
 
-def test_seeded_episodes_replay_and_the_wrapper_matches_the_env():
-    # reset(seed=s) replays bit for bit over several steps, and GroundOdometry(RoverDrive-v0)
-    # gives exactly GroundVO-v0's observations (the same adapter, seeded from the same task).
+def test_seeded_episodes_replay_and_the_composition_is_its_raw_base():
+    # reset(seed=s) replays bit for bit over several steps, and GroundVO-v0 is RoverDrive-v0 plus
+    # the VO: its base is the raw env, whose truth it replays exactly.
     actions = [np.array([0.3, 0.05], np.float32)] * 4
     env = gym.make(ENV_ID, route_length=100.0)
     a = _rollout(env, 11, actions)
     b = _rollout(env, 11, actions)
-    wrapped = GroundOdometry(gym.make("polar_sim/RoverDrive-v0", route_length=100.0))
-    c = _rollout(wrapped, 11, actions)
+    assert isinstance(env.unwrapped.base, RoverDriveEnv)
+    raw = gym.make("polar_sim/RoverDrive-v0", route_length=100.0)
+    c = _rollout(raw, 11, actions)
     for (oa, ia), (ob, ib), (oc, ic) in zip(a, b, c):
-        assert sorted(oa) == KEYS and sorted(oc) == KEYS
-        assert data_equivalence(oa, ob, exact=True) and data_equivalence(oa, oc, exact=True)
-        assert data_equivalence(ia, ib, exact=True)
-        for k in ("est_pose2d", "drift", "robot_pose2d", "progress"):
+        assert sorted(oa) == KEYS and sorted(oc) == ["rgb"]
+        assert data_equivalence(oa, ob, exact=True) and data_equivalence(ia, ib, exact=True)
+        for k in ("robot_pose2d", "progress", "cross_track_error", "time"):
             assert data_equivalence(ia[k], ic[k], exact=True)
         assert oa in env.observation_space
     assert not data_equivalence(_rollout(env, 12, [])[0][0], a[0][0])  # another seed, another world
-    assert wrapped.observation_space == env.observation_space
     env.close()
-    wrapped.close()
+    raw.close()
+
+
+def test_actions_at_the_bound_are_clipped_and_rejected_ones_change_nothing():
+    # Issue 17, finding 5: float32 [1.0000001] * 2 lies within the box's tolerance; it is the
+    # bound, on the raw env and the composition alike. An action beyond it raises and leaves the
+    # speed command as it was: the next step equals that of an env that never saw it.
+    for env_id in ("polar_sim/RoverDrive-v0", ENV_ID):
+        a, b = gym.make(env_id, route_length=50.0), gym.make(env_id, route_length=50.0)
+        a.reset(seed=3)
+        b.reset(seed=3)
+        oa = a.step(np.float32([1.0000001] * 2))[0]
+        ob = b.step(np.float32([1.0, 1.0]))[0]
+        assert data_equivalence(oa, ob, exact=True)
+        with pytest.raises(ValueError, match="outside the action space"):
+            a.step(np.float32([1.2, 0.0]))
+        step = np.float32([0.5, -0.2])
+        assert data_equivalence(a.step(step), b.step(step), exact=True)
+        a.close()
+        b.close()
 
 
 def test_image_obs_adds_the_camera_image():
@@ -99,10 +117,6 @@ def test_bad_input_raises_clearly():
     for bad in ([1.5, 0.0], [0.0, np.nan], [0.1, 0.1, 0.1], ["a", "b"]):
         with pytest.raises(ValueError, match="action"):
             env.step(np.array(bad, dtype=object if isinstance(bad[0], str) else np.float64))
-    other = gym.make("polar_sim/ObjectTrack-v0")
-    with pytest.raises(TypeError, match="camera rover"):
-        GroundOdometry(other)
-    other.close()
     env.close()
     env.close()
     with pytest.raises(RuntimeError, match="close"):
@@ -112,7 +126,7 @@ def test_bad_input_raises_clearly():
 def test_vector_envs_sync_and_async_spawn():
     # Both vector envs run the id (Async in spawned children, module-prefixed id); a child's
     # seeded reset equals the parent's, bit for bit, across processes.
-    make = lambda: gym.make("polar_sim:polar_sim/GroundVO-v0", route_length=50.0)  # noqa: E731
+    make = lambda: gym.make("polar_sim.envs:polar_sim/GroundVO-v0", route_length=50.0)  # noqa: E731
     ref = make()
     obs0, _ = ref.reset(seed=21)
     ref.close()

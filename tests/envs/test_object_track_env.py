@@ -1,5 +1,5 @@
 """ObjectTrack-v0 and its raw base TabletopReach-v0: the gymnasium contract, seeding, bad input,
-the TrackerObservation wrapper, vector environments and the visual-servo baseline, scored
+the composition, vector environments and the visual-servo baseline, scored
 against truth."""
 
 import os
@@ -13,9 +13,9 @@ import pytest  # noqa: E402
 from gymnasium.utils.env_checker import check_env, data_equivalence  # noqa: E402
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv  # noqa: E402
 
-import polar_sim  # noqa: E402, F401
+import polar_sim.envs  # noqa: E402, F401
 from polar_sim.envs.policies import VisualServoReach  # noqa: E402
-from polar_sim.envs.wrappers import TrackerObservation  # noqa: E402
+from polar_sim.envs.tabletop_reach_v0 import TabletopReachEnv  # noqa: E402
 
 ENV_ID = "polar_sim/ObjectTrack-v0"
 KEYS = ["hand_pose", "object_pose", "object_std", "pregrasp"]
@@ -47,26 +47,27 @@ def test_check_env_gymnasium_and_sb3():
     env.close()
 
 
-def test_seeded_episodes_replay_and_the_wrapper_matches_the_env():
+def test_seeded_episodes_replay_and_the_composition_is_its_raw_base():
     # reset(seed=s) replays bit for bit over several steps (physics, disturbance, noise, tracker),
-    # and TrackerObservation(TabletopReach-v0) gives exactly ObjectTrack-v0's observations.
+    # and ObjectTrack-v0 is TabletopReach-v0 plus the tracker: its base is the raw env, whose
+    # observation (hand pose) and truth it replays exactly.
     actions = [np.array([-0.5, -0.5, -0.3, 0.2], np.float32)] * 4
     env = gym.make(ENV_ID)
     a = _rollout(env, 5, actions)
     b = _rollout(env, 5, actions)
-    wrapped = TrackerObservation(gym.make("polar_sim/TabletopReach-v0"))
-    c = _rollout(wrapped, 5, actions)
+    assert isinstance(env.unwrapped.base, TabletopReachEnv)
+    raw = gym.make("polar_sim/TabletopReach-v0")
+    c = _rollout(raw, 5, actions)
     for (oa, ia), (ob, ib), (oc, ic) in zip(a, b, c):
-        assert sorted(oa) == KEYS and sorted(oc) == KEYS
-        assert data_equivalence(oa, ob, exact=True) and data_equivalence(oa, oc, exact=True)
-        assert data_equivalence(ia, ib, exact=True)
-        for k in ("est_object_pose", "tracking_error", "object_pose", "position_error"):
+        assert sorted(oa) == KEYS and sorted(oc) == ["depth", "hand_pose", "rgb"]
+        assert data_equivalence(oa, ob, exact=True) and data_equivalence(ia, ib, exact=True)
+        assert data_equivalence(oa["hand_pose"], oc["hand_pose"], exact=True)
+        for k in ("object_pose", "position_error", "time"):
             assert data_equivalence(ia[k], ic[k], exact=True)
         assert oa in env.observation_space
-    assert wrapped.observation_space == env.observation_space
     assert not data_equivalence(_rollout(env, 6, [])[0][1]["object_pose"], a[0][1]["object_pose"])
     env.close()
-    wrapped.close()
+    raw.close()
 
 
 def test_image_obs_and_the_raw_env_give_rgbd():
@@ -101,10 +102,6 @@ def test_bad_input_raises_clearly():
     for bad in ([0.0, 0.0, 1.2, 0.0], [np.nan, 0.0, 0.0, 0.0], [0.1, 0.1]):
         with pytest.raises(ValueError, match="action"):
             env.step(np.array(bad))
-    other = gym.make("polar_sim/GroundVO-v0")
-    with pytest.raises(TypeError, match="RGB-D"):
-        TrackerObservation(other)
-    other.close()
     env.close()
     env.close()
     with pytest.raises(RuntimeError, match="close"):
@@ -114,7 +111,7 @@ def test_bad_input_raises_clearly():
 def test_vector_envs_sync_and_async_spawn():
     # Both vector envs run the id (Async in spawned children, module-prefixed id); a child's
     # seeded reset equals the parent's, bit for bit, across processes.
-    make = lambda: gym.make("polar_sim:polar_sim/ObjectTrack-v0")  # noqa: E731
+    make = lambda: gym.make("polar_sim.envs:polar_sim/ObjectTrack-v0")  # noqa: E731
     ref = make()
     obs0, _ = ref.reset(seed=31)
     ref.close()
