@@ -1,7 +1,8 @@
 """``polar-sim``: the command line. It parses, calls the library and prints; nothing more.
 
-Heavy modules are imported inside each command. A ``ValueError``, ``TypeError`` or
-``FileNotFoundError`` becomes exit code 1 with a one-line message. ``run`` and ``reproduce`` exit
+Heavy modules are imported inside each command. A ``ValueError``, ``TypeError``, ``OSError``
+(``FileNotFoundError`` included) or ``ImportError`` (a ``--policy MODULE:CALLABLE`` that does not
+import) becomes exit code 1 with a one-line message; argparse's usage errors exit 2. ``run`` and ``reproduce`` exit
 0 when every trial ran and no check regressed (recorded misses are reported, not failed), and 2
 otherwise; ``--strict`` also fails on recorded misses.
 """
@@ -65,10 +66,12 @@ def _env_ids():
 def _cmd_render(args):
     from polar_sim.sim import World
 
-    _positive_int(args.width, "--width")
-    _positive_int(args.height, "--height")
-    if args.steps < 0:
-        raise ValueError(f"--steps: expected an integer >= 0, got {args.steps}")
+    _positive_int(args.width, "--width", 8192)
+    _positive_int(args.height, "--height", 8192)
+    if not 0 <= args.steps <= 1_000_000:
+        raise ValueError(f"--steps: expected an integer in [0, 1000000], got {args.steps}")
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
     _out_dir(args.out)
     from polar_sim.sim.pictures import render_scene_pictures
 
@@ -111,14 +114,26 @@ def _parse_overrides(items):
     return out
 
 
-def _positive_int(value, name):
-    if value < 1:
-        raise ValueError(f"{name}: expected an integer >= 1, got {value}")
+def _positive_int(value, name, maximum=None):
+    if value < 1 or (maximum is not None and value > maximum):
+        bound = f" and <= {maximum}" if maximum is not None else ""
+        raise ValueError(f"{name}: expected an integer >= 1{bound}, got {value}")
+    return value
+
+
+def _timeout(value, name="--trial-timeout"):
+    """None or a finite number of seconds > 0."""
+    import math
+
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name}: expected a finite number of seconds > 0, got {value}")
     return value
 
 
 def _out_dir(path):
     """Check that an --out folder can be created (a one-line error, not a traceback)."""
+    if "\x00" in str(path):
+        raise ValueError(f"--out: {str(path)[:200]!r} is not a folder path (it holds a NUL byte)")
     p = Path(path).expanduser()
     try:
         if p.exists() and not p.is_dir():
@@ -144,9 +159,9 @@ def _cmd_run(args):
     from polar_sim.runner import run_experiment
 
     res = run_experiment(args.experiment, quick=args.quick, size=args.size, split=args.split, out=args.out,
-                         workers=_positive_int(args.workers, "--workers"), backend=args.backend,
+                         workers=_positive_int(args.workers, "--workers", 1024), backend=args.backend,
                          address=args.address, overrides=_parse_overrides(args.set),
-                         trial_timeout=args.trial_timeout)
+                         trial_timeout=_timeout(args.trial_timeout))
     print(f"{args.experiment}: {len(res.table)} trials ({res.config['split']} split, {res.config['size']} size), "
           f"results in {res.out_dir}")
     _print_checks(res)
@@ -157,8 +172,8 @@ def _cmd_reproduce(args):
     from polar_sim.runner.reproduce import reproduce
 
     results, report = reproduce(args.out, quick=args.quick, split=args.split, only=args.only,
-                                workers=_positive_int(args.workers, "--workers"), backend=args.backend,
-                                address=args.address, trial_timeout=args.trial_timeout)
+                                workers=_positive_int(args.workers, "--workers", 1024), backend=args.backend,
+                                address=args.address, trial_timeout=_timeout(args.trial_timeout))
     for name, res in results.items():
         c = [x.status for x in res.checks]
         print(f"{name}: {c.count('pass')} met, {c.count('missed')} missed (recorded), {c.count('FAIL')} failed, "
@@ -170,6 +185,7 @@ def _cmd_reproduce(args):
 def _cmd_compare(args):
     from polar_sim.runner.compare import compare_runs
 
+    _positive_int(args.n_boot, "--n-boot", 10_000_000)
     out = compare_runs(args.run_a, args.run_b, by=args.by, metrics=args.metric, out=args.out,
                        n_boot=args.n_boot, seed=args.seed)
     print(out.read_text())
@@ -191,11 +207,15 @@ def _cmd_eval(args):
     register_envs()
     if args.env_id not in ENV_IDS:
         raise ValueError(f"env_id: unknown environment {args.env_id!r}; valid: {', '.join(ENV_IDS)}")
-    _positive_int(args.episodes, "--episodes")
+    _positive_int(args.episodes, "--episodes", 1_000_000)
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
     try:
         kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     except json.JSONDecodeError as exc:
         raise ValueError(f"--env-kwargs: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ValueError("--env-kwargs: JSON nested too deeply") from None
     if not isinstance(kwargs, dict):
         raise ValueError(f"--env-kwargs: expected a JSON object like {{\"sdf_source\": \"truth\"}}, got {args.env_kwargs}")
     out = str(_out_dir(args.out or f"polar_sim_out/eval/{args.env_id.replace('/', '_')}"))
@@ -308,7 +328,7 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, TypeError, OSError) as exc:
+    except (ValueError, TypeError, OSError, ImportError) as exc:   # ImportError: a user's MODULE:CALLABLE
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"polar-sim: error: {msg[:500]}", file=sys.stderr)
         return 1

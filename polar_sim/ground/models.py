@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polar_sim._validation import as_rng
+
 __all__ = ["GROUND_MODELS", "GroundFit", "fit_ground", "ransac_iterations", "normalise", "design",
            "default_iterations", "sample_weighted"]
 
@@ -148,7 +150,7 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
         weighted ridge LS (spec §4.5–4.6); under "fixed" each LS solve scales its weights to mean 1, so
         that λ regularises weighted and uniform fits equally (the spec's raw weights under "code").
     n_iter : RANSAC iterations (None = :func:`default_iterations`).
-    rng : numpy Generator.
+    rng : numpy Generator, int seed or None (= seed 0, so the fit is deterministic).
     lam : ridge weight of the 6param hypotheses (all coefficients but the scale).
     sigma : inlier threshold (None = 0.005 for 2/3-parameter models, 0.002 for 6param).
     compat : "code" reproduces the published cumulative draw with redraws; "fixed" draws without
@@ -160,7 +162,7 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
     n_iter = default_iterations(model, compat) if n_iter is None else int(n_iter)
     if n < max(s_size, 2) + 1 or n_iter < 1:
         return _failed(n, sigma, 0)
-    rng = np.random.default_rng() if rng is None else rng
+    rng = as_rng(0 if rng is None else rng, "rng")
     w = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64)
     if not np.any(w > 0):
         w = np.ones(n)

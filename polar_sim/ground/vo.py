@@ -123,8 +123,9 @@ class GroundVO:
         RANSAC draws in proportion to the learned ground probability, or uniformly.
     compat : {"fixed", "code"}, default="fixed"
         "code" reproduces the published code where the spec lists a difference (§10).
-    seed : None, int or numpy.random.Generator
-        RANSAC randomness.
+    seed : int, numpy.random.Generator or None, default=0
+        RANSAC randomness. An int (or a Generator) makes every output bit-identical across runs and
+        processes; None draws fresh OS entropy, so two runs differ (issue 17: the former default).
     n_iter : int, optional
         RANSAC iterations (default 6param 55 [99 under "code"], 2param 16, plane3/3param 69).
     lam : float, default=0.1
@@ -185,7 +186,7 @@ class GroundVO:
         Planar unicycle integration, or 3-D with the measured pitch/roll rates (non-flat terrain).
     """
 
-    def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=None,
+    def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=0,
                  n_iter=None, lam=0.1, sigma=None, weight_exponent=None, downsample=2, max_features=400,
                  klt_window=11, klt_levels=3, fb_max=0.5, irls_iter=None, n_global=3, ridge=1.0,
                  estimate_foe=False, exact_flow=True, ground_warp=True, min_triplets=30, min_inliers=10,
@@ -248,6 +249,7 @@ class GroundVO:
         c["model"] = check_choice(model, GROUND_MODELS, "model")
         c["sampling"] = check_choice(self.sampling, ("weighted", "uniform"), "sampling")
         c["compat"] = check_choice(self.compat, ("fixed", "code"), "compat")
+        as_rng(self.seed, "seed")  # type check only; the generator is made in _build
         code = c["compat"] == "code"
         c["n_iter"] = None if self.n_iter is None else as_int(self.n_iter, "n_iter", minimum=1)
         c["lam"] = as_positive_float(self.lam, "lam", allow_zero=True)

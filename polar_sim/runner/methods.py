@@ -172,3 +172,31 @@ register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G o
 # -- vo (the ground experiments) --
 
 # -- tracker (the tracking experiments) --
+#: Built-in trackers: ObjectTracker configurations (keyword arguments over its defaults).
+TRACKERS = {
+    "ww": ({}, "ObjectTracker, the default: W head, confidence-weighted self-labels"),
+    "wu": ({"appearance": "wu"}, "ObjectTracker, W head (weighted sum of per-scale heads), uniform self-labels"),
+    "sw": ({"appearance": "sw"}, "ObjectTracker, S head (one layer on stacked features), weighted self-labels"),
+    "su": ({"appearance": "su"}, "ObjectTracker, S head, uniform self-labels"),
+    "h": ({"appearance": "h"}, "ObjectTracker with the 216-bin HSV Naive Bayes (the ground chapter's classifier)"),
+    "shape-only": ({"appearance": "none"}, "ablation: appearance term off (prior x depth only)"),
+    "no-motion": ({"motion": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
+    "spatial-prior": ({"spatial_prior": True}, "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
+    "spatial-prior-0.1": ({"spatial_prior": True, "epsilon": 0.1}, "ablation: the silhouette prior softened to epsilon 0.1"),
+    "alpha-beta": ({"motion": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
+    "no-hold": ({"hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "plain-icp": ({"appearance": "none", "registration": "plain"}, "baseline: robust ICP on every ROI point"),
+}
+
+
+def _tracker(config):
+    def factory(model_points, K, initial_pose, *, model_normals=None, random_state=0, **kw):
+        from polar_sim.tracking import ObjectTracker
+
+        return ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state,
+                             **{**config, **kw})
+    return factory
+
+
+for _name, (_config, _description) in TRACKERS.items():
+    register_method("tracker", _name, _tracker(_config), description=_description)

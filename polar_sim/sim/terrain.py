@@ -13,6 +13,8 @@ import dataclasses
 import mujoco
 import numpy as np
 
+from polar_sim.sim.appearance_textures import ground_family_texture, sky_cube
+from polar_sim.sim.rover_appearance import resolve_appearance
 from polar_sim.sim.textures import GROUND_TYPES, OBSTACLE_COLOURS, ground_texture, obstacle_texture
 
 __all__ = ["TerrainGrid", "make_route", "build_rover_scene", "build_rover_terrain", "build_rover_flat"]
@@ -130,15 +132,17 @@ def _add_texture(spec, name, img):
 
 
 def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str = "car",
-                      camera_height=None, camera_fovy=None):
+                      camera_height=None, camera_fovy=None, appearance=None):
     """Fill a base rover spec with seeded terrain, route, zones, obstacles and the rover.
 
-    Returns the scene metadata: ``route`` (n, 2), ``zones`` (names along the route),
-    ``zone_of_route`` (n,) zone index per waypoint, ``terrain`` (:class:`TerrainGrid`),
-    ``start_pose2d``.
+    Returns the scene metadata: ``route`` (n, 2), ``zones`` (the ground type or family of each zone,
+    in route order), ``zone_of_route`` (n,) zone index per waypoint, ``terrain``
+    (:class:`TerrainGrid`), ``start_pose2d``, ``appearance`` (the resolved spec, None by default;
+    see :mod:`polar_sim.sim.rover_appearance`).
     """
     from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
 
+    look = resolve_appearance(appearance, seed)  # validated before anything is built
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7001]))
     cell, n = 2.0, 111  # 220 m x 220 m terrain
     half = cell * (n - 1) / 2
@@ -147,13 +151,26 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     route = make_route(rng)
     n_route = len(route)
 
-    # Ground zones: contiguous arcs of the route, at least 3 appearances, order seeded.
+    # Ground zones: contiguous arcs of the route, at least 3 appearances, order seeded. The default
+    # textures are drawn even under another appearance, so the obstacles (drawn next from the same
+    # stream) do not depend on the appearance.
     zones = list(rng.permutation(GROUND_TYPES))
+    textures = [ground_texture(kind, rng) for kind in zones]
+    materials, repeat = [f"ground_{kind}" for kind in zones], [4.0] * len(zones)
+    if look is not None and "ground" in look:
+        zones = [z["family"] for z in look["ground"]]
+        opts = [{k: v for k, v in z.items() if k not in ("family", "scale_m")} for z in look["ground"]]
+        textures = [ground_family_texture(z, np.random.default_rng(np.random.SeedSequence([look["texture_seed"], k])), **o)
+                    for k, (z, o) in enumerate(zip(zones, opts))]
+        materials = [f"ground_zone{k}" for k in range(len(zones))]
+        repeat = [z["scale_m"] for z in look["ground"]]
     zone_of_route = (np.arange(n_route) * len(zones) // n_route).astype(int)
-    for k, kind in enumerate(zones):
-        _add_texture(spec, f"ground_{kind}", ground_texture(kind, rng))
-        mat = spec.add_material(name=f"ground_{kind}", specular=0.05, shininess=0.05)
-        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"ground_{kind}"
+    for name, img in zip(materials, textures):
+        _add_texture(spec, name, img)
+        mat = spec.add_material(name=name, specular=0.05, shininess=0.05)
+        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
+    if look is not None:
+        _apply_sky_and_light(spec, look)
 
     # Visible ground: tiles of 10x10 cells, each tile in the zone of its nearest route point.
     verts = grid.vertices()
@@ -175,10 +192,10 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
             mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
             mesh.uservert = V.ravel().tolist()
             mesh.userface = remap[F].ravel().tolist()
-            # 4 m texture repeat: gravel stones of 2-6 texels come out 1.5-5 cm large.
-            mesh.usertexcoord = (V[:, :2] / 4.0).ravel().tolist()
+            # 4 m texture repeat by default: gravel stones of 2-6 texels come out 1.5-5 cm large.
+            mesh.usertexcoord = (V[:, :2] / repeat[k]).ravel().tolist()
             spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name,
-                                    material=f"ground_{zones[k]}", contype=0, conaffinity=0,
+                                    material=materials[k], contype=0, conaffinity=0,
                                     group=GROUP["ground"])
 
     # Collision ground: a hidden heightfield (or plane when flat) under the visible meshes.
@@ -246,19 +263,47 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
         "terrain": grid,
         "start_pose2d": np.array(start),
         "rover_config": cfg,
+        "appearance": look,
     }
 
 
-def build_rover_terrain(spec, seed, *, camera_height=None, camera_fovy=None, rover="car"):
+def _apply_sky_and_light(spec, look):
+    """Replace the base MJCF's sky texture, sun and headlight by an appearance's (those it gives)."""
+    sky = look.get("sky")
+    if sky is not None:
+        tex = next(t for t in spec.textures if t.name == "sky")
+        if sky["kind"] == "clutter":
+            rng = np.random.default_rng(np.random.SeedSequence([look["texture_seed"], 99]))
+            img = sky_cube(rng, colour=sky["colour"], colour2=sky["colour2"], clutter_colour=sky["clutter_colour"],
+                           clutter_deg=sky["clutter_deg"])
+            tex.builtin = mujoco.mjtBuiltin.mjBUILTIN_NONE
+            tex.width, tex.height = img.shape[1], img.shape[0]
+            tex.data = np.ascontiguousarray(img).tobytes()
+        else:
+            top = np.asarray(sky["colour"]) / 255.0
+            hor = np.asarray(sky.get("colour2", sky["colour"])) / 255.0
+            tex.builtin = mujoco.mjtBuiltin.mjBUILTIN_GRADIENT if sky["kind"] == "gradient" else mujoco.mjtBuiltin.mjBUILTIN_FLAT
+            tex.rgb1, tex.rgb2 = top, (hor if sky["kind"] == "gradient" else top)
+    light = look.get("light")
+    if light is not None:
+        sun = next(li for li in spec.worldbody.lights if li.name == "sun")
+        az, el = np.radians(light["azimuth_deg"]), np.radians(light["elevation_deg"])
+        sun.dir = -np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        sun.diffuse = np.clip(0.65 * light["intensity"] * np.asarray(light["colour"]), 0.0, 1.0)
+        spec.visual.headlight.ambient = [light["ambient"]] * 3
+
+
+def build_rover_terrain(spec, seed, *, camera_height=None, camera_fovy=None, rover="car", appearance=None):
     """``rover_terrain``: rolling hills (up to 10% slopes). Options: ``camera_height`` (m above
     the ground, default the preset's 1.65), ``camera_fovy`` (vertical field of view, degrees,
     default 45; 29.31 gives KITTI's f = 718.9 px at 376 rows), ``rover`` preset ("car" or
-    "indoor")."""
+    "indoor"), ``appearance`` (None: the default look; "random", a ground family name or an
+    explicit spec: :mod:`polar_sim.sim.rover_appearance`)."""
     return build_rover_scene(spec, seed, flat=False, rover=rover, camera_height=camera_height,
-                             camera_fovy=camera_fovy)
+                             camera_fovy=camera_fovy, appearance=appearance)
 
 
-def build_rover_flat(spec, seed, *, camera_height=None, camera_fovy=None, rover="car"):
+def build_rover_flat(spec, seed, *, camera_height=None, camera_fovy=None, rover="car", appearance=None):
     """``rover_flat``: the same route, zones and obstacles on flat ground (same options)."""
     return build_rover_scene(spec, seed, flat=True, rover=rover, camera_height=camera_height,
-                             camera_fovy=camera_fovy)
+                             camera_fovy=camera_fovy, appearance=appearance)
