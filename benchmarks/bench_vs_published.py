@@ -44,17 +44,23 @@ class SetupError(RuntimeError):
 def build(src, build_dir=None):
     """Build the published library from the checkout ``src``; returns the path of ``libgpismap.so``."""
     src = Path(src).expanduser().resolve()
-    if not src.is_dir():
-        raise SetupError(f"--gpismap-src: {src} is not a directory")
-    need = ["CMakeLists.txt", "gpismap/runtime_api.h", "gpismap/runtime_api.cc"]
-    missing = [p for p in need if not (src / p).is_file()]
-    if missing or "GPisMap" not in (src / "CMakeLists.txt").read_text(errors="replace"):
-        raise SetupError(f"--gpismap-src: {src} is not a GPisMap2 checkout (missing {', '.join(missing) or 'its CMake project'}); "
-                         "clone https://github.com/leebhoram/GPisMap2")
     cache = Path(os.environ.get("POLAR_SIM_CACHE") or Path.home() / ".cache" / "polar_sim").expanduser()
     out = Path(build_dir) if build_dir else cache / "gpismap_build" / hashlib.sha256(str(src).encode()).hexdigest()[:12]
     out.mkdir(parents=True, exist_ok=True)
     log = out / "build.log"
+    need = ["CMakeLists.txt", "gpismap/runtime_api.h", "gpismap/runtime_api.cc"]
+    why = None
+    if not src.is_dir():
+        why = f"{src} is not a directory"
+    else:
+        missing = [p for p in need if not (src / p).is_file()]
+        if missing or "GPisMap" not in (src / "CMakeLists.txt").read_text(errors="replace"):
+            why = f"{src} is not a GPisMap2 checkout (missing {', '.join(missing) or 'its CMake project'})"
+    if why:
+        # the log says what a checkout must hold, so the one-line error can point at it
+        log.write_text(f"--gpismap-src: {why}\nA checkout of https://github.com/leebhoram/GPisMap2 holds: "
+                       f"{', '.join(need)}\nNothing was built.\n")
+        raise SetupError(f"--gpismap-src: {why}; clone https://github.com/leebhoram/GPisMap2; build log: {log}")
     with open(log, "w") as fh:
         for cmd in (["cmake", "-S", str(src), "-B", str(out), "-DCMAKE_BUILD_TYPE=Release"],
                     ["cmake", "--build", str(out), "-j", "2"]):

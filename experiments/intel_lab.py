@@ -114,15 +114,20 @@ def trial(params, seed, ctx):
     return row
 
 
+def _mapping(table, mapper="gpis"):
+    """The mapping figures of ``mapper``: every trial re-measures them; the median over the trials."""
+    rows = [r for r in table if r["mapper"] == mapper]
+    return {k: float(np.median([r[k] for r in rows])) for k in ("update_cpu_ms_median", "update_cpu_ms_p99",
+                                                              "heldout_abs_sdf_median_m", "heldout_endpoints")} if rows else None
+
+
 def checks(table, ctx):
-    g = [r for r in table if r["mapper"] == "gpis"]
-    out = []
-    if g:
-        r = g[0]
+    r, out = _mapping(table), []
+    if r:
         out += [Check("Intel Lab: held-out end points' median |SDF| <= 1.5 cm", r["heldout_abs_sdf_median_m"] <= 0.015,
-                      f"{100 * r['heldout_abs_sdf_median_m']:.2f} cm over {r['heldout_endpoints']} end points", known_miss=True),
+                      f"{100 * r['heldout_abs_sdf_median_m']:.2f} cm over {r['heldout_endpoints']:.0f} end points", known_miss=True),
                 Check("Intel Lab: median update <= 8 ms per scan (CPU time)", r["update_cpu_ms_median"] <= 8.0,
-                      f"{r['update_cpu_ms_median']:.2f} ms", known_miss=True)]
+                      f"{r['update_cpu_ms_median']:.2f} ms (median over {len(table)} trials)", known_miss=True)]
     for r in [r for r in table if r["method"] == "icpg"][:1]:
         out += [Check("Intel Lab: ICP-G relocalisation median <= 3 cm against the corrected poses", r["reloc_median_m"] <= 0.03,
                       f"{100 * r['reloc_median_m']:.2f} cm over {r['reloc_scans']} held-out scans"),
@@ -132,17 +137,20 @@ def checks(table, ctx):
 
 
 def findings(table, ctx):
-    g = [r for r in table if r["mapper"] == "gpis"]
-    if not g:
+    r = _mapping(table)
+    if not r:
         return []
-    r = g[0]
-    return [Finding("Ch. 7, Fig. 7.12a (Intel Lab)", "GPIS updates scan by scan in a few milliseconds on the Intel Research Lab log",
+    return [Finding("Ch. 7, Fig. 7.12a (Intel Lab)", "the distribution of GPIS update times over the Intel Lab log (online "
+                    "rate); issue 14 reads it as a median <= 8 ms per scan",
                     f"median {r['update_cpu_ms_median']:.2f} ms, p99 {r['update_cpu_ms_p99']:.2f} ms CPU per 180-beam scan",
-                    "held" if r["update_cpu_ms_median"] <= 8.0 else "not held", "our machine and implementation; 910 corrected scans"),
-            Finding("Ch. 7, Fig. 7.19 (Intel Lab)", "the GPIS map of the Intel Lab: a zero level on the walls, low variance where observed",
+                    "held" if r["update_cpu_ms_median"] <= 8.0 else "not held", "our implementation on a shared 2-core VM, 910 corrected scans; the published "
+                    "histogram's numbers are not transcribed here: bench_vs_published times the published C++ on the same scans"),
+            Finding("Ch. 7, Fig. 7.19 (Intel Lab)", "the GPIS map of the Intel Lab: its zero level on the walls, low "
+                    "variance where observed (a picture)",
                     f"held-out end points lie {100 * r['heldout_abs_sdf_median_m']:.2f} cm (median) from the zero level",
                     "held" if r["heldout_abs_sdf_median_m"] <= 0.015 else "partly held",
-                    "scored by self-consistency: a real log has no exact geometry")]
+                    "a picture is compared by eye; we score it by self-consistency (issue 14: median "
+                    "<= 1.5 cm), as a real log has no exact geometry")]
 
 
 def summarize(table, ctx):

@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["Orbit", "recorded_orbit", "ObjectTruth"]
 
-_VERSION = 1
+_VERSION = 2                # 2: the key holds the orbit's phase, the object's pose and colours
 
 
 @dataclasses.dataclass
@@ -73,12 +73,19 @@ def recorded_orbit(world, n_frames, seed, *, turns=1.0):
     """The orbit of ``world`` (an ``object_orbit`` World): ``n_frames`` frames over ``turns``
     turns, depth noise seeded by ``seed``. Recorded once under ``$POLAR_SIM_CACHE/object_orbit``
     (keyed by the world's seed and options, ``n_frames``, ``seed``, ``turns``), then replayed.
-    ``world`` is left where the capture left it (or untouched, when replayed)."""
+    ``world`` must be as built (or reset); it is left where the capture left it (or untouched, when
+    replayed)."""
     from polar_sim.sim import sequences
 
-    key = {"scene": world.scene, "world_seed": int(world.seed), "object": world.meta["target"],
-           "n_frames": int(n_frames), "seed": int(seed), "turns": float(turns),
-           "orbit": [float(world.meta["script"].radius), float(world.meta["script"].period)]}
+    if world.time != 0.0:
+        raise ValueError(f"world: record an orbit from a freshly built or reset world (its time is {world.time:g} s)")
+    sc, name = world.meta["script"], world.meta["target"]
+    # Everything that shapes the frames: the same seed with other options is another world (the
+    # object, its yaw and colours and the orbit's phase all come from one seeded stream).
+    key = {"scene": world.scene, "world_seed": int(world.seed), "object": name, "n_frames": int(n_frames),
+           "seed": int(seed), "turns": float(turns), "colours": list(world.meta.get("colours", {}).get(name, [])),
+           "orbit": [float(sc.radius), float(sc.period), float(sc.phase0), float(sc.elevation)] + [float(c) for c in sc.centre],
+           "object_pose": np.round(world.truth()["objects"][name], 12).ravel().tolist()}
     fresh = []
 
     def build():

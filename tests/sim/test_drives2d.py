@@ -76,6 +76,15 @@ def test_recorded_orbit(cache):
     for x, y in zip(a.depths, b.depths):
         np.testing.assert_array_equal(x, y)
     np.testing.assert_array_equal(a.observed, b.observed)
+    # the same seed with another option is another world, and another recording
+    c = recorded_orbit(World("object_orbit", seed=2, object="mug" if a.name != "mug" else "box"), 4, seed=2)
+    assert c.render_s > 0 and c.name != a.name
+    wd = World("object_orbit", seed=2, object=a.name)        # same object from the seed, other colours
+    assert wd.meta["colours"] != w.meta["colours"]
+    assert recorded_orbit(wd, 4, seed=2).render_s > 0           # so not the cached recording of ``w``
+    with pytest.raises(ValueError, match="freshly"):
+        w.step()
+        recorded_orbit(w, 4, seed=2)
     assert np.abs(w.sdf(a.observed[::50])).max() < 2e-3
     t = ObjectTruth(w, a)
     E = t.eval_points(500, seed=0)
