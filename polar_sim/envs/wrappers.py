@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from polar_sim.envs.appearance import AppearanceRandomization  # noqa: F401 (exported here)
 from polar_sim.envs.gpis_nav_v0 import GRAD_BOUND, SDF_BOUND, stencil_observation
 from polar_sim.envs.observers import SDFStencil, TrackerPose, TruthSource, VOOdometry, make_sdf_source
 from polar_sim.geometry import T_to_pose2d
