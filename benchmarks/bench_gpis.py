@@ -60,7 +60,7 @@ def _query_ms(m, pts, reps=50, warm_s=0.5):
 
 def bench_2d(n_scans, legacy):
     g = load_gazebo1()
-    m = GPISMap2D(legacy=legacy)
+    m = GPISMap2D(legacy=legacy, sensor_offset=g["sensor_offset"])   # base poses
     m.update(g["thetas"], g["ranges"][0], g["poses"][0])         # compile numba kernels
     m.reset()
     wall, cpu = [], []
@@ -69,7 +69,7 @@ def bench_2d(n_scans, legacy):
         wall.append(w)
         cpu.append(c)
     # memory in a second pass: tracemalloc slows allocation-heavy code, so not while timing
-    m2 = GPISMap2D(legacy=legacy)
+    m2 = GPISMap2D(legacy=legacy, sensor_offset=g["sensor_offset"])
     tracemalloc.start()
     for k in range(n_scans):
         m2.update(g["thetas"], g["ranges"][k], g["poses"][k])

@@ -31,7 +31,7 @@ from polar_sim.baselines import (
     ParticleFilterLocalizer,
     RoomSDF2D,
 )
-from polar_sim.baselines._common import beam_points, transform2d
+from polar_sim.registration import beam_points, transform2d
 from polar_sim.geometry import between2d, compose2d
 from polar_sim.gpis.localize import localize
 

@@ -2,6 +2,14 @@
 
     python benchmarks/bench_tracking.py [--quick] [--objects mug,box] [--variants h,ww,...]
     python benchmarks/bench_tracking.py --tabletop touch,push --seeds 1,2 --frames 200   # simulator
+    python benchmarks/bench_tracking.py --sequences test --seed 10000    # the recorded randomised sequences
+
+``--sequences`` (a split name, "dev" or "test", or a comma list of sequence names) times the tracker
+on the cached 640x480 recordings of :mod:`polar_sim.sim.tabletop_sequences` (recorded first if
+missing, not timed) and asks where the cost comes from: per sequence the CPU time per frame, the
+object's image size (amodal pixels) and the ROI; pooled over all frames, a linear fit of CPU time on
+the object's pixels and the Spearman correlations with the object's and the ROI's pixels, and the
+per-stage times in terciles of the object's image size (issue 13 item 7).
 
 Single-threaded: OpenCV, numba and the BLAS are limited to one thread before anything runs.
 Frames are rendered first (not timed); each tracker's first frame (JIT and cache warm-up) is left
@@ -129,6 +137,112 @@ def tabletop(scripts, seeds, n, variants):
                       f"{1000 * np.median(cpu[1:]):.1f} |", flush=True)
 
 
+def _model(obj, how):
+    """3000 model points and normals: area-uniform, or 1000 per part (``parts``: the atlas tiles, e.g.
+    blocks' body, post and small block), which leaves a large part sparse (issue 13 item 4)."""
+    import trimesh
+
+    from polar_sim.sim import objects
+
+    mesh = objects.load_mesh(obj)
+    if how == "uniform":
+        P, face = trimesh.sample.sample_surface(mesh, 3000, seed=0)
+        return np.asarray(P), np.asarray(mesh.face_normals[face])
+    tiles = objects._face_tiles(obj, mesh)
+    Ps, Ns = [], []
+    for k in np.unique(tiles):
+        sub = mesh.submesh([np.flatnonzero(tiles == k)], append=True)
+        p, f = trimesh.sample.sample_surface(sub, 3000 // len(np.unique(tiles)), seed=0)
+        Ps.append(np.asarray(p)), Ns.append(np.asarray(sub.face_normals[f]))
+    return np.vstack(Ps), np.vstack(Ns)
+
+
+def _part_recall(obj, f, T, K, mask):
+    """Recall of the mask on each atlas part of the object's visible pixels (blocks: body, post, block)."""
+    from polar_sim.sim import objects
+
+    v, u = np.nonzero(f["mask_visible"])
+    z = f["depth_clean"][v, u]
+    X = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], 1)
+    Y = (X - T[:3, 3]) @ T[:3, :3]
+    mesh = objects.load_mesh(obj)
+    _, _, tri = mesh.nearest.on_surface(Y)
+    part = objects._face_tiles(obj, mesh)[tri]
+    return {int(k): (float(mask[v, u][part == k].mean()), int((part == k).sum())) for k in np.unique(part)}
+
+
+def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
+    """Item 7: CPU per frame on recorded 640x480 sequences against the object's image size and the scene.
+    With ``model="parts"`` also the mask's recall per part of the object (item 4)."""
+    from scipy.stats import spearmanr
+
+    from polar_sim.sim.tabletop_sequences import cached_sequence, list_sequences
+
+    if names in ("dev", "test", "dev_appearance"):
+        names = list_sequences(names)
+    else:
+        names = names.split(",")
+    print("| sequence | appearance | variant | frames | CPU ms median | p95 | frames/s | object px median | ROI px median |"
+          " mask recall per part (part: recall, pixels) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    pooled = {v: {"cpu": [], "tgt": [], "roi": [], "st": [], "fam": []} for v in variants}
+    for name in names:
+        rec = cached_sequence(name, seed)
+        n = len(rec) if max_frames is None else min(len(rec), max_frames)
+        frames = [f for _, f in rec.frames(0, n, keys=("rgb", "depth", "mask_full", "mask_visible", "depth_clean"))]
+        G, ts = rec.stack("T_cam_obj"), rec.stack("t")
+        P, N = _model(rec.meta["object"], model)
+        K = np.array(rec.meta["K"])
+        fam = (rec.meta.get("appearance") or {}).get("family", "default")
+        tgt = np.array([f["mask_full"].sum() for f in frames])
+        for v in variants:
+            best = None
+            for _ in range(repeats):
+                tr = ObjectTracker(P, K, G[0], model_normals=N, **VARIANTS[v])
+                cpu, roi, st, parts = [], [], [], {}
+                for i, f in enumerate(frames):
+                    c0 = time.process_time()
+                    r = tr.process(f["rgb"], f["depth"], float(ts[i]))
+                    cpu.append(1000 * (time.process_time() - c0))
+                    if model == "parts" and i % 10 == 0:
+                        for k, (rc, npx) in _part_recall(rec.meta["object"], f, G[i], K, r.mask).items():
+                            parts.setdefault(k, []).append((rc * npx, npx))
+                    roi.append((r.roi[2] - r.roi[0]) * (r.roi[3] - r.roi[1]))
+                    st.append([1000 * r.stage_times.get(k, 0.0) for k in STAGES])
+                cpu = np.array(cpu)
+                best = cpu if best is None else np.minimum(best, cpu)
+            c, R = best[1:], np.array(roi)[1:]
+            for k, x in (("cpu", c), ("tgt", tgt[1:]), ("roi", R), ("st", np.array(st)[1:])):
+                pooled[v][k].append(x)
+            pooled[v]["fam"] += [fam] * len(c)
+            print(f"| {name} | {fam} | {v} | {len(c)} | {np.median(c):.1f} | {np.percentile(c, 95):.1f} | "
+                  f"{1000 / np.median(c):.0f} | {np.median(tgt):.0f} | {np.median(R):.0f} | "
+                  + ", ".join(f"{k}: {sum(a for a, _ in x) / max(sum(b for _, b in x), 1):.2f} ({sum(b for _, b in x)})"
+                              for k, x in sorted(parts.items())) + " |", flush=True)
+    for v, d in pooled.items():
+        c, t, R, st = (np.concatenate(d[k]) for k in ("cpu", "tgt", "roi", "st"))
+        fam = np.array(d["fam"])
+        b, a0 = np.polyfit(t / 1e4, c, 1)
+        r2 = 1 - np.var(c - (a0 + b * t / 1e4)) / np.var(c)
+        print(f"\n{v}: {len(c)} frames, CPU ms median {np.median(c):.1f} ({1000 / np.median(c):.0f} frames/s), p95 "
+              f"{np.percentile(c, 95):.1f}; fit CPU = {a0:.1f} ms + {b:.2f} ms per 10,000 object px (R^2 {r2:.2f}); "
+              f"Spearman with object px {spearmanr(t, c).statistic:.2f}, with ROI px {spearmanr(R, c).statistic:.2f}")
+        q = np.quantile(t, [1 / 3, 2 / 3])
+        print("\n| object px tercile | frames | object px median | CPU ms median | " + " | ".join(STAGES) + " |")
+        print("|---" * (len(STAGES) + 4) + "|")
+        for k, m in enumerate([t <= q[0], (t > q[0]) & (t <= q[1]), t > q[1]]):
+            if not m.any():
+                continue
+            print(f"| {k + 1} | {m.sum()} | {np.median(t[m]):.0f} | {np.median(c[m]):.1f} | "
+                  + " | ".join(f"{x:.2f}" for x in np.median(st[m], axis=0)) + " |")
+        print("\n| appearance family | frames | CPU ms median | object px median | CPU ms per 10,000 object px |")
+        print("|---|---|---|---|---|")
+        for f in sorted(set(fam)):
+            m = fam == f
+            print(f"| {f} | {m.sum()} | {np.median(c[m]):.1f} | {np.median(t[m]):.0f} | "
+                  f"{np.median(c[m] / np.maximum(t[m], 1) * 1e4):.2f} |")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="30 frames, mug only (CI size)")
@@ -141,11 +255,23 @@ def main(argv=None):
     ap.add_argument("--tabletop", default=None,
                     help="comma list of tabletop scripts: spot check on the simulator instead (needs MuJoCo)")
     ap.add_argument("--seeds", default="1,2", help="tabletop seeds (with --tabletop)")
+    ap.add_argument("--sequences", default=None,
+                    help="a split (dev, test, dev_appearance) or comma list of recorded sequences (item 7)")
+    ap.add_argument("--seed", type=int, default=10000, help="seed of the recorded sequences (with --sequences)")
+    ap.add_argument("--model", default="uniform", choices=("uniform", "parts"),
+                    help="model points: area-uniform, or 1000 per part (with --sequences; prints recall per part)")
     ap.add_argument("--repeats", type=int, default=None,
                     help="runs per variant; per-frame times are the fastest run (default 3, quick 2)")
     a = ap.parse_args(argv)
     cv2.setNumThreads(1)
     n = a.frames or (30 if a.quick else 120)
+    if a.sequences:
+        print(f"# bench_tracking --sequences {a.sequences} --seed {a.seed}: 640x480, one thread, "
+              f"best of {a.repeats or 1} runs per frame; {platform.processor() or platform.machine()}, load average "
+              f"{os.getloadavg()[0]:.2f} at start")
+        sequences(a.sequences, a.seed, (a.variants or "ww").split(","), a.repeats or 1, a.frames, a.model)
+        print(f"# load average {os.getloadavg()[0]:.2f} at end")
+        return
     if a.tabletop:
         print(f"# bench_tracking --tabletop: {n} frames per sequence, load average "
               f"{os.getloadavg()[0]:.2f} at start")

@@ -26,7 +26,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     g = load_gazebo1()
     n = len(g["ranges"]) if a.scans is None else a.scans
-    m = GPISMap2D()
+    m = GPISMap2D(sensor_offset=g["sensor_offset"])   # the log gives base poses
     for k in tqdm(range(n), desc="gazebo1 scans"):
         m.update(g["thetas"], g["ranges"][k], g["poses"][k])
     s = m.samples()["points"]

@@ -1,6 +1,7 @@
 """Pictures of the manipulation scenes, and the statistics of the tracking sequences.
 
-    python benchmarks/plot_scenes_tabletop.py            # docs/img/scene_tabletop.png, scene_object_orbit.png
+    python benchmarks/plot_scenes_tabletop.py            # docs/img/scene_tabletop.png, scene_object_orbit.png,
+                                                         # tabletop_appearance.png (every appearance family)
     python benchmarks/plot_scenes_tabletop.py --stats    # also a table of every sequence (occlusion, contact, speed)
 
 Each picture is the ``rgbd`` camera's RGB, depth and labels (plus, for tabletop, a frame of the
@@ -82,17 +83,58 @@ def scene_pictures(out_dir):
     return paths
 
 
-def sequence_stats(width=320, height=240, only=None):
-    """Per sequence: occlusion range, frames in contact / held, peak speeds, displacement."""
-    from polar_sim.sim.tabletop_sequences import SEQUENCES, sequence_world
+#: The scenes of the appearance picture: (seed, script, target, frames stepped).
+APPEARANCE_SCENES = ((5, "touch", "blocks", 75), (1, "lift", "mug", 150), (2, "touch", "bottle", 75))
+
+
+def appearance_pictures(out_dir):
+    """docs/img/tabletop_appearance.png: each appearance family (rows) on three scenes (columns)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from polar_sim.sim import World
+    from polar_sim.sim.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
+
+    fams = list(DEV_FAMILIES) + list(TEST_FAMILIES) + ["random"]
+    fig, axes = plt.subplots(len(fams), len(APPEARANCE_SCENES), figsize=(4.2 * len(APPEARANCE_SCENES), 3.3 * len(fams)))
+    for i, fam in enumerate(fams):
+        for j, (seed, script, target, n) in enumerate(APPEARANCE_SCENES):
+            w = World("tabletop", seed=seed, script=script, target=target, appearance=fam)
+            for _ in range(n):
+                w.step()
+            f = w.camera("rgbd", width=480, height=360)
+            a = w.meta["appearance"]
+            w.close()
+            ax = axes[i, j]
+            ax.imshow(f.rgb)
+            ax.set_xticks([]), ax.set_yticks([])
+            split = "dev" if fam in DEV_FAMILIES else "test" if fam in TEST_FAMILIES else "test (random)"
+            ax.set_title(f"{fam} [{split}]: {target}, {script}, seed {seed}\nobjects {a['objects']}, hand {a['hand']}, "
+                         f"table {a['table']}, key light x{a['light']['intensity']:.2f} at {a['light']['azimuth_deg']:+.0f} deg",
+                         fontsize=7)
+    fig.suptitle("tabletop appearance families (simulated RGB, 480x360): rows are families, columns scenes; "
+                 "[dev] families were used while tuning, [test] never", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
+    path = Path(out_dir) / "tabletop_appearance.png"
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def sequence_stats(width=320, height=240, only=None, split="dev"):
+    """Per sequence of a split: occlusion range, frames in contact / held, peak speeds, displacement."""
+    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, list_sequences, sequence_spec, sequence_world
     from polar_sim.sim.truth import LABELS
 
     rows = []
-    for name, spec in SEQUENCES.items():
+    for name in list_sequences(split):
+        spec = sequence_spec(name)
         if only and name not in only:
             continue
         t0 = time.time()
-        w = sequence_world(name, 0)
+        w = sequence_world(name, SPLIT_SEEDS[split][0])
         tgt = w.meta["target"]
         occ, contact, held, v, om, phases = [], 0, 0, [], [], []
         p0 = w.truth()["objects"][tgt][:3, 3]
@@ -129,12 +171,13 @@ def main(argv=None):
     ap.add_argument("--stats", action="store_true", help="also print the sequence statistics table")
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--only", nargs="*", help="sequences for --stats (default: all)")
+    ap.add_argument("--split", default="dev", help="sequences for --stats: dev, dev_appearance or test")
     a = ap.parse_args(argv)
     if not a.no_pictures:
-        for p in scene_pictures(a.out):
+        for p in scene_pictures(a.out) + [appearance_pictures(a.out)]:
             print("wrote", p)
     if a.stats:
-        rows = sequence_stats(only=a.only)
+        rows = sequence_stats(only=a.only, split=a.split)
         print("\n| sequence | object | frames | occlusion min-max (median) | contact frames | held frames |"
               " peak speed | peak rotation | net displacement |")
         print("|---|---|---|---|---|---|---|---|---|")

@@ -1,83 +1,168 @@
-"""Train stable-baselines3 PPO on GPISNav-v0 and plot its learning curve.
+"""Train PPO (stable-baselines3, or sb3-contrib's RecurrentPPO) on a GPISNav-v1 tier and plot its
+learning curve beside random actions and the scripted baselines.
 
 Usage:
-    python examples/train_ppo_gpisnav.py --steps 200000 --out polar_sim_out/ppo_gpisnav
+    python examples/train_ppo_gpisnav.py --tier room --obs-mode stencil --steps 300000 \\
+        --out polar_sim_out/ppo_room --docs docs/img
+    python examples/train_ppo_gpisnav.py --tier rooms2 --obs-mode grid ...
+    python examples/train_ppo_gpisnav.py --tier rooms2 --recurrent ...
 
-Every ``--eval-every`` steps the deterministic policy is scored on held-out worlds (episode
-seeds 10000, 10001, ...), beside a uniformly random policy on the same worlds. Writes
-``curve.csv``, ``curve.png`` (success rate against training steps) and the model. CPU only
-(``pip install torch==2.13.0`` gives the CPU wheel); about 40 minutes for 200k steps on 2 cores.
+Every ``--eval-every`` steps the deterministic policy is scored on ``--curve-episodes`` dev
+worlds (episode seeds 1000, 1001, ...: the split the recipe was chosen on); random actions,
+``SDFReactive`` and ``SDFNavigator`` are scored once on the same worlds (the scripted ones on the
+stencil observation of the same tier and pose source). At the end the final policy (not a
+chosen checkpoint) and the baselines are scored on ``--test-episodes`` held-out worlds (seeds
+10000, 10001, ...). Writes ``curve.csv``, ``curve.png``, ``summary.json`` and the policy
+(``policy.npz``: weights, recipe and observation normalisation, no pickle) to ``--out``, and the
+plot to ``--docs`` as ``ppo_gpisnav_<tier>_<mode>.png``. CPU torch (``pip install
+torch==2.13.0``); one process, one core.
 """
 
 import argparse
 import csv
+import json
+import shutil
+import time
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
-import polar_sim  # noqa: F401  (registers the ids)
+import polar_sim.envs  # noqa: F401  (registers the ids)
 from polar_sim.envs.evaluate import RandomPolicy
+from polar_sim.envs.policies import SDFNavigator, SDFReactive
+
+TIER_IDS = {"room": "polar_sim/GPISNav-Room-v1", "rooms2": "polar_sim/GPISNav-Rooms2-v1",
+            "rooms3": "polar_sim/GPISNav-v1"}
+DEV_SEED, TEST_SEED = 1000, 10_000
 
 
-def success_rate(env_id, policy, episodes, env_kwargs, seed=10_000):
+def run_episodes(env_id, env_kwargs, policy, seeds):
+    """Success rate, collision rate and mean episode length of ``policy`` on the episode ``seeds``.
+    ``policy`` is ``(act(obs) -> action, reset())``."""
+    act, reset = policy
     env = gym.make(env_id, **env_kwargs)
-    wins = 0
-    for i in range(episodes):
-        obs, info = env.reset(seed=seed + i)
-        done = False
-        while not done:
-            obs, r, term, trunc, info = env.step(policy(obs))
-            done = term or trunc
-        wins += bool(info["is_success"])
-    env.close()
-    return wins / episodes
+    wins = hits = steps = 0
+    try:
+        for s in seeds:
+            obs, info = env.reset(seed=int(s))
+            reset()
+            done = False
+            while not done:
+                obs, r, term, trunc, info = env.step(act(obs))
+                steps += 1
+                done = term or trunc
+            wins += bool(info["is_success"])
+            hits += bool(info["collision"])
+    finally:
+        env.close()
+    n = max(len(seeds), 1)
+    return {"success": wins / n, "collision": hits / n, "mean_length": steps / n, "episodes": len(seeds)}
+
+
+def scripted(cls):
+    pol = cls()
+    return pol, pol.reset
+
+
+def learned(model, normaliser, recurrent):
+    """(act, reset) of a trained model: deterministic actions on normalised observations."""
+    state = {"h": None, "start": True}
+
+    def act(obs):
+        o = {k: v[None] for k, v in normaliser(obs).items()}
+        if recurrent:
+            a, state["h"] = model.predict(o, state=state["h"], episode_start=np.array([state["start"]]),
+                                          deterministic=True)
+            state["start"] = False
+        else:
+            a, _ = model.predict(o, deterministic=True)
+        return np.clip(a[0], -1.0, 1.0).astype(np.float32)
+
+    def reset():
+        state.update(h=None, start=True)
+
+    return act, reset
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=200_000)
+    ap.add_argument("--tier", default="room", choices=sorted(TIER_IDS))
+    ap.add_argument("--obs-mode", default="stencil", choices=["stencil", "grid"])
+    ap.add_argument("--grid-visited", action="store_true", help="grid: add the visited channel")
+    ap.add_argument("--recurrent", action="store_true", help="sb3-contrib RecurrentPPO (an LSTM policy)")
+    ap.add_argument("--pose-source", default="slam", choices=["slam", "odometry", "truth"])
+    ap.add_argument("--steps", type=int, default=300_000)
+    ap.add_argument("--envs", type=int, default=4, help="training environments, stepped in this one process")
     ap.add_argument("--eval-every", type=int, default=25_000)
-    ap.add_argument("--eval-episodes", type=int, default=20)
-    ap.add_argument("--envs", type=int, default=2, help="parallel training environments (subprocesses)")
-    ap.add_argument("--sdf-source", default="gpis", choices=["gpis", "truth", "occupancy_edt"])
+    ap.add_argument("--curve-episodes", type=int, default=20, help="dev worlds per point of the curve")
+    ap.add_argument("--test-episodes", type=int, default=50, help="held-out worlds of the final score (>= 1)")
+    ap.add_argument("--baselines", default="random,reactive,navigator",
+                    help="comma-separated subset of random,reactive,navigator (empty: none)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="polar_sim_out/ppo_gpisnav")
+    ap.add_argument("--docs", default=None, help="also copy the plot into this folder (e.g. docs/img)")
     args = ap.parse_args()
+    if min(args.curve_episodes, args.test_episodes, args.envs, args.steps) < 1:
+        ap.error("--curve-episodes, --test-episodes, --envs and --steps must be >= 1")
 
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from polar_sim.envs.learning import ObsNormaliser, load_policy, make_model, ppo_recipe, save_policy
 
     torch.set_num_threads(1)
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    env_id = "polar_sim:polar_sim/GPISNav-v0"
-    kwargs = {"sdf_source": args.sdf_source}
-    venv = make_vec_env(env_id, n_envs=args.envs, seed=args.seed, env_kwargs=kwargs,
-                        vec_env_cls=SubprocVecEnv if args.envs > 1 else None,
-                        vec_env_kwargs={"start_method": "spawn"} if args.envs > 1 else None)
+    env_id = TIER_IDS[args.tier]
+    kwargs = {"obs_mode": args.obs_mode, "pose_source": args.pose_source}
+    if args.grid_visited:
+        kwargs["grid_visited"] = True
+    scripted_kwargs = {"obs_mode": "stencil", "pose_source": args.pose_source}
+    name = f"{args.tier}_{args.obs_mode}{'_visited' if args.grid_visited else ''}{'_lstm' if args.recurrent else ''}"
+    dev = np.arange(DEV_SEED, DEV_SEED + args.curve_episodes)
+    test = np.arange(TEST_SEED, TEST_SEED + args.test_episodes)
+
+    # Training episodes start from seeds 0.. (make_vec_env) and continue unseeded: their worlds are
+    # neither the dev nor the test worlds.
+    venv = make_vec_env("polar_sim.envs:" + env_id, n_envs=args.envs, seed=args.seed, env_kwargs=kwargs)
     # The goal (metres, up to the world's diagonal), the SDF and its variance span very different
     # scales; running normalisation lets one learning rate serve them all.
     venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
-    # 200k steps is a small budget for PPO, so: short rollouts (1024 steps per update, ~195
-    # updates), and a narrow initial action noise (std 0.37), so that early episodes are not
-    # spent flailing at the action bounds into the nearest wall.
-    model = PPO("MultiInputPolicy", venv, n_steps=512, batch_size=128, n_epochs=10, learning_rate=3e-4,
-                gamma=0.99, gae_lambda=0.95, ent_coef=0.0, seed=args.seed, verbose=0, device="cpu",
-                policy_kwargs={"net_arch": {"pi": [128, 128], "vf": [128, 128]}, "log_std_init": -1.0})
-    def ppo_policy(obs):
-        # Score with the normalisation statistics frozen at their current values.
-        return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
+    recipe = ppo_recipe(args.obs_mode, args.recurrent)
+    model = make_model(recipe, venv, seed=args.seed)
 
+    wanted = [b for b in args.baselines.split(",") if b]
     probe = gym.make(env_id, **kwargs)
-    random_rate = success_rate(env_id, RandomPolicy(probe.action_space, seed=args.seed), args.eval_episodes, kwargs)
-    probe.close()
-    untrained = success_rate(env_id, ppo_policy, args.eval_episodes, kwargs)
-    rows = [{"steps": 0, "ppo_success": untrained, "random_success": random_rate}]
-    print(f"random policy: success {random_rate:.2f}; untrained PPO {untrained:.2f}", flush=True)
+    makers = {"random": lambda: (lambda p: (p, p.reset))(RandomPolicy(probe.action_space, seed=args.seed)),
+              "reactive": lambda: scripted(SDFReactive), "navigator": lambda: scripted(SDFNavigator)}
+
+    def baselines(seeds):
+        res = {}
+        for b in wanted:
+            kw = kwargs if b == "random" else scripted_kwargs
+            res[b] = run_episodes(env_id, kw, makers[b](), seeds)
+            print(f"  {b}: {res[b]}", flush=True)
+        return res
+
+    print(f"{env_id} {kwargs}, {recipe['algorithm']}: baselines on {len(dev)} dev worlds", flush=True)
+    base_dev = baselines(dev)
+    rows = []
+
+    def evaluate_now(steps):
+        norm = ObsNormaliser.from_vecnormalize(venv)
+        r = run_episodes(env_id, kwargs, learned(model, norm, args.recurrent), dev)
+        rows.append({"steps": steps, "ppo_success": r["success"], "ppo_collision": r["collision"],
+                     "ppo_mean_length": r["mean_length"], "wall_s": time.perf_counter() - t_wall,
+                     **{f"{b}_success": base_dev[b]["success"] for b in wanted}})
+        print(f"{steps} steps: PPO {r} ({rows[-1]['wall_s']:.0f} s)", flush=True)
+        with open(out / "curve.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
 
     class Evaluate(BaseCallback):
         def __init__(self):
@@ -87,40 +172,56 @@ def main():
         def _on_step(self):
             if self.num_timesteps >= self.next:
                 self.next += args.eval_every
-                rate = success_rate(env_id, ppo_policy, args.eval_episodes, kwargs)
-                rows.append({"steps": self.num_timesteps, "ppo_success": rate, "random_success": random_rate})
-                print(f"{self.num_timesteps} steps: PPO success {rate:.2f} (random {random_rate:.2f})", flush=True)
-                with open(out / "curve.csv", "w", newline="") as fh:
-                    w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                    w.writeheader()
-                    w.writerows(rows)
+                evaluate_now(self.num_timesteps)
             return True
 
+    evaluate_now(0)
     model.learn(total_timesteps=args.steps, callback=Evaluate(), progress_bar=False)
-    model.save(out / "ppo_gpisnav")
-    # The observation statistics the policy expects, as plain arrays (not SB3's pickle).
-    rms = venv.obs_rms
-    np.savez(out / "obs_normalisation.npz", format_version=1, clip=10.0,
-             **{f"{k}_mean": r.mean for k, r in rms.items()}, **{f"{k}_var": r.var for k, r in rms.items()})
+    if rows[-1]["steps"] != model.num_timesteps:
+        evaluate_now(model.num_timesteps)
+    train_wall, train_cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
+    save_policy(out / "policy.npz", model, recipe, ObsNormaliser.from_vecnormalize(venv))
     venv.close()
+
+    # The final policy as saved (reloaded from its file) on the held-out worlds.
+    loaded, norm = load_policy(out / "policy.npz", probe)
+    probe.close()
+    print(f"final policy and baselines on {len(test)} held-out worlds", flush=True)
+    final = run_episodes(env_id, kwargs, learned(loaded, norm, args.recurrent), test)
+    print(f"  PPO: {final}", flush=True)
+    base_test = baselines(test)
+    summary = {"env_id": env_id, "env_kwargs": kwargs, "recipe": recipe, "steps": int(model.num_timesteps),
+               "training_wall_s": train_wall, "training_cpu_s": train_cpu, "dev_seeds": [int(dev[0]), int(dev[-1])],
+               "test_seeds": [int(test[0]), int(test[-1])], "ppo_test": final, "baselines_test": base_test,
+               "baselines_dev": base_dev, "curve": rows}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
 
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    steps = np.array([r["steps"] for r in rows])
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.plot(steps, [r["ppo_success"] for r in rows], "o-", label="PPO (deterministic)")
-    ax.axhline(random_rate, color="grey", ls="--", label="random policy")
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    ax.plot([r["steps"] for r in rows], [r["ppo_success"] for r in rows], "o-", color="C0",
+            label=f"{recipe['algorithm']} ({args.obs_mode}{', LSTM' if args.recurrent else ''})")
+    styles = {"random": ("grey", ":"), "reactive": ("C1", "--"), "navigator": ("C2", "-.")}
+    labels = {"random": "random actions", "reactive": "SDFReactive", "navigator": "SDFNavigator"}
+    for b in wanted:
+        ax.axhline(base_dev[b]["success"], color=styles[b][0], ls=styles[b][1], label=labels[b])
     ax.set_xlabel("training steps")
-    ax.set_ylabel(f"success rate ({args.eval_episodes} held-out worlds)")
-    ax.set_ylim(0, 1)
-    ax.set_title(f"PPO on GPISNav-v0 (sdf_source={args.sdf_source})")
-    ax.legend()
+    ax.set_ylabel(f"success rate ({len(dev)} dev worlds)")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(f"{env_id.split('/')[1]} (pose_source={args.pose_source}), simulated; "
+                 f"held-out: PPO {final['success']:.0%}", fontsize=9)
+    ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     fig.savefig(out / "curve.png", dpi=110)
-    print(f"wrote {out / 'curve.png'}; final PPO success {rows[-1]['ppo_success']:.2f}, random {random_rate:.2f}")
+    if args.docs:
+        Path(args.docs).mkdir(parents=True, exist_ok=True)
+        shutil.copy(out / "curve.png", Path(args.docs) / f"ppo_gpisnav_{name}.png")
+    print(f"wrote {out}; held-out success PPO {final['success']:.2f}; "
+          + ", ".join(f"{b} {base_test[b]['success']:.2f}" for b in wanted)
+          + f"; training {train_wall / 60:.1f} min wall, {train_cpu / 60:.1f} min CPU", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,23 +1,17 @@
-"""mapping_cost: GPIS update cost per scan, and whether it depends on the size of the map (issue 4).
+"""mapping_cost: the update cost per scan, and whether it depends on the size of the map (issue 4; Ch. 7).
 
-The world is ``office2d`` tiled n x n (``World("office2d", seed, tiles=n)``: n^2 copies of the
-30 m x 30 m floor, each with its own furniture, joined by doors), so its area is 1x, 4x, 16x
-and 64x that of ``office2d`` for n = 1, 2, 4, 8. The kinematic rover drives a snake through the
-whole world: east along the corridor of the first row of tiles, north through an office, a door
-in the tile wall and a store room into the next row's corridor, west along it, and so on, at up to
-1.5 m/s, with a lidar scan (1081 beams, sigma 1 cm) every ``every_m`` metres of travel. One
-``GPISMap2D(sensor_offset=(0, 0))`` (default mode and parameters) fuses every scan at the true
-pose; each ``update`` is timed in process CPU time (``time.process_time``, fairer than the wall
-clock on a shared machine; the wall time is recorded too, with the load average).
+The world is ``office2d`` tiled n x n (``World("office2d", seed, tiles=n)``: n^2 copies of the 30 m
+floor, each with its own furniture, joined by doors): 1x, 4x, 16x and 64x the office2d area for
+n = 1, 2, 4, 8. The kinematic rover drives the snake through the whole world
+(``polar_sim.sim.drives2d.snake_route``) at up to 1.5 m/s, a lidar scan (1081 beams, sigma 1 cm)
+every ``every_m`` metres (0.5; quick: 1.0); the drive is recorded, then the ``mapper2d`` method
+(``gpis``: ``GPISMap2D``, default mode) fuses every scan at the true pose, each ``update`` timed in
+process CPU time (the wall time too, with the load average). Reported: the distribution of update
+time per scan, its median / p90 / p99 per world size, and, within one drive, the median over the
+scans taken in the k-th tile visited (the map then holds k tiles). The first 5 scans are left out.
 
-Reported: the distribution of update time per scan (histogram), its median / p90 / p99 for each
-world size, and, within one drive, the median over the scans taken in the k-th tile visited
-(k = 1, 4, 16, 64): the map then already holds k tiles, i.e. k times the ``office2d`` area. The
-first 5 scans of a drive are left out of the statistics (warm-up).
-
-Headline check: the cost is local, independent of the map size: the median update time in the
-largest world is at most 1.5x that in the smallest (the issue-3 criterion for gazebo1 applied to
-map size).
+Headline check: the median update time in the largest world is at most 1.5x that in the smallest.
+It is a CPU-time figure: measured at full size and recorded in benchmarks/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -26,7 +20,7 @@ import time
 
 import numpy as np
 
-from polar_sim.runner import Check, Experiment
+from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
 try:
@@ -35,166 +29,113 @@ except ImportError:  # pragma: no cover
     import _gpis_common as C
 
 WARMUP = 5
-
-
-def snake(n, tile=30.0):
-    """Waypoints (k, 2) of the snake through an n x n tiled office (see the module docstring)."""
-    from polar_sim.sim.office import LANE_X
-
-    pts = [(-13.0, 0.0)]
-    for j in range(n):
-        y = tile * j
-        east = j % 2 == 0
-        last = j == n - 1
-        if last:
-            x_end = tile * (n - 1) + 13.0 if east else -13.0
-            pts.append((x_end, y))
-        else:
-            x_lane = tile * (n - 1) + LANE_X if east else LANE_X
-            pts += [(x_lane, y), (x_lane, y + tile)]
-    p = np.asarray(pts, float)
-    out = [p[0]]
-    for a, b in zip(p[:-1], p[1:]):
-        k = max(1, int(np.ceil(np.linalg.norm(b - a) / 0.1)))
-        out += list(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
-    return np.asarray(out)
+COLS = ["method", "tiles", "area_x", "seed", "n_scans", "travelled_m", "cpu_ms_median", "cpu_ms_p90", "cpu_ms_p99",
+        "cpu_ms_max", "wall_ms_median", "n_samples", "map_mb", "tiles_with_samples", "load"]
 
 
 def trial(params, seed, ctx):
-    from polar_sim.gpis import GPISMap2D
-    from polar_sim.sim import World
-    from polar_sim.sim.sensors import RangeNoise
+    from polar_sim.sim.drives2d import recorded_drives, snake_route
 
     n = int(params["tiles"])
-    every = 1.0 if ctx.quick else 0.5
-    w = World("office2d", seed=seed, kinematic=True, noise={"lidar": RangeNoise(sigma=C.LIDAR_SIGMA)}, tiles=n)
-    path = snake(n)
-    follow = C.Follower(path, lookahead=0.6)
-    m = GPISMap2D(sensor_offset=(0.0, 0.0))
-    cpu, wall, tile_of, samples = [], [], [], []
-    prev = w.truth()["robot_pose2d"]
-    dist, last = 0.0, -np.inf
-    max_steps = int(1.3 * (len(path) * 0.1) / (1.5 * w.dt)) + 200
-    for _ in range(max_steps):
-        if dist - last >= every - 1e-9:
-            last = dist
-            s = w.lidar("lidar")
-            pose = C.T_to_pose2d(s.T_world_sensor)
-            t0, c0 = time.perf_counter(), time.process_time()
-            m.update(s.angles, s.ranges, pose)
-            cpu.append(time.process_time() - c0)
-            wall.append(time.perf_counter() - t0)
-            tile_of.append((int(np.floor((pose[0] + 15.0) / 30.0)), int(np.floor((pose[1] + 15.0) / 30.0))))
-            samples.append(len(m.tree_.alive()) if hasattr(m, "tree_") else 0)
-        if follow.done:
-            break
-        w.step(follow(prev, 1.5))
-        cur = w.truth()["robot_pose2d"]
-        dist += float(np.hypot(*(cur[:2] - prev[:2])))
-        prev = cur
-    w.close()
-    cpu, wall = np.asarray(cpu) * 1e3, np.asarray(wall) * 1e3
-    # visiting order of the tiles: the k-th distinct tile entered
-    order, idx = {}, []
-    for t in tile_of:
-        order.setdefault(t, len(order) + 1)
-        idx.append(order[t])
-    idx = np.asarray(idx)
+    steps = int(1.3 * len(snake_route(n)) * 0.1 / (1.5 * 0.1)) + 200      # enough control steps for the snake
+    d, = recorded_drives("office2d", seed, [dict(route="snake", duration=0.1 * steps, speed=1.5, lookahead=0.6,
+                                                 every_m=1.0 if ctx.quick else 0.5, clean=False)], tiles=n)
+    m = C.make("mapper2d", params["method"], seed=seed)
+    cpu, wall, samples = [], [], []
+    for p, r in zip(d.poses, d.ranges):
+        t0, c0 = time.perf_counter(), time.process_time()
+        m.update(d.angles, r, p)
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+        samples.append(len(m.tree_.alive()) if hasattr(m, "tree_") else 0)
+    cpu, wall = 1e3 * np.asarray(cpu), 1e3 * np.asarray(wall)
+    tiles = [(int(np.floor((x + 15) / 30)), int(np.floor((y + 15) / 30))) for x, y in d.poses[:, :2]]
+    order = {}
+    idx = np.array([order.setdefault(t, len(order) + 1) for t in tiles])      # the k-th distinct tile entered
     c = cpu[WARMUP:]
-    row = {"area_x": n * n, "n_scans": len(cpu), "travelled_m": dist, "cpu_ms_median": float(np.median(c)),
-           "cpu_ms_p90": float(np.percentile(c, 90)), "cpu_ms_p99": float(np.percentile(c, 99)),
-           "cpu_ms_max": float(c.max()), "wall_ms_median": float(np.median(wall[WARMUP:])),
-           "wall_ms_p99": float(np.percentile(wall[WARMUP:], 99)), "n_samples": int(samples[-1]),
-           "map_mb": m.nbytes() / 1e6, "tiles_visited": len(order), "load": C.load_now()}
+    row = {"area_x": n * n, "n_scans": len(cpu), "travelled_m": float(d.travelled[-1]), "cpu_ms_median": float(np.median(c)),
+           "cpu_ms_p90": float(np.percentile(c, 90)), "cpu_ms_p99": float(np.percentile(c, 99)), "cpu_ms_max": float(c.max()),
+           "wall_ms_median": float(np.median(wall[WARMUP:])), "wall_ms_p99": float(np.percentile(wall[WARMUP:], 99)),
+           "n_samples": int(samples[-1]), "tiles_visited": len(order), "load": C.load_now(),
+           "map_mb": m.nbytes() / 1e6 if hasattr(m, "nbytes") else float("nan")}
     for k in (1, 4, 16, 64):
         sel = idx[WARMUP:] == k
         row[f"cpu_ms_median_tile{k}"] = float(np.median(c[sel])) if sel.any() else float("nan")
-    # the map must cover the whole world: samples in every tile
-    pts = m.samples()["points"]
-    cov = {(int(np.floor((x + 15) / 30)), int(np.floor((y + 15) / 30))) for x, y in pts}
-    row["tiles_with_samples"] = len(cov)
-    np.savez_compressed(ctx.out_dir / "cost.npz", cpu_ms=cpu, wall_ms=wall, tile_index=idx,
-                        samples=np.asarray(samples))
+    if hasattr(m, "samples"):     # the map must cover the whole world: samples in every tile
+        row["tiles_with_samples"] = len({(int(np.floor((x + 15) / 30)), int(np.floor((y + 15) / 30)))
+                                         for x, y in m.samples()["points"]})
+    ctx.save_arrays(cpu_ms=cpu, wall_ms=wall, tile_index=idx, samples=np.asarray(samples))
     return row
 
 
-def _series(ctx, table):
-
-    out = {}
+def _ratio(table, method="gpis"):
+    by = {}
     for r in table:
-        z = np.load(ctx.trial_dir(r) / "cost.npz")
-        out[(r["tiles"], r["seed"])] = {k: z[k] for k in z.files}
-    return out
+        if r["method"] == method:
+            by.setdefault(r["tiles"], []).append(r["cpu_ms_median"])
+    lo, hi = min(by), max(by)
+    return lo, hi, float(np.median(by[lo])), float(np.median(by[hi]))
 
 
 def checks(table, ctx):
-    quick = ctx.quick
-    by = {}
-    for r in table:
-        by.setdefault(r["tiles"], []).append(r["cpu_ms_median"])
-    lo, hi = min(by), max(by)
-    a, b = float(np.median(by[lo])), float(np.median(by[hi]))
-    out = [Check(f"update cost independent of map size: median at {hi * hi}x area <= 1.5 x median at {lo * lo}x",
-                 b <= 1.5 * a, f"{b:.2f} ms vs {a:.2f} ms CPU (ratio {b / a:.2f})")]
-    full = [r for r in table if r["tiles"] == hi]
-    cov = min(r["tiles_with_samples"] for r in full)
-    out.append(Check("the map covers every tile of the largest world", cov == hi * hi, f"{cov}/{hi * hi} tiles"))
-    return out
+    lo, hi, a, b = _ratio(table)
+    big = [r for r in table if r["tiles"] == hi and r["method"] == "gpis"]
+    cov = min(r.get("tiles_with_samples", 0) for r in big)
+    return [Check(f"update cost independent of map size: median CPU at {hi * hi}x area <= 1.5 x median at {lo * lo}x",
+                  b <= 1.5 * a, f"{b:.2f} ms vs {a:.2f} ms CPU (ratio {b / a:.2f})"),
+            Check("the map covers every tile of the largest world", cov == hi * hi, f"{cov}/{hi * hi} tiles")]
+
+
+def findings(table, ctx):
+    lo, hi, a, b = _ratio(table)
+    return [Finding("Ch. 7, update time as the map grows", "the median GPIS update time stays flat as the map grows",
+                    f"median CPU per scan {a:.2f} ms at {lo * lo}x the office2d area, {b:.2f} ms at {hi * hi}x "
+                    f"(ratio {b / a:.2f})", "held" if b <= 1.5 * a else "not held",
+                    "tiled simulated office, 1081-beam lidar; CPU time on a shared machine")]
 
 
 def summarize(table, ctx):
-    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = sorted(table, key=lambda r: (r["tiles"], r["seed"]))
-    cols = ["tiles", "area_x", "seed", "n_scans", "travelled_m", "cpu_ms_median", "cpu_ms_p90", "cpu_ms_p99",
-            "cpu_ms_max", "wall_ms_median", "wall_ms_p99", "n_samples", "map_mb", "load"]
-    write_csv_table(rows, cols, out_dir / "mapping_cost.csv")
-    tcols = ["tiles", "seed"] + [f"cpu_ms_median_tile{k}" for k in (1, 4, 16, 64)]
-    ser = _series(ctx, table)
+    rows = sorted(table, key=lambda r: (r["method"], r["tiles"], r["seed"]))
+    write_csv_table(rows, COLS, ctx.out_dir / "mapping_cost.csv")
+    tcols = ["method", "tiles", "seed"] + [f"cpu_ms_median_tile{k}" for k in (1, 4, 16, 64)]
+    ser = {(r["method"], r["tiles"], r["seed"]): ctx.arrays(r) for r in rows}
     fig, ax = plt.subplots(1, 2, figsize=(13, 4.2))
     bins = np.linspace(0, max(np.percentile(v["cpu_ms"][WARMUP:], 99.5) for v in ser.values()) * 1.1, 60)
-    for (n, s), v in sorted(ser.items()):
+    for (k, n, s), v in sorted(ser.items()):
         ax[0].hist(v["cpu_ms"][WARMUP:], bins=bins, histtype="step", lw=1.5, density=True,
-                   label=f"{n * n}x area (seed {s}, {len(v['cpu_ms'])} scans)")
-    ax[0].set_xlabel("GPISMap2D.update CPU time per scan (ms)")
-    ax[0].set_ylabel("density")
+                   label=f"{k}, {n * n}x area (seed {s}, {len(v['cpu_ms'])} scans)")
+    ax[0].set(xlabel="update CPU time per scan (ms)", ylabel="density", title="update time per scan")
     ax[0].legend(fontsize=8)
-    ax[0].set_title("update time per scan")
-    big = max(ser)
-    v = ser[big]
+    v = ser[max(ser, key=lambda t: t[1])]
     x = np.arange(WARMUP, len(v["cpu_ms"]))
     ax[1].plot(x, v["cpu_ms"][WARMUP:], ".", ms=1.5, alpha=0.5, label="per scan")
-    k = 51
-    if len(x) > k:
-        med = np.array([np.median(v["cpu_ms"][max(WARMUP, i - k // 2): i + k // 2 + 1]) for i in x])
-        ax[1].plot(x, med, "-", c="k", lw=1.2, label=f"running median ({k} scans)")
+    if len(x) > 51:
+        ax[1].plot(x, [np.median(v["cpu_ms"][max(WARMUP, i - 25): i + 26]) for i in x], "-", c="k", lw=1.2,
+                   label="running median (51 scans)")
     ax2 = ax[1].twinx()
     ax2.plot(x, v["samples"][WARMUP:], "-", c="tab:red", lw=1, label="surface samples in the map")
-    ax2.set_ylabel("samples", color="tab:red")
-    ax[1].set_xlabel(f"scan index ({big[0] * big[0]}x world, the map grows along the drive)")
-    ax[1].set_ylabel("CPU ms")
-    ax[1].set_ylim(0, np.percentile(v["cpu_ms"][WARMUP:], 99.5) * 1.2)
+    ax2.set_ylabel("samples in the map", color="tab:red")
+    ax[1].set(xlabel="scan index (largest world; the map grows along the drive)", ylabel="CPU ms",
+              ylim=(0, np.percentile(v["cpu_ms"][WARMUP:], 99.5) * 1.2), title="update time as the map grows")
     ax[1].legend(loc="upper left", fontsize=8)
-    ax[1].set_title("update time as the map grows")
-    fig_line = savefig(fig, out_dir, "structure_mapping_cost")
     return "\n".join([
-        "Per-scan `GPISMap2D.update` time (ms; CPU = process time, wall = perf_counter; first 5 scans left out). "
-        "`load`: 1-minute load average at the end of the trial.", "", markdown_table(rows, cols), "",
-        "Median CPU time of the scans taken in the k-th tile visited (the map then holds k tiles = k x the "
-        "office2d area):", "", markdown_table(rows, tcols), "", "Table: `mapping_cost.csv`.", "", fig_line])
+        "Per-scan update time (ms; CPU = process time, wall = perf_counter; first 5 scans left out). `load`: 1-minute "
+        "load average at the end of the trial.", "", markdown_table(rows, COLS), "",
+        "Median CPU time of the scans taken in the k-th tile visited (the map then holds k tiles):", "",
+        markdown_table(rows, tcols), "", "Table: `mapping_cost.csv`.", "", savefig(fig, ctx.out_dir, "structure_mapping_cost")])
 
 
 EXPERIMENT = Experiment(
     name="mapping_cost",
-    description="issue 4: GPIS update time per scan and its (in)dependence on map size, tiled office worlds 1x-64x",
-    grid={"tiles": [1, 2, 4, 8]},
-    splits={"dev": {"seeds": [0]}},
+    description="update time per scan and its (in)dependence on map size, tiled office worlds 1x-64x",
+    grid={"tiles": [1, 2, 4, 8], "method": ["gpis"]},
+    methods={"method": "mapper2d"},
+    splits={"dev": {"seeds": [0]}, "test": {"seeds": [10_000]}},
     sizes={"quick": {"n_seeds": 1, "grid": {"tiles": [1, 2]}}, "full": {}},
-    trial=trial,
-    summarize=summarize,
-    checks=checks,
+    trial=trial, summarize=summarize, checks=checks, findings=findings,
 )

@@ -1,171 +1,130 @@
-"""tracking_segmentation: 2D target segmentation of the tracker, and the hand under touch.
+"""tracking_segmentation: 2D target segmentation, the hand under touch, and the calibration of P(target).
 
-Issue 6, item 4: 2D segmentation success by IoU (thesis Fig. 5.7: the fraction of frames whose mask
-IoU with the truth exceeds a threshold, headline 0.5) for the colour baseline ``h`` and the four
-feature variants, on the 16 ``tabletop`` sequences (seed 0, 640x480, noisy depth); and the direct
-measure of "occlusion by touch": the fraction of hand pixels the tracker labels as target while the
-hand touches (or holds) the object. The shape-only tracker (appearance term off) is run beside them
-as the reference for what the learned appearance adds.
-
-The mask scored is ``TrackResult.mask`` (O = 1 plus undecided pixels without depth inside the
-registered silhouette that the appearance model calls target); the truth is the rendered visible
-mask. A frame where the tracker is lost has an empty mask. Hand pixels are counted within 15 px
-(at 640 wide) of the object's full silhouette, so a large hand elsewhere in the image does not
-dilute the figure; they are pooled over every frame in which the hand touches the object.
-
-These runs are the same as ``tracking_variants``' (memoised: see ``_tracking_common.track``).
-The CI size (``--quick``) uses the same 320x240 cuts of ``mug_touch`` and ``drill_lift``.
+Segmentation success by IoU (thesis Fig. 5.7: the fraction of frames whose mask IoU with the truth
+exceeds a threshold, headline 0.5) for the colour baseline ``h``, the four feature variants and the
+shape-only reference (appearance term off); the direct measure of "occlusion by touch": the
+fraction of hand pixels (within 15 px of the object's full silhouette, at 640 wide) labelled target
+while the hand touches it; and the calibration of ``TrackResult.prob``, P(target), against the true
+visible mask over the ROI pixels: expected calibration error (15 bins) and a reliability diagram,
+for the calibrated map and for the raw prediction map (``prob_raw``). The calibration is learned
+from the tracker's own labels, never from truth. These runs are ``tracking_variants``' (memoised).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.runner import Check, Experiment
+from polar_sim import metrics
+from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
 try:  # the registry imports this module as polar_sim.experiments.tracking_segmentation
     from polar_sim.experiments import _tracking_common as C
+    from polar_sim.experiments import _tracking_pictures as pictures
 except ImportError:  # pragma: no cover
     import _tracking_common as C
+    import _tracking_pictures as pictures
 
-VARIANT_ORDER = ["h", "su", "sw", "wu", "ww"]
-ORDER = VARIANT_ORDER + ["shape-only"]
-#: Hand-pixel target of issue 6, while touching.
-HAND_MAX = 0.05
+ORDER = C.VARIANTS + ["shape-only"]
+HAND_MAX, ECE_MAX = 0.05, 0.05
 
 
 def trial(params, seed, ctx):
-    a, meta = C.track(params["sequence"], seed, params["variant"], quick=ctx.quick)
-    C.save_frames(ctx, params["sequence"], params["variant"], a, meta)
+    a, meta = C.track(params["sequence"], seed, params["method"], quick=ctx.quick)
+    C.trial_arrays(ctx, a, meta)
     return C.summarize_run(a, meta)
 
 
-def _seg_rows(table):
-    rows = []
-    for v in ORDER:
-        rs = C.by(table, "variant", v)
-        if not rs:
-            continue
-        hn = sum(r["hand_px_touch"] for r in rs)
-        ht = sum(r["hand_tgt_px_touch"] for r in rs)
-        worst = max((r for r in rs if r["hand_px_touch"]), key=lambda r: r["hand_as_target"] or 0.0, default=None)
-        rows.append({"variant": v, "sequences": len(rs), "frames": int(sum(r["frames"] for r in rs)),
-                     "iou_ok": C.pooled(rs, "iou_ok"), "iou_ok_seqmean": float(np.mean([r["iou_ok"] for r in rs])),
-                     "iou_ok_seqmin": float(np.min([r["iou_ok"] for r in rs])),
-                     "iou_mean": C.pooled(rs, "iou_mean"), "iou_auc": C.pooled(rs, "iou_auc"),
-                     "precision": C.pooled(rs, "precision"), "recall": C.pooled(rs, "recall"),
-                     "touch_frames": int(sum(r["touch_frames"] for r in rs)), "hand_px": int(hn),
-                     "hand_as_target": ht / hn if hn else float("nan"),
-                     "hand_worst_seq": f"{worst['sequence']} {100 * worst['hand_as_target']:.1f} %" if worst else "",
-                     "occl_iou_ok": C.pooled(rs, "occl_iou_ok", "occl_frames"), "lost": int(sum(r["lost"] for r in rs))})
-    return rows
+def _bins(rows, ctx, key):
+    return np.sum([ctx.arrays(r)[key].sum(axis=0) for r in rows], axis=0)
+
+
+def _rows(table, ctx):
+    out = []
+    for r in C.rate_rows(table, "method", ORDER):
+        rs = C.by(table, "method", r["method"])
+        worst = max((x for x in rs if x["hand_px_touch"]), key=lambda x: x["hand_as_target"], default=None)
+        out.append({**{k: r[k] for k in ("method", "sequences", "frames", "iou_ok", "iou_mean", "occl_frames",
+                                         "occl_iou_ok", "hand_as_target")},
+                    "precision": C.pooled(rs, "precision"), "recall": C.pooled(rs, "recall"),
+                    "hand_worst": f"{worst['sequence']} {100 * worst['hand_as_target']:.1f} %" if worst else "",
+                    "ece": C.pooled_ece(_bins(rs, ctx, "cal_bins")), "ece_raw": C.pooled_ece(_bins(rs, ctx, "raw_bins"))})
+    return out
 
 
 def summarize(table, ctx):
-    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    frames = C.load_frames(out_dir)
-    rows = _seg_rows(table)
-    best = C.best_of(C.rate_rows(table, "variant", VARIANT_ORDER), "variant")
-    cols = ["variant", "sequences", "frames", "iou_ok", "iou_ok_seqmean", "iou_ok_seqmin", "iou_mean", "iou_auc",
-            "precision", "recall", "occl_iou_ok", "touch_frames", "hand_px", "hand_as_target", "hand_worst_seq", "lost"]
-    write_csv_table(rows, cols, out_dir / "tracking_segmentation_table.csv")
-    size = f"{table[0]['width']}x{table[0]['height']}"
-    lines = [f"{len({r['sequence'] for r in table})} sequences at {size}, seed {sorted({r['seed'] for r in table})}. "
-             "`iou_ok`: IoU > 0.5 over all frames pooled (`_seqmean`, `_seqmin`: mean and lowest per-sequence rate); "
-             "`iou_auc`: mean of the IoU success curve over thresholds 0-1; precision and recall pooled over "
-             "pixels; `occl_iou_ok`: IoU > 0.5 on the frames where the hand touches the object and hides more "
-             f"than {100 * C.TOUCH_OCCLUSION:.0f} % of it; `hand_as_target`: hand pixels (within 15 px of the "
-             "object) labelled target, pooled over the frames in which the hand touches the object; "
-             "`hand_worst_seq`: the sequence where that fraction is highest. `shape-only` (appearance "
-             f"term off) is a reference, not a variant. Best variant (as in `tracking_variants`): **{best}**.", "",
-             markdown_table(rows, cols), ""]
-    # hand pixels per touching sequence
-    seqs = [s for s in C.SEQUENCE_ORDER if any(r["sequence"] == s and r["touch_frames"] for r in table)]
-    hrows = []
-    for s in seqs:
-        d = {"sequence": s, "touch_frames": C.by(table, "sequence", s)[0]["touch_frames"]}
-        for v in ORDER:
-            r = next((r for r in C.by(table, "sequence", s) if r["variant"] == v), None)
-            if r is not None:
-                d[v] = r["hand_as_target"]
-        hrows.append(d)
-    hcols = ["sequence", "touch_frames"] + [v for v in ORDER if any(v in h for h in hrows)]
-    write_csv_table(hrows, hcols, out_dir / "tracking_segmentation_hand.csv")
-    lines += ["### Hand pixels labelled target while touching, per sequence", "", markdown_table(hrows, hcols), ""]
-    irows = []
-    for s in [s for s in C.SEQUENCE_ORDER if any(r["sequence"] == s for r in table)]:
-        d = {"sequence": s}
-        for v in ORDER:
-            r = next((r for r in C.by(table, "sequence", s) if r["variant"] == v), None)
-            if r is not None:
-                d[f"iou_ok_{v}"], d[f"iou_mean_{v}"] = r["iou_ok"], r["iou_mean"]
-        irows.append(d)
-    icols = ["sequence"] + [f"iou_ok_{v}" for v in ORDER if any(f"iou_ok_{v}" in r for r in irows)]
-    write_csv_table(irows, icols + [f"iou_mean_{v}" for v in ORDER], out_dir / "tracking_segmentation_sequences.csv")
-    lines += ["### IoU > 0.5 per sequence", "", markdown_table(irows, icols), ""]
-    # figure: IoU success curves; hand fraction per sequence
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
-    tt = np.linspace(0, 1, 101)
-    for v in ORDER:
-        u = [f["iou"] for (s, c), f in frames.items() if c == v]
-        if u:
-            u = np.concatenate(u)
-            axes[0].plot(tt, [(u > t).mean() for t in tt], label=v, ls="--" if v == "shape-only" else "-")
-    axes[0].axvline(0.5, color="k", lw=0.6, ls=":")
-    axes[0].set(xlabel="IoU threshold", ylabel="fraction of frames with IoU > threshold",
-                title="2D segmentation success, all frames")
-    axes[0].legend(fontsize=8)
-    axes[0].grid(alpha=0.3)
-    ax = axes[1]
-    wid = 0.8 / len(ORDER)
+    head = C.group(table, ctx.split)
+    rows = _rows(head, ctx)
+    cols = list(rows[0])
+    write_csv_table(rows, cols, ctx.out_dir / "tracking_segmentation_table.csv")
+    seqs = list(dict.fromkeys(r["sequence"] for r in table))
+    hrows = [{"sequence": s, "touch_frames": C.by(table, "sequence", s)[0]["touch_frames"],
+              **{r["method"]: r["hand_as_target"] for r in C.by(table, "sequence", s)},
+              **{f"ece_{r['method']}": r["ece"] for r in C.by(table, "sequence", s)}} for s in seqs]
+    hcols = ["sequence", "touch_frames"] + [v for v in ORDER if v in hrows[0]] + ["ece_ww"]
+    write_csv_table(hrows, hcols, ctx.out_dir / "tracking_segmentation_sequences.csv")
+    lines = [f"Split **{ctx.split}**, pooled over {len({r['sequence'] for r in head})} sequences. `iou_ok`: IoU > 0.5; "
+             f"`occl_iou_ok`: the same on the frames of occlusion by touch (the hand touches the object and hides "
+             f"more than {100 * C.TOUCH_OCCLUSION:.0f} % of it); `hand_as_target`: hand pixels labelled target while "
+             "touching; `ece`: expected calibration error (15 bins) of P(target) over the ROI pixels against the "
+             "true visible mask, `ece_raw` the same for the uncalibrated prediction map. `shape-only` is a "
+             "reference, not a variant.", "", markdown_table(rows, cols), "",
+             "### Hand labelled target while touching, and ECE, per sequence", "", markdown_table(hrows, hcols), ""]
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.4))
+    pictures.success_curves(head, ctx, ORDER, ax_iou=ax[0])
+    w = 0.8 / len(ORDER)
     for k, v in enumerate(ORDER):
-        vals = [100 * (h.get(v) if h.get(v) is not None else np.nan) for h in hrows]
-        ax.bar(np.arange(len(hrows)) + (k - len(ORDER) / 2 + 0.5) * wid, vals, wid, label=v)
-    ax.axhline(100 * HAND_MAX, color="k", lw=0.8, ls=":")
-    ax.set_xticks(range(len(hrows)), [h["sequence"] for h in hrows], rotation=60, ha="right", fontsize=7)
-    ax.set(ylabel="% of hand pixels labelled target", title="hand labelled target while touching")
-    ax.legend(fontsize=7, ncol=2)
-    ax.grid(alpha=0.3, axis="y")
+        ax[1].bar(np.arange(len(hrows)) + (k - len(ORDER) / 2 + 0.5) * w, [100 * (h.get(v) or np.nan) for h in hrows],
+                  w, label=v)
+    ax[1].axhline(100 * HAND_MAX, color="k", lw=0.8, ls=":")
+    ax[1].set_xticks(range(len(hrows)), [h["sequence"] for h in hrows], rotation=70, ha="right", fontsize=6)
+    ax[1].set(ylabel="% of hand pixels labelled target", title="the hand while touching")
+    ax[1].legend(fontsize=7, ncol=2)
+    ww = C.by(head, "method", "ww")
+
+    def rel(key):
+        b = _bins(ww, ctx, key)
+        with np.errstate(invalid="ignore"):
+            return metrics.Reliability(np.linspace(0, 1, C.N_BINS + 1), b[0].astype(np.int64), b[1] / b[0], b[2] / b[0],
+                                       C.pooled_ece(b), float("nan"), int(b[0].sum()))
+    metrics.plot_reliability([rel("cal_bins"), rel("raw_bins")], ["P(target), calibrated", "raw prediction map"],
+                             ax=ax[2], title=f"ww, ROI pixels ({ctx.split})")
     fig.tight_layout()
-    lines += [savefig(fig, out_dir, "tracking_segmentation"), "",
-              "Tables: `tracking_segmentation_table.csv`, `tracking_segmentation_hand.csv`, "
-              "`tracking_segmentation_sequences.csv`."]
-    return "\n".join(lines)
+    return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_segmentation")])
 
 
 def checks(table, ctx):
-    quick = ctx.quick
-    rows = {r["variant"]: r for r in _seg_rows(table)}
-    best = C.best_of(C.rate_rows(table, "variant", VARIANT_ORDER), "variant")
-    b = rows[best]
-    worst_v = max(VARIANT_ORDER, key=lambda v: rows[v]["hand_as_target"] if v in rows else -1)
-    return [
-        Check(f"best variant ({best}): IoU > 0.5 on >= 95 % of frames (pooled and per-sequence mean)",
-              b["iou_ok"] >= 0.95 and b["iou_ok_seqmean"] >= 0.95,
-              f"pooled {100 * b['iou_ok']:.1f} %, per-sequence mean {100 * b['iou_ok_seqmean']:.1f} %, "
-              f"lowest sequence {100 * b['iou_ok_seqmin']:.1f} %"),
-        Check(f"best variant ({best}): <= 5 % of hand pixels labelled target while touching",
-              b["hand_as_target"] <= HAND_MAX,
-              f"{100 * b['hand_as_target']:.2f} % of {b['hand_px']} hand pixels over {b['touch_frames']} touching "
-              f"frames (worst sequence {b['hand_worst_seq']}); highest variant {worst_v} "
-              f"{100 * rows[worst_v]['hand_as_target']:.2f} %"),
-    ]
+    r = next(x for x in _rows(C.group(table, ctx.split), ctx) if x["method"] == "ww")
+    return [Check("ww: IoU > 0.5 on >= 95 % of frames", r["iou_ok"] >= 0.95, f"{100 * r['iou_ok']:.1f} %"),
+            Check("ww: <= 5 % of hand pixels labelled target while touching", r["hand_as_target"] <= HAND_MAX,
+                  f"{100 * r['hand_as_target']:.2f} % (worst sequence {r['hand_worst']})"),
+            Check("ww: ECE of P(target) <= 0.05 (ROI pixels, 15 bins)", r["ece"] <= ECE_MAX,
+                  f"{r['ece']:.3f} (raw prediction map {r['ece_raw']:.3f})")]
+
+
+def findings(table, ctx):
+    rows = {r["method"]: r for r in _rows(C.group(table, ctx.split), ctx)}
+    w, s = rows["ww"], rows.get("shape-only")
+    ours = (f"Ww under touch: IoU > 0.5 on {100 * w['occl_iou_ok']:.1f} % of {w['occl_frames']} frames, hand labelled "
+            f"target {100 * w['hand_as_target']:.1f} %" + (f" (shape only: {100 * s['occl_iou_ok']:.1f} %, "
+                                                            f"{100 * s['hand_as_target']:.1f} %)" if s else ""))
+    ok = w["occl_iou_ok"] >= 0.9 and w["hand_as_target"] <= HAND_MAX
+    return [Finding("Ch. 1-2, Ch. 5 (Fig. 5.7)", "accurate segmentation under occlusion by touch", ours,
+                    "held" if ok else "partly held", "a scripted simulated hand; IoU success at 0.5")]
 
 
 EXPERIMENT = Experiment(
     name="tracking_segmentation",
-    description="2D segmentation success by IoU of the appearance variants on the tabletop sequences, and the "
-                "hand pixels labelled target while touching",
-    grid={"sequence": list(C.SEQUENCE_ORDER), "variant": ORDER},
-    splits={"dev": {"seeds": [0]}},
-    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": list(C.QUICK_CUTS), "variant": ORDER}}, "full": {}},
-    trial=trial,
-    summarize=summarize,
-    checks=checks,
+    description="2D segmentation success by IoU, the hand labelled target under touch, and the calibration "
+                "(ECE, reliability) of P(target)",
+    grid={"sequence": C.DEV, "method": ORDER},
+    methods={"method": "tracker"},
+    splits=C.SPLITS,
+    sizes=C.SIZES,
+    trial=trial, summarize=summarize, checks=checks, findings=findings,
 )

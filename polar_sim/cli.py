@@ -1,7 +1,10 @@
 """``polar-sim``: the command line. It parses, calls the library and prints; nothing more.
 
-Heavy modules are imported inside each command. A ``PolarSimError`` or ``ValueError`` becomes
-exit code 1 with a one-line message.
+Heavy modules are imported inside each command. A ``ValueError``, ``TypeError``, ``OSError``
+(``FileNotFoundError`` included) or ``ImportError`` (a ``--policy MODULE:CALLABLE`` that does not
+import) becomes exit code 1 with a one-line message; argparse's usage errors exit 2. ``run`` and ``reproduce`` exit
+0 when every trial ran and no check regressed (recorded misses are reported, not failed), and 2
+otherwise; ``--strict`` also fails on recorded misses.
 """
 
 from __future__ import annotations
@@ -17,20 +20,59 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 def _cmd_list(args):
     from polar_sim.runner import get_experiment, list_experiments
+    from polar_sim.runner.methods import describe_methods
     from polar_sim.sim.scenes import describe_scene, list_scenes, scene_options
 
     print("scenes:")
     for s in list_scenes():
         opts = ", ".join(f"{k}={v!r}" for k, v in scene_options(s).items())
         print(f"  {s:<14} {describe_scene(s)}" + (f"  [options: {opts}]" if opts else ""))
-    print("experiments:")
+    print("experiments (polar-sim run NAME [--quick] [--split dev|test]):")
     for e in list_experiments():
-        print(f"  {e:<22} {get_experiment(e).description}")
+        exp = get_experiment(e)
+        print(f"  {e:<22} {exp.description}  [splits: {', '.join(exp.splits)}]")
+    print("environments (gym.make(ID) after `import polar_sim.envs`):")
+    for env_id, doc in _env_ids():
+        print(f"  {env_id:<30} {doc}")
+    methods = describe_methods()
+    if methods:
+        print("methods (--set method=NAME, or method=package.module:factory for your own):")
+        for kind, name, desc in methods:
+            print(f"  {kind:<12} {name:<14} {desc}")
     return 0
+
+
+def _env_ids():
+    """(id, first docstring line) of every registered polar_sim environment."""
+    import importlib
+
+    from polar_sim.envs import ENV_IDS
+
+    out = []
+    for env_id, spec in ENV_IDS.items():
+        entry = spec[0] if isinstance(spec, tuple) else spec
+        doc = ""
+        if isinstance(entry, str) and ":" in entry:
+            mod, _, attr = entry.partition(":")
+            try:
+                obj = getattr(importlib.import_module(mod), attr)
+                doc = (obj.__doc__ or "").strip().splitlines()[0] if obj.__doc__ else ""
+            except Exception:  # noqa: BLE001 - a listing must not fail on one broken env
+                doc = ""
+        out.append((env_id, doc))
+    return out
 
 
 def _cmd_render(args):
     from polar_sim.sim import World
+
+    _positive_int(args.width, "--width", 8192)
+    _positive_int(args.height, "--height", 8192)
+    if not 0 <= args.steps <= 1_000_000:
+        raise ValueError(f"--steps: expected an integer in [0, 1000000], got {args.steps}")
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
+    _out_dir(args.out)
     from polar_sim.sim.pictures import render_scene_pictures
 
     with World(args.scene, seed=args.seed) as w:
@@ -42,66 +84,141 @@ def _cmd_render(args):
     return 0
 
 
-def _parse_overrides(items):
+def _parse_value(text):
+    """A --set value: JSON if it parses, a bracketed list of bare words (``[office2d, gazebo1]``),
+    or the plain string."""
     import json
 
+    text = text.strip()
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        pass
+    if text.startswith("[") and text.endswith("]"):
+        inner = text[1:-1].strip()
+        return [] if not inner else [_parse_value(part) for part in inner.split(",")]
+    if text.startswith(("[", "{", '"')) or text.endswith(("]", "}")):
+        raise ValueError(f"--set: cannot parse {text!r}; use JSON (e.g. [1.0, 2.0]) or [a, b]")
+    return text
+
+
+def _parse_overrides(items):
     out = {}
     for item in items or []:
         if "=" not in item:
             raise ValueError(f"--set: expected KEY=VALUE, got {item!r}")
         k, v = item.split("=", 1)
-        try:
-            out[k] = json.loads(v)
-        except json.JSONDecodeError:
-            out[k] = v
+        if not k:
+            raise ValueError(f"--set: empty key in {item!r}")
+        out[k] = _parse_value(v)
     return out
+
+
+def _positive_int(value, name, maximum=None):
+    if value < 1 or (maximum is not None and value > maximum):
+        bound = f" and <= {maximum}" if maximum is not None else ""
+        raise ValueError(f"{name}: expected an integer >= 1{bound}, got {value}")
+    return value
+
+
+def _timeout(value, name="--trial-timeout"):
+    """None or a finite number of seconds > 0."""
+    import math
+
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name}: expected a finite number of seconds > 0, got {value}")
+    return value
+
+
+def _out_dir(path):
+    """Check that an --out folder can be created (a one-line error, not a traceback)."""
+    if "\x00" in str(path):
+        raise ValueError(f"--out: {str(path)[:200]!r} is not a folder path (it holds a NUL byte)")
+    p = Path(path).expanduser()
+    try:
+        if p.exists() and not p.is_dir():
+            raise ValueError(f"--out: {str(p)[:200]!r} exists and is not a folder")
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot create {str(p)[:200]!r}: {exc.strerror}") from None
+    return p
 
 
 def _print_checks(res):
     for c in res.checks:
-        print(f"  [{'pass' if c.passed else 'FAIL'}] {c.name}: {c.detail}")
+        print(f"  [{c.status}] {c.name}: {c.detail}")
+
+
+def _exit_code(results, strict):
+    """0: every trial ran and no check regressed; 2: a failure (or, with --strict, a miss)."""
+    ok = all((r.strict_passed if strict else r.passed) for r in results)
+    return 0 if ok else 2
 
 
 def _cmd_run(args):
     from polar_sim.runner import run_experiment
 
-    res = run_experiment(args.experiment, quick=args.quick, out=args.out, workers=args.workers,
-                         backend=args.backend, overrides=_parse_overrides(args.set))
-    print(f"{args.experiment}: {len(res.table)} trials, results in {res.out_dir}")
+    res = run_experiment(args.experiment, quick=args.quick, size=args.size, split=args.split, out=args.out,
+                         workers=_positive_int(args.workers, "--workers", 1024), backend=args.backend,
+                         address=args.address, overrides=_parse_overrides(args.set),
+                         trial_timeout=_timeout(args.trial_timeout))
+    print(f"{args.experiment}: {len(res.table)} trials ({res.config['split']} split, {res.config['size']} size), "
+          f"results in {res.out_dir}")
     _print_checks(res)
-    return 0 if res.passed else 2
+    return _exit_code([res], args.strict)
 
 
 def _cmd_reproduce(args):
-    from polar_sim.runner import list_experiments, run_experiment
-    from polar_sim.runner.report import build_report
+    from polar_sim.runner.reproduce import reproduce
 
-    root = Path(args.out)
-    results = []
-    names = args.only or list_experiments()
-    for name in names:
-        res = run_experiment(name, quick=args.quick, out=root / name, workers=args.workers, backend=args.backend)
-        print(f"{name}: {sum(c.passed for c in res.checks)}/{len(res.checks)} checks passed")
-        results.append(res)
-    report = build_report(results, root)
-    print(f"report: {report}")
-    return 0 if all(r.passed for r in results) else 2
+    results, report = reproduce(args.out, quick=args.quick, split=args.split, only=args.only,
+                                workers=_positive_int(args.workers, "--workers", 1024), backend=args.backend,
+                                address=args.address, trial_timeout=_timeout(args.trial_timeout))
+    for name, res in results.items():
+        c = [x.status for x in res.checks]
+        print(f"{name}: {c.count('pass')} met, {c.count('missed')} missed (recorded), {c.count('FAIL')} failed, "
+              f"{len(res.failures)} trial errors")
+    print(f"report: {report} (and {report.with_suffix('.html').name})")
+    return _exit_code(list(results.values()), args.strict)
+
+
+def _cmd_compare(args):
+    from polar_sim.runner.compare import compare_runs
+
+    _positive_int(args.n_boot, "--n-boot", 10_000_000)
+    out = compare_runs(args.run_a, args.run_b, by=args.by, metrics=args.metric, out=args.out,
+                       n_boot=args.n_boot, seed=args.seed)
+    print(out.read_text())
+    return 0
 
 
 def _cmd_demo(args):
     from polar_sim.demo import run_demo
 
-    return run_demo(Path(args.out), quick=True)
+    return run_demo(_out_dir(args.out), quick=True)
 
 
 def _cmd_eval(args):
     import json
 
-    import polar_sim  # noqa: F401  (registers the environment ids)
+    from polar_sim.envs import ENV_IDS, register_envs
     from polar_sim.envs.evaluate import evaluate
 
-    kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
-    out = args.out or f"polar_sim_out/eval/{args.env_id.replace('/', '_')}"
+    register_envs()
+    if args.env_id not in ENV_IDS:
+        raise ValueError(f"env_id: unknown environment {args.env_id!r}; valid: {', '.join(ENV_IDS)}")
+    _positive_int(args.episodes, "--episodes", 1_000_000)
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
+    try:
+        kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--env-kwargs: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ValueError("--env-kwargs: JSON nested too deeply") from None
+    if not isinstance(kwargs, dict):
+        raise ValueError(f"--env-kwargs: expected a JSON object like {{\"sdf_source\": \"truth\"}}, got {args.env_kwargs}")
+    out = str(_out_dir(args.out or f"polar_sim_out/eval/{args.env_id.replace('/', '_')}"))
     rows, summary = evaluate(args.env_id, args.policy, episodes=args.episodes, seed=args.seed,
                              env_kwargs=kwargs, out_dir=out)
     for k, v in summary.items():
@@ -153,25 +270,46 @@ def build_parser():
     s.add_argument("--height", type=int, default=480)
     s.set_defaults(func=_cmd_render)
 
+    def sweep_options(s):
+        s.add_argument("--split", default=None, help="dev (tuning) or test (held out; the default)")
+        s.add_argument("--workers", type=int, default=1, help="parallel trials (default 1)")
+        s.add_argument("--backend", choices=["local", "ray"], default="local")
+        s.add_argument("--address", default=None,
+                       help="Ray cluster to join with --backend ray ('auto', HOST:PORT); default $RAY_ADDRESS or a local one")
+        s.add_argument("--trial-timeout", type=float, default=None, metavar="S",
+                       help="stop a trial after S seconds and record it as failed")
+        s.add_argument("--strict", action="store_true", help="exit 2 on recorded misses too")
+
     s = sub.add_parser("run", help="run one experiment")
     s.add_argument("experiment")
-    s.add_argument("--quick", action="store_true", help="the small CI size")
+    s.add_argument("--quick", action="store_true", help="the small CI size (same as --size quick)")
+    s.add_argument("--size", default=None, help="a size the experiment declares: quick or full (default)")
     s.add_argument("--out", default=None, help="run folder (default polar_sim_out/runs/NAME/TIMESTAMP); reused to resume")
-    s.add_argument("--workers", type=int, default=1)
-    s.add_argument("--backend", choices=["local", "ray"], default="local")
-    s.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="override grid axes, e.g. --set spacing_m=[1.0]")
+    s.add_argument("--set", nargs="*", metavar="KEY=VALUE",
+                   help="override grid axes or seeds: --set spacing_m=[0.5,1.0] scene=[office2d] seed=3 "
+                        "method=mypkg.mymod:MyLocalizer")
+    sweep_options(s)
     s.set_defaults(func=_cmd_run)
 
-    s = sub.add_parser("reproduce", help="run every experiment and write one report")
-    s.add_argument("--quick", action="store_true")
+    s = sub.add_parser("reproduce", help="run every experiment and write one report (report.md, report.html)")
+    s.add_argument("--quick", action="store_true", help="the CI size of every experiment")
     s.add_argument("--out", default="polar_sim_out/reproduce")
-    s.add_argument("--workers", type=int, default=1)
-    s.add_argument("--backend", choices=["local", "ray"], default="local")
     s.add_argument("--only", nargs="*", help="a subset of experiments")
+    sweep_options(s)
     s.set_defaults(func=_cmd_reproduce)
 
+    s = sub.add_parser("compare", help="metric differences between two runs, with bootstrap confidence intervals")
+    s.add_argument("run_a", help="run folder A (holds results.csv)")
+    s.add_argument("run_b", help="run folder B")
+    s.add_argument("--by", nargs="*", default=None, help="group by these parameters (default: every parameter but seed)")
+    s.add_argument("--metric", nargs="*", default=None, help="metrics to compare (default: every numeric metric)")
+    s.add_argument("--out", default=None, help="folder for compare.md, compare.csv and compare.png (default RUN_B/compare)")
+    s.add_argument("--n-boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
+    s.add_argument("--seed", type=int, default=0, help="bootstrap seed")
+    s.set_defaults(func=_cmd_compare)
+
     s = sub.add_parser("eval", help="closed-loop evaluation of a policy in an environment")
-    s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v0")
+    s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v0 (polar-sim list shows them all)")
     s.add_argument("--policy", required=True, help="MODULE:CALLABLE (a class is instantiated) or 'random'")
     s.add_argument("--episodes", type=int, default=10)
     s.add_argument("--seed", type=int, default=10_000, help="seed of the first episode (default 10000: held out)")
@@ -190,8 +328,9 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"polar-sim: error: {exc}", file=sys.stderr)
+    except (ValueError, TypeError, OSError, ImportError) as exc:   # ImportError: a user's MODULE:CALLABLE
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"polar-sim: error: {msg[:500]}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("polar-sim: interrupted; finished trials are kept in results.csv", file=sys.stderr)

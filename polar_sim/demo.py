@@ -22,11 +22,15 @@ def demo_scenes(out: Path):
         with World(scene, seed=0) as w:
             for _ in range(10):
                 w.step(action)
-            render_scene_pictures(w, out, width=480, height=360)
+            paths = render_scene_pictures(w, out, width=480, height=360)
             s = w.lidar("lidar")
             t = w.truth()
+            n_ret = int(np.isfinite(s.ranges).sum())
+            why = (" (open terrain: most beams pass the 30 m range without a hit)" if scene == "rover_terrain"
+                   else "")
             lines.append(f"{scene}: robot at ({t['robot_pose2d'][0]:.1f}, {t['robot_pose2d'][1]:.1f}) m, "
-                         f"speed {t['robot_twist'][0]:.2f} m/s, lidar {np.isfinite(s.ranges).sum()}/{len(s.ranges)} returns")
+                         f"speed {t['robot_twist'][0]:.2f} m/s; 2D lidar: {n_ret} of {len(s.ranges)} beams "
+                         f"returned{why} ({', '.join(p.name for p in paths)})")
     return lines
 
 
@@ -74,8 +78,11 @@ def demo_gpis(out: Path):
         a.contour(X, Y, field.reshape(X.shape), levels=[0.0], colors="w", linewidths=0.8)
         a.plot(path[:, 0], path[:, 1], color="orange", lw=1.5)
         a.set_title(title)
+        a.set_xlabel("x [m]")
+        a.set_ylabel("y [m]")
         a.set_aspect("equal")
-    fig.colorbar(im, ax=ax, shrink=0.8, label="m")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="signed distance [m] (clipped to -0.5..2.5; white: zero level)")
+    fig.suptitle("office2d after 150 lidar scans (orange: the robot's path)")
     fig.savefig(out / "gpis_office2d.png", dpi=90, bbox_inches="tight")
     plt.close(fig)
     med = float(np.median(np.abs(d[near] - true[near])))
@@ -89,7 +96,6 @@ def demo_ground(out: Path):
     """Run monocular VO with scale from the ground on 80 frames of a flat route."""
     from polar_sim.ground import GroundVO
     from polar_sim.metrics.ground import classifier_iou
-    from polar_sim.sim.pictures import save_png
     from polar_sim.sim.rover_sequences import record_route
 
     rec = record_route("flat_00", max_frames=80, progress=False)
@@ -104,17 +110,48 @@ def demo_ground(out: Path):
             errs.append(e.speed_raw - float(speeds[i - 1]))
             ious.append(classifier_iou(e.ground_prob, f["ground_mask"]))
     last = rec[len(rec) - 1]
-    overlay = (0.5 * last["rgb"] + 0.5 * np.stack([255 * (1 - e.ground_prob), 255 * e.ground_prob,
-                                                   np.zeros_like(e.ground_prob)], -1)).astype(np.uint8)
-    save_png(out / "ground_prob.png", np.vstack([last["rgb"], overlay]))
+    _ground_figure(out / "ground_prob.png", last["rgb"], e.ground_prob, last["ground_mask"], len(rec) - 1)
     est = vo.trajectory()
     gt = rec.stack("T_world_cam")
     T0 = np.linalg.inv(gt[0])
     true_xyz = np.einsum("ij,njk->nik", T0, gt)[:, :3, 3]
     drift = float(np.linalg.norm(est[-1, :3, 3] - true_xyz[-1]))
     dist = float(np.sum(np.linalg.norm(np.diff(true_xyz, axis=0), axis=1)))
-    return [f"flat_00, 80 frames ({dist:.0f} m, accelerating from rest): raw speed error {np.mean(np.abs(errs)):.3f} m/s mean abs, "
-            f"ground IoU {np.mean(ious):.3f}, end drift {drift:.2f} m ({100 * drift / max(dist, 1e-9):.1f}%) (ground_prob.png)"]
+    return [f"flat_00, the first 80 frames ({dist:.0f} m, accelerating from rest): raw speed error "
+            f"{np.mean(np.abs(errs)):.3f} m/s mean abs, ground IoU {np.mean(ious):.3f}, end drift {drift:.2f} m "
+            f"({100 * drift / max(dist, 1e-9):.1f} % of the path; a short start-up cut: the filters converge over "
+            "the first frames, so this is not the KITTI 100-800 m figure of the README's Results) (ground_prob.png)"]
+
+
+def _ground_figure(path, rgb, prob, truth, index):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    from polar_sim.sim.pictures import save_figure
+
+    fig, ax = plt.subplots(1, 3, figsize=(16, 3.6))
+    ax[0].imshow(rgb)
+    ax[0].set_title(f"camera, frame {index}")
+    im = ax[1].imshow(prob, cmap="viridis", vmin=0, vmax=1)
+    ax[1].set_title("learned P(ground | colour)")
+    fig.colorbar(im, ax=ax[1], shrink=0.8, label="probability")
+    pred = prob > 0.5
+    agree = np.zeros(rgb.shape, np.uint8)
+    agree[pred & truth] = (60, 170, 60)
+    agree[pred & ~truth] = (220, 60, 50)
+    agree[~pred & truth] = (240, 200, 40)
+    ax[2].imshow(agree)
+    ax[2].set_title("P > 0.5 against the true ground mask")
+    ax[2].legend(handles=[Patch(color=np.array(c) / 255, label=t) for c, t in
+                          (((60, 170, 60), "ground, found"), ((220, 60, 50), "not ground, called ground"),
+                           ((240, 200, 40), "ground, missed"))], fontsize=7, loc="upper right")
+    for a in ax:
+        a.set_xlabel("u [px]")
+        a.set_ylabel("v [px]")
+    save_figure(fig, path)
 
 
 def demo_tracking(out: Path):
@@ -125,7 +162,6 @@ def demo_tracking(out: Path):
 
     from polar_sim import metrics
     from polar_sim.sim import objects
-    from polar_sim.sim.pictures import save_png
     from polar_sim.sim.tabletop_sequences import record_sequence
     from polar_sim.tracking import ObjectTracker
 
@@ -152,13 +188,38 @@ def demo_tracking(out: Path):
     hand = metrics.occluder_as_target(np.stack(masks), np.stack(hands), within=np.stack(near))
     add = metrics.add(np.asarray(P, float), G[start:end], np.stack(poses))
     d = metrics.object_diameter(np.asarray(P, float))
-    tint = f["rgb"].copy()
-    tint[r.mask] = (0.5 * tint[r.mask] + [0, 0, 127]).astype(np.uint8)
-    save_png(out / "tracking_mug.png", np.hstack([f["rgb"], tint]))
-    return [f"tabletop mug_touch, {end - start} frames under the hand: ADD < 0.1 d on "
+    _tracking_figure(out / "tracking_mug.png", f, r, end - 1)
+    return [f"tabletop mug_touch, frames {start}-{end - 1} as the hand comes down on the mug: ADD < 0.1 d on "
             f"{100 * metrics.add_success(add, d, 0.1):.0f}% of frames (mean {1000 * add.mean():.1f} mm), "
             f"IoU > 0.5 on {100 * metrics.iou_success(np.array(ious), 0.5):.0f}%, hand pixels as target "
             f"{100 * hand:.1f}% (tracking_mug.png)"]
+
+
+def _tracking_figure(path, f, r, index):
+    import cv2
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    from polar_sim.sim.pictures import save_figure
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
+    ax[0].imshow(f["rgb"])
+    ax[0].set_title(f"camera, frame {index} (the hand touches the mug)")
+    tint = f["rgb"].copy()
+    tint[r.mask] = (0.45 * tint[r.mask] + [0, 0, 140]).astype(np.uint8)
+    edge = cv2.morphologyEx(f["mask_visible"].astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+    tint[edge] = (255, 255, 0)
+    ax[1].imshow(tint)
+    ax[1].set_title("tracker's segmentation against the truth")
+    ax[1].legend(handles=[Patch(color=(0.2, 0.2, 0.7), label="tracker mask"),
+                          Patch(color=(1, 1, 0), label="true visible outline")], fontsize=8, loc="lower right")
+    for a in ax:
+        a.set_xlabel("u [px]")
+        a.set_ylabel("v [px]")
+    save_figure(fig, path)
 
 
 def demo_env(out: Path):
@@ -167,7 +228,6 @@ def demo_env(out: Path):
 
     import polar_sim  # noqa: F401  (registers the ids)
     from polar_sim.envs.policies import SDFNavigator
-    from polar_sim.sim.pictures import save_png
 
     env = gym.make("polar_sim/GPISNav-v0", sdf_source="gpis", render_mode="rgb_array", rooms=2, room_size=4.0,
                    clutter=3)
@@ -178,7 +238,10 @@ def demo_env(out: Path):
     while not done:
         obs, r, term, trunc, info = env.step(pol(obs))
         done, n = term or trunc, n + 1
-    save_png(out / "env_gpisnav.png", env.render())
+    from polar_sim.sim.pictures import image_figure, save_figure
+
+    save_figure(image_figure(env.render(), f"GPISNav-v0 after {n} steps: the navigator on the online GPIS map"),
+                out / "env_gpisnav.png")
     env.close()
     return [f"GPISNav-v0 (gpis map): goal {start:.1f} m away, {'reached' if info['is_success'] else 'not reached'} "
             f"in {n} steps, path {info['path_length']:.1f} m, collision {info['collision']} (env_gpisnav.png)"]

@@ -18,6 +18,12 @@ from pathlib import Path
 __all__ = ["check_destination", "check_source", "atomic_write"]
 
 
+def _show(p) -> str:
+    """A path for an error message: at most 200 characters (paths can be 4,096 bytes long)."""
+    s = str(p)
+    return repr(s) if len(s) <= 200 else repr(s[:120] + "..." + s[-60:])
+
+
 def check_destination(path, name: str = "path") -> Path:
     """``path`` as a :class:`~pathlib.Path` that a save may create or replace.
 
@@ -27,18 +33,21 @@ def check_destination(path, name: str = "path") -> Path:
     """
     if isinstance(path, (bool, int)) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name}: expected a str or os.PathLike file path, got {type(path).__name__}")
-    p = Path(os.fspath(path)).expanduser()
+    try:
+        p = Path(os.fspath(path)).expanduser()
+    except (TypeError, RuntimeError) as exc:      # bytes paths; "~user" with no such user
+        raise ValueError(f"{name}: {path!r} is not a usable file path ({exc})") from None
     if not str(p) or str(p) == "." or "\x00" in str(p):
-        raise ValueError(f"{name}: {str(path)!r} is not a file path")
+        raise ValueError(f"{name}: {_show(path)} is not a file path")
     try:
         st = p.stat()
     except FileNotFoundError:
         return p
     except OSError as exc:
-        raise ValueError(f"{name}: cannot use {str(p)!r}: {exc.strerror}") from None
+        raise ValueError(f"{name}: cannot use {_show(p)}: {exc.strerror}") from None
     if not stat.S_ISREG(st.st_mode):
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-        raise ValueError(f"{name}: {str(p)!r} is {kind}; a save replaces only regular files")
+        raise ValueError(f"{name}: {_show(p)} is {kind}; a save replaces only regular files")
     return p
 
 
@@ -50,17 +59,20 @@ def check_source(path, name: str = "path") -> Path:
     """
     if isinstance(path, (bool, int)) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name}: expected a str or os.PathLike file path, got {type(path).__name__}")
-    p = Path(os.fspath(path)).expanduser()
+    try:
+        p = Path(os.fspath(path)).expanduser()
+    except (TypeError, RuntimeError) as exc:
+        raise ValueError(f"{name}: {path!r} is not a usable file path ({exc})") from None
     if "\x00" in str(p):
-        raise ValueError(f"{name}: {str(path)!r} is not a file path")
+        raise ValueError(f"{name}: {_show(path)} is not a file path")
     try:
         st = p.stat()
     except FileNotFoundError:
-        raise FileNotFoundError(f"{name}: {str(p)!r} does not exist") from None
+        raise FileNotFoundError(f"{name}: {_show(p)} does not exist") from None
     except OSError as exc:
-        raise ValueError(f"{name}: cannot read {str(p)!r}: {exc.strerror}") from None
+        raise ValueError(f"{name}: cannot read {_show(p)}: {exc.strerror}") from None
     if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{name}: {str(p)!r} is not a regular file")
+        raise ValueError(f"{name}: {_show(p)} is not a regular file")
     return p
 
 
@@ -75,11 +87,11 @@ def atomic_write(path, name: str = "path", mode: str = "wb"):
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ValueError(f"{name}: cannot create the folder of {str(p)!r}: {exc.strerror}") from None
+        raise ValueError(f"{name}: cannot create the folder of {_show(p)}: {exc.strerror}") from None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:80]}.", suffix=".tmp", dir=p.parent)
     except OSError as exc:
-        raise ValueError(f"{name}: cannot write in {str(p.parent)!r}: {exc.strerror}") from None
+        raise ValueError(f"{name}: cannot write in {_show(p.parent)}: {exc.strerror}") from None
     try:
         with os.fdopen(fd, mode) as fh:
             yield fh

@@ -7,15 +7,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import pytest  # noqa: E402
 
-FULL = os.environ.get("POLAR_SIM_FULL", "") == "1"
-
-
-def size(full, reduced):
-    """Problem size for a slow end-to-end test: ``full`` with POLAR_SIM_FULL=1, else ``reduced``.
-
-    CI runs every slow test at its reduced size; nothing is skipped.
-    """
-    return full if FULL else reduced
+from ci_sizes import FULL, size  # noqa: E402,F401
 
 
 @pytest.fixture

@@ -3,6 +3,7 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from polar_sim.cli import main
@@ -34,11 +35,96 @@ def test_errors_one_line(capsys):
 def test_render(tmp_path):
     assert main(["render", "office2d", "--out", str(tmp_path), "--width", "160", "--height", "120"]) == 0
     names = {p.name for p in tmp_path.glob("*.png")}
-    assert {"office2d_front_rgb.png", "office2d_front_depth.png", "office2d_front_labels.png",
-            "office2d_overview.png"} <= names
+    assert {"office2d_front.png", "office2d_overview.png"} == names
 
 
 # run --quick executes an experiment and reports its checks.
 def test_run_quick(tmp_path):
     assert main(["run", "sensors", "--quick", "--out", str(tmp_path), "--set", "scene=office2d"]) == 0
     assert (tmp_path / "summary.md").is_file() and (tmp_path / "results.csv").is_file()
+
+
+# list names the environment ids too.
+def test_list_names_envs(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "polar_sim/GPISNav-v0" in out and "environments" in out
+
+
+# --set parses bare-word lists, JSON and plain strings, and rejects half-written JSON at once.
+def test_set_parsing():
+    from polar_sim.cli import _parse_overrides
+
+    got = _parse_overrides(["scene=[office2d, rover_flat]", "spacing_m=[0.5,1.0]", "seed=3", "method=pkg.mod:Loc",
+                            "flag=true", "name=plain"])
+    assert got == {"scene": ["office2d", "rover_flat"], "spacing_m": [0.5, 1.0], "seed": 3,
+                   "method": "pkg.mod:Loc", "flag": True, "name": "plain"}
+    with pytest.raises(ValueError, match="--set"):
+        _parse_overrides(["x={bad"])
+    with pytest.raises(ValueError, match="KEY=VALUE"):
+        _parse_overrides(["novalue"])
+
+
+# The slips a new user makes end in one-line errors, never tracebacks.
+@pytest.mark.parametrize("argv, match", [
+    (["eval", "polar_sim/Nope-v0", "--policy", "random"], "unknown environment"),
+    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", "0"], "--episodes"),
+    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "[1]"], "--env-kwargs"),
+    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "{bad"], "--env-kwargs"),
+    (["render", "office2d", "--width", "0"], "--width"),
+    (["demo", "--out", "/dev/null/x"], "--out"),
+    (["render", "office2d", "--out", "/tmp/" + "x" * 5000], "--out"),
+    (["run", "sensors", "--quick", "--split", "train"], "valid: dev"),
+    (["run", "sensors", "--quick", "--set", "bogus=1"], "valid:"),
+    (["run", "sensors", "--quick", "--workers", "0"], "--workers"),
+    (["compare", "/nonexistent/a", "/nonexistent/b"], "run_a"),
+])
+def test_cli_slips(argv, match, capsys):
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("polar-sim: error:") and match in err and err.count("\n") == 1, err
+
+
+# compare: two runs of the same toy sweep give per-metric differences with bootstrap intervals.
+def test_compare(tmp_path):
+    from polar_sim.runner.compare import bootstrap_difference, compare_runs
+    from polar_sim.runner.results import ResultsFile, trial_key
+
+    for run, shift in (("a", 0.0), ("b", 1.0)):
+        rf = ResultsFile(tmp_path / run / "results.csv")
+        for seed in range(8):
+            rf.append({"m": "x", "seed": seed, "status": "ok", "trial_key": trial_key({"m": "x"}, seed),
+                       "err": seed * 0.1 + shift})
+    md = compare_runs(tmp_path / "a", tmp_path / "b", out=tmp_path / "cmp")
+    import csv
+
+    with open(tmp_path / "cmp" / "compare.csv") as fh:
+        (r,) = [r for r in csv.DictReader(fh) if r["metric"] == "err"]
+    r = {k: (float(v) if k.startswith(("diff", "ci95")) else v) for k, v in r.items()}
+    assert r["diff_b_minus_a"] == pytest.approx(1.0) and r["paired"] == "True"
+    assert r["ci95_low"] == pytest.approx(1.0) and r["ci95_high"] == pytest.approx(1.0)   # constant shift
+    assert (tmp_path / "cmp" / "compare.png").is_file() and "err" in md.read_text()
+    # an unpaired difference of means with noise covers the true shift
+    rng = np.random.default_rng(0)
+    d, lo, hi = bootstrap_difference(rng.normal(0, 1, 400), rng.normal(0.5, 1, 300), paired=False)
+    assert lo < 0.5 < hi and lo > 0
+
+
+# reproduce writes report.md and report.html with provenance, the experiments table and each summary.
+def test_reproduce_report(tmp_path):
+    assert main(["reproduce", "--quick", "--only", "sensors", "--out", str(tmp_path)]) == 0
+    md = (tmp_path / "report.md").read_text()
+    assert "## Provenance" in md and "## Findings" in md and "| sensors | dev" in md
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("<table>") >= 2 and "<h2>Provenance</h2>" in html
+
+
+# The HTML report inlines PNG figures and keeps escaped pipes inside cells.
+def test_markdown_to_html_inlines_images(tmp_path):
+    import cv2
+
+    from polar_sim.runner.reproduce import markdown_to_html
+
+    cv2.imwrite(str(tmp_path / "fig.png"), np.zeros((4, 4, 3), np.uint8))
+    html = markdown_to_html("# T\n\n![fig](fig.png)\n\n| a | b |\n|---|---|\n| x \\| y | 2 |\n", base=tmp_path)
+    assert "data:image/png;base64," in html and "<td>x | y</td>" in html

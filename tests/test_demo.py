@@ -10,5 +10,6 @@ from polar_sim.demo import DEMOS, run_demo
 def test_demo_runs(tmp_path):
     assert run_demo(tmp_path) == 0
     names = {p.name for p in tmp_path.glob("*.png")}
-    assert {"gpis_office2d.png", "ground_prob.png", "tracking_mug.png", "env_gpisnav.png", "office2d_front_rgb.png"} <= names
+    assert {"gpis_office2d.png", "ground_prob.png", "tracking_mug.png", "env_gpisnav.png", "office2d_front.png",
+            "office2d_overview.png", "rover_terrain_front.png", "rover_terrain_overview.png"} == names
     assert len(DEMOS) >= 4

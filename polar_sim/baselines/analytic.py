@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim._validation import _as_float_array, as_angles, as_intrinsics, as_points, as_pose, as_pose2d
-from polar_sim.baselines._common import as_sensor_offset, transform2d
+from polar_sim.registration import as_sensor_offset, transform2d
 from polar_sim.geometry import pose2d_to_T
 
 __all__ = ["RoomSDF2D", "RoomSDF3D"]

@@ -15,17 +15,20 @@ from polar_sim._validation import (
     check_choice,
     check_updated,
 )
-from polar_sim.baselines._common import (
-    ResetMixin,
+from polar_sim.baselines._common import ResetMixin
+from polar_sim.baselines.discrete_sdf import DiscreteSDF2D
+from polar_sim.geometry import matrix_to_pose2d, pose2d_to_matrix, so3_log
+from polar_sim.registration import (
     arc_length_subsample,
     as_scan2d,
     as_sensor_offset,
     beam_points,
+    kabsch,
+    point_to_point_covariance,
+    register_sdf,
     scan3d_points,
     valid_beams,
 )
-from polar_sim.baselines.discrete_sdf import DiscreteSDF2D
-from polar_sim.geometry import hat, pose2d_to_matrix, matrix_to_pose2d, so3_log
 
 __all__ = ["ICPLocalizer"]
 
@@ -37,7 +40,8 @@ class ICPLocalizer(ResetMixin):
 
     - ``method="sdf"`` ("ICP-D"): Gauss-Newton on a discrete signed distance field, each end point
       pulled along the EDT gradient by its distance. This is exactly ICP-G
-      (:func:`polar_sim.gpis.localize.localize`) run on a :class:`DiscreteSDF2D` instead of a GPIS.
+      (:func:`polar_sim.registration.register_sdf`, which ``polar_sim.gpis.localize.localize``
+      is) run on a :class:`DiscreteSDF2D` instead of a GPIS.
     - ``method="point"``: classic point-to-point ICP (Besl & McKay): nearest map points from a
       KD-tree, pairs farther than ``max_correspondence_distance`` rejected, closed-form (SVD)
       alignment, repeated until the update is below ``tolerance``.
@@ -128,7 +132,7 @@ class ICPLocalizer(ResetMixin):
         return self
 
     def localize(self, scan, initial_pose):
-        """Register one scan; same scan forms, outputs and statuses as :func:`polar_sim.gpis.localize.localize`.
+        """Register one scan; same scan forms, outputs and statuses as :func:`polar_sim.registration.register_sdf`.
 
         Parameters
         ----------
@@ -144,9 +148,7 @@ class ICPLocalizer(ResetMixin):
         check_choice(self.method, _METHODS, "method")
         if self.method == "sdf":
             check_updated(self, "map_")
-            from polar_sim.gpis.localize import localize  # the shared Gauss-Newton on an SDF
-
-            return localize(
+            return register_sdf(
                 self.map_, scan, initial_pose, sensor_offset=self.sensor_offset, n_points=self.n_points,
                 max_iterations=self.max_iterations, tolerance=self.tolerance, min_range=self.min_range,
                 max_range=self.max_range, max_correction=self.max_correction,
@@ -198,7 +200,7 @@ class ICPLocalizer(ResetMixin):
                 info.update(status=status, iterations=it, reason="too few correspondences")
                 return prior.copy(), no_cov, info
             Pm, M = P[m], self.points_[idx[m]]
-            T_new = _kabsch(Pm, M)
+            T_new = kabsch(Pm, M)
             step = np.linalg.inv(T) @ T_new
             dt = np.linalg.norm(step[:dim, dim])
             dr = abs(np.arctan2(step[1, 0], step[0, 0])) if dim == 2 else np.linalg.norm(so3_log(step[:3, :3]))
@@ -211,10 +213,10 @@ class ICPLocalizer(ResetMixin):
                 info.update(status="diverged", reason="moved too far from the prior")
                 return prior.copy(), no_cov, info
             if dt < tol and dr < tol:
-                return out_pose(T), _p2p_cov(Pm @ T[:dim, :dim].T + T[:dim, dim], T, e), info
+                return out_pose(T), point_to_point_covariance(Pm @ T[:dim, :dim].T + T[:dim, dim], T, e), info
         info.update(status="max_iter", reason=f"no convergence in {max_it} iterations")
         Qm = Pm @ T[:dim, :dim].T + T[:dim, dim]
-        return out_pose(T), _p2p_cov(Qm, T, e), info
+        return out_pose(T), point_to_point_covariance(Qm, T, e), info
 
 
 def _as3(R):
@@ -223,37 +225,3 @@ def _as3(R):
     out = np.eye(3)
     out[:2, :2] = R
     return out
-
-
-def _kabsch(P, Q):
-    """Homogeneous transform (dim+1, dim+1) minimising sum |R p + t - q|^2 (Arun et al. 1987)."""
-    dim = P.shape[1]
-    pc, qc = P.mean(axis=0), Q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((P - pc).T @ (Q - qc))
-    D = np.eye(dim)
-    D[-1, -1] = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ D @ U.T
-    T = np.eye(dim + 1)
-    T[:dim, :dim] = R
-    T[:dim, dim] = qc - R @ pc
-    return T
-
-
-def _p2p_cov(Q, T, e):
-    """Gauss-Newton covariance of point-to-point ICP (same parameterisation as ``localize``)."""
-    dim = Q.shape[1]
-    lever = Q - T[:dim, dim]
-    n = len(Q)
-    if dim == 2:
-        J = np.zeros((n, 2, 3))
-        J[:, 0, 0] = J[:, 1, 1] = 1.0
-        J[:, 0, 2] = -lever[:, 1]
-        J[:, 1, 2] = lever[:, 0]
-    else:
-        J = np.zeros((n, 3, 6))
-        J[:, :, :3] = -np.stack([hat(v) for v in lever])
-        J[:, :, 3:] = np.eye(3)
-    H = np.einsum("nki,nkj->ij", J, J)
-    dof = H.shape[0]
-    s2 = float(np.sum(e * e)) / max(dim * n - dof, 1)
-    return s2 * np.linalg.inv(H + 1e-12 * np.eye(dof))

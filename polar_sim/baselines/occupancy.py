@@ -16,7 +16,8 @@ from polar_sim._validation import (
     as_positive_float,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin, as_scan2d, as_sensor_offset, beam_points, transform2d, valid_beams
+from polar_sim.baselines._common import ResetMixin
+from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, transform2d, valid_beams
 from polar_sim.geometry import compose2d
 
 __all__ = ["OccupancyGrid2D"]

@@ -12,7 +12,8 @@ from polar_sim._validation import (
     as_rng,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin, as_scan2d, as_sensor_offset, beam_points, valid_beams
+from polar_sim.baselines._common import ResetMixin
+from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, valid_beams
 from polar_sim.geometry import wrap_angle
 
 __all__ = ["ParticleFilterLocalizer", "sample_motion_model_odometry", "low_variance_resample"]

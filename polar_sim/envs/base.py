@@ -13,7 +13,11 @@ import inspect
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["PolarMujocoEnv", "check_kwargs"]
+__all__ = ["PolarMujocoEnv", "check_kwargs", "ACTION_TOLERANCE"]
+
+#: Actions up to this far outside the action box are taken as the bound (float32 round-off);
+#: further out they raise ``ValueError``.
+ACTION_TOLERANCE = 1e-6
 
 
 def check_kwargs(cls, unknown):
@@ -83,6 +87,7 @@ class PolarMujocoEnv(gym.Env):
         return self._get_obs(), self._get_info()
 
     def step(self, action):
+        """One control period. A rejected action (``ValueError``) leaves the environment as it was."""
         if self._closed:
             raise RuntimeError(f"{type(self).__name__}: step() after close()")
         if self._needs_reset:
@@ -106,10 +111,12 @@ class PolarMujocoEnv(gym.Env):
         if not np.isfinite(a).all():
             raise ValueError(f"action: contains NaN or inf: {a.tolist()}")
         lo, hi = self.action_space.low, self.action_space.high
-        if np.any(a < lo - 1e-6) or np.any(a > hi + 1e-6):
+        if np.any(a < lo - ACTION_TOLERANCE) or np.any(a > hi + ACTION_TOLERANCE):
             raise ValueError(f"action: {a.tolist()} is outside the action space [{lo.tolist()}, {hi.tolist()}]; "
                              "it is never clipped silently")
-        return a
+        # Within the tolerance (float32 round-off of a bound) the action is the bound itself, so
+        # that nothing downstream (the rover's own limits) can reject what was accepted here.
+        return np.clip(a, lo, hi)
 
     def render(self):
         if self.render_mode is None:

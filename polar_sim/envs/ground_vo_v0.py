@@ -7,16 +7,17 @@ import numpy as np
 from gymnasium import spaces
 
 from polar_sim.envs.base import check_kwargs
+from polar_sim.envs.module_env import ModuleEnv
 from polar_sim.envs.observers import VOOdometry
 from polar_sim.envs.rover_drive_v0 import RoverDriveEnv
 
 __all__ = ["GroundVOEnv"]
 
 
-class GroundVOEnv(RoverDriveEnv):
+class GroundVOEnv(ModuleEnv):
     """## Description
-    ``RoverDrive-v0`` where the robot knows where it is only from its own monocular visual
-    odometry: every camera image goes to :class:`polar_sim.ground.GroundVO` (scale from the ground
+    ``RoverDrive-v0`` composed with monocular visual odometry: the robot knows where it is only
+    from its own VO. Every camera image goes to :class:`polar_sim.ground.GroundVO` (scale from the ground
     and the known camera height, a colour ground model learned online), whose pose, chained onto
     the known start pose, is the robot's estimated pose. The agent sees the estimated pose, the
     next waypoint in the estimated robot frame, the VO's speed and yaw rate and a downsampled
@@ -59,8 +60,12 @@ class GroundVOEnv(RoverDriveEnv):
     ``vo_status``.
 
     ## Version History
-    - v0: first release.
+    - v0: first release. (Since then, without a version bump: built as the composition of
+      ``RoverDrive-v0`` and the VO, with the same observations bit for bit; actions within the
+      box's 1e-6 tolerance are clipped to it.)
     """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, *, render_mode=None, render_size=(640, 360), image_obs=False, vo="groundvo", vo_params=None,
                  waypoint_lookahead=10.0, ground_prob_size=(80, 24), route_length=300.0, scene="rover_terrain",
@@ -70,40 +75,40 @@ class GroundVOEnv(RoverDriveEnv):
         self._image_obs = bool(image_obs)
         self._odometry = VOOdometry(vo, vo_params=vo_params, waypoint_lookahead=waypoint_lookahead,
                                     ground_prob_size=ground_prob_size)
-        super().__init__(render_mode=render_mode, render_size=render_size, route_length=route_length, scene=scene,
-                         max_speed=max_speed, max_yaw_rate=max_yaw_rate, max_accel=max_accel,
-                         max_cross_track=max_cross_track, camera_size=camera_size, supersample=supersample)
-
-    def _obs_spaces(self):
+        super().__init__(RoverDriveEnv(render_mode=render_mode, render_size=render_size, route_length=route_length,
+                                       scene=scene, max_speed=max_speed, max_yaw_rate=max_yaw_rate,
+                                       max_accel=max_accel, max_cross_track=max_cross_track,
+                                       camera_size=camera_size, supersample=supersample))
         obs = self._odometry.observation_spaces()
         if self._image_obs:
-            obs.update(super()._obs_spaces())
-        return dict(sorted(obs.items()))
+            obs["rgb"] = self.base.observation_space["rgb"]
+        self.observation_space = spaces.Dict(dict(sorted(obs.items())))
 
-    def _reset_scene(self):
-        super()._reset_scene()
-        self._odometry.reset(self.task, self._rgb, self._world.time)
-        self._trail = [(self._pose[:2].copy(), self._odometry.pose2d[:2].copy())]  # for render()
+    # -- the module -----------------------------------------------------------------------
+    def _module_reset(self, obs, info):
+        self._rgb = obs["rgb"]
+        self._odometry.reset(self.task, obs["rgb"], info["time"])
+        self._trail = [(info["robot_pose2d"][:2].copy(), self._odometry.pose2d[:2].copy())]  # for render()
 
-    def _after_frame(self):
-        self._odometry.update(self._rgb, self._world.time)
-        self._trail.append((self._pose[:2].copy(), self._odometry.pose2d[:2].copy()))
+    def _module_step(self, obs, info):
+        self._rgb = obs["rgb"]
+        self._odometry.update(obs["rgb"], info["time"])
+        self._trail.append((info["robot_pose2d"][:2].copy(), self._odometry.pose2d[:2].copy()))
 
-    def _get_obs(self):
+    def _get_obs(self, raw):
         obs = self._odometry.observation()
         if self._image_obs:
-            obs["rgb"] = self._rgb.copy()
+            obs["rgb"] = raw["rgb"]
         return dict(sorted(obs.items()))
 
-    def _get_info(self):
-        info = super()._get_info()
+    def _get_info(self, info):
         info.update(self._odometry.info(info["robot_pose2d"], info["path_length"]))
         return info
 
     def _render_frame(self):
         """Chase view | camera image with the VO's ground probability | top-down route map
         (route grey, true path green, estimated path orange)."""
-        chase = super()._render_frame()
+        chase = self.base.render()
         h, w = chase.shape[:2]
         cam = self._rgb.astype(np.float32)
         gp = cv2.resize(self._odometry.ground_prob, (cam.shape[1], cam.shape[0]), interpolation=cv2.INTER_LINEAR)
@@ -123,7 +128,8 @@ class GroundVOEnv(RoverDriveEnv):
             q = (np.asarray(p) - lo) * scale
             return np.stack([5 + q[..., 0], h - 5 - q[..., 1]], -1).astype(np.int32)
 
-        end = int(np.searchsorted(self._path.s, self._route_length))
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        end = int(np.searchsorted(s, self.task.route_length))
         cv2.polylines(img, [px(pts[: end + 1])], False, (150, 150, 150), 3)
         tr = np.array([t for t, _ in self._trail])
         es = np.array([e for _, e in self._trail])

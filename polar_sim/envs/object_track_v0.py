@@ -4,17 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from gymnasium import spaces
+
 from polar_sim.envs.base import check_kwargs
+from polar_sim.envs.module_env import ModuleEnv
 from polar_sim.envs.observers import TrackerPose
 from polar_sim.envs.tabletop_reach_v0 import TabletopReachEnv
 
 __all__ = ["ObjectTrackEnv"]
 
 
-class ObjectTrackEnv(TabletopReachEnv):
+class ObjectTrackEnv(ModuleEnv):
     """## Description
-    ``TabletopReach-v0`` where the robot knows where the object is only from its own tracker:
-    every RGB-D frame goes to :class:`polar_sim.tracking.ObjectTracker` (initialised with the
+    ``TabletopReach-v0`` composed with an object tracker: the robot knows where the object is only
+    from its own tracker. Every RGB-D frame goes to :class:`polar_sim.tracking.ObjectTracker` (initialised with the
     object's pose at reset, as tracking benchmarks do), and the agent sees the tracker's pose
     estimate, its uncertainty and the pre-grasp pose that follows from it, relative to the hand.
     The reward and the success come from the true pose, and the tracking error is scored in
@@ -54,8 +57,12 @@ class ObjectTrackEnv(TabletopReachEnv):
     ``tracker_lost``.
 
     ## Version History
-    - v0: first release.
+    - v0: first release. (Since then, without a version bump: built as the composition of
+      ``TabletopReach-v0`` and the tracker, with the same observations bit for bit; actions within
+      the box's 1e-6 tolerance are clipped to it.)
     """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
     def __init__(self, *, render_mode=None, render_size=(480, 360), image_obs=False, tracker="objecttracker",
                  tracker_params=None, target=None, n_objects=4, camera_size=(320, 240), depth_noise=True, max_speed=0.3,
@@ -63,36 +70,40 @@ class ObjectTrackEnv(TabletopReachEnv):
         check_kwargs(type(self), unknown)
         self._image_obs = bool(image_obs)
         self._tracking = TrackerPose(tracker, tracker_params=tracker_params)
-        super().__init__(render_mode=render_mode, render_size=render_size, target=target, n_objects=n_objects,
-                         camera_size=camera_size, depth_noise=depth_noise, max_speed=max_speed,
-                         max_yaw_rate=max_yaw_rate, pregrasp_clearance=pregrasp_clearance,
-                         success_position=success_position, success_yaw=success_yaw)
-
-    def _obs_spaces(self):
-        raw = super()._obs_spaces()
+        super().__init__(TabletopReachEnv(render_mode=render_mode, render_size=render_size, target=target,
+                                          n_objects=n_objects, camera_size=camera_size, depth_noise=depth_noise,
+                                          max_speed=max_speed, max_yaw_rate=max_yaw_rate,
+                                          pregrasp_clearance=pregrasp_clearance, success_position=success_position,
+                                          success_yaw=success_yaw))
+        raw = self.base.observation_space
         obs = {"hand_pose": raw["hand_pose"], **self._tracking.observation_spaces()}
+        if self._image_obs:
+            obs.update(depth=raw["depth"], rgb=raw["rgb"])
+        self.observation_space = spaces.Dict(dict(sorted(obs.items())))
+
+    # -- the module -----------------------------------------------------------------------
+    def _module_reset(self, obs, info):
+        self._rgb = obs["rgb"]
+        self._tracking.reset(self.task, obs["rgb"], obs["depth"], info["time"])
+
+    def _module_step(self, obs, info):
+        self._rgb = obs["rgb"]
+        self._tracking.update(obs["rgb"], obs["depth"], info["time"])
+
+    def _get_obs(self, raw):
+        obs = self._tracking.observation(raw["hand_pose"])
+        obs["hand_pose"] = raw["hand_pose"]
         if self._image_obs:
             obs.update(depth=raw["depth"], rgb=raw["rgb"])
         return dict(sorted(obs.items()))
 
-    def _reset_scene(self):
-        super()._reset_scene()
-        self._tracking.reset(self.task, self._rgb, self._depth, self._world.time)
-
-    def _after_frame(self):
-        self._tracking.update(self._rgb, self._depth, self._world.time)
-
-    def _get_obs(self):
-        obs = self._tracking.observation(self._hand_obs())
-        obs["hand_pose"] = self._hand_obs()
-        if self._image_obs:
-            obs.update(depth=self._depth.copy(), rgb=self._rgb.copy())
-        return dict(sorted(obs.items()))
-
-    def _get_info(self):
-        info = super()._get_info()
+    def _get_info(self, info):
         info.update(self._tracking.info(info["object_pose"]))
         return info
+
+    def _render_frame(self):
+        """A third-person view of the table beside the camera image with the tracker's estimate."""
+        return self.base.view_beside(self._camera_overlay())
 
     def _camera_overlay(self):
         """The camera image with the tracker's estimate (model points, green) and segmentation."""

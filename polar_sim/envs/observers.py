@@ -50,8 +50,9 @@ class GPISSource:
     def __init__(self, **params):
         from polar_sim.gpis import GPISMap2D
 
-        params.setdefault("sensor_offset", (0.0, 0.0))  # the env passes the sensor's own pose
-        self.map = GPISMap2D(**params)
+        if "sensor_offset" in params:
+            raise ValueError("sdf_params: sensor_offset is set by the environment (it passes the sensor's own pose)")
+        self.map = GPISMap2D(sensor_offset=(0.0, 0.0), **params)
 
     def reset(self):
         self.map.reset()
@@ -102,12 +103,15 @@ class TruthSource:
     """The exact SDF of the scene in the lidar plane (``World.sdf``): the perfect map.
 
     The gradient is a central difference of the exact field (step 1 mm); the variance is 0.
+    ``origin`` (x, y, theta), the map frame's pose in the world (None: the world itself), lets
+    the perfect map be queried in the robot's start frame.
     """
 
     name = "truth"
 
-    def __init__(self, world=None):
+    def __init__(self, world=None, origin=None):
         self.world = world
+        self.origin = origin
 
     def reset(self):
         pass
@@ -118,9 +122,15 @@ class TruthSource:
     def query(self, points):
         h = 1e-3
         f = self.world.sdf
+        o = self.origin
+        if o is not None:
+            points = compose2d(o, np.c_[points, np.zeros(len(points))])[:, :2]
         d = f(points)
         gx = (f(points + [h, 0]) - f(points - [h, 0])) / (2 * h)
         gy = (f(points + [0, h]) - f(points - [0, h])) / (2 * h)
+        if o is not None:  # the gradient back in the map frame
+            c, s = np.cos(o[2]), np.sin(o[2])
+            gx, gy = c * gx + s * gy, -s * gx + c * gy
         return d, np.stack([gx, gy], 1), np.zeros(len(points))
 
 

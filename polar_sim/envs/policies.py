@@ -164,7 +164,8 @@ class SDFNavigator(SDFReactive):
 
     It reads what ``SDFReactive`` reads (the stencil, the goal in the robot frame and the
     twist) and adds memory. The goal vector fixes the robot's position relative to the goal, and
-    the integrated yaw rate fixes its heading; in that goal-anchored frame it keeps an obstacle
+    the heading of the estimated ``pose`` (GPISNav-v1; in v0 the integrated yaw rate) fixes its
+    heading; in that goal-anchored frame it keeps an obstacle
     grid, marking the stencil's surface estimates s = p - d g and clearing the disk of radius d
     around every stencil point, which the SDF says is free. Each step it plans the cheapest
     path to the goal on that grid, taking unknown cells as free (optimistic planning), and steers
@@ -232,10 +233,15 @@ class SDFNavigator(SDFReactive):
         return mem.centre(ij[None])[0]
 
     def __call__(self, obs):
-        w = float(obs["twist"][1])
-        if self._yaw_rate is not None:
-            self._theta += 0.5 * (self._yaw_rate + w) * self.dt  # trapezoidal rule
-        self._yaw_rate = w
+        if "pose" in obs:
+            # GPISNav-v1 observes the estimated pose: its heading anchors the memory (integrating
+            # the odometry's yaw rate would carry its drift into the grid).
+            self._theta = float(obs["pose"][2])
+        else:
+            w = float(obs["twist"][1])
+            if self._yaw_rate is not None:
+                self._theta += 0.5 * (self._yaw_rate + w) * self.dt  # trapezoidal rule
+            self._yaw_rate = w
         c, sn = np.cos(self._theta), np.sin(self._theta)
         R = np.array([[c, -sn], [sn, c]])
         goal = np.asarray(obs["goal"], float)

@@ -54,8 +54,8 @@ class RoverDriveEnv(PolarMujocoEnv):
     slopes, four ground textures, obstacles 5.5-10 m beside the route). Every episode builds a new
     world from the episode seed (terrain, closed route, obstacles) and the segment starts where the
     rover stands. This base environment emits only the raw camera image; where the robot is comes
-    from whatever odometry the user adds. ``GroundVO-v0`` (and the ``GroundOdometry`` wrapper)
-    adds the ``GroundVO`` monocular odometry. The task (route, start pose, intrinsics, camera
+    from whatever odometry the user adds; ``GroundVO-v0`` composes it with the ``GroundVO``
+    monocular odometry. The task (route, start pose, intrinsics, camera
     height) is ``env.unwrapped.task`` after ``reset``.
 
     The camera is KITTI-like: 621x188 px with KITTI's focal length after its 2x reduction
@@ -74,7 +74,8 @@ class RoverDriveEnv(PolarMujocoEnv):
     ``Box(-1, 1, (2,))``: normalised ``(v, omega)``; the speed set-point is a0 * ``max_speed``
     (m/s) and the yaw rate a1 * ``max_yaw_rate`` (rad/s). The rover's speed command moves toward
     the set-point at ``max_accel`` (m/s^2, a car's acceleration and braking). Actions outside the
-    box or with NaN raise ``ValueError``.
+    box or with NaN raise ``ValueError`` and leave the environment unchanged; within 1e-6 of the box
+    they are taken as its bound.
 
     ## Reward
     ``progress`` (0.1 per metre of true progress along the route) + ``cross_track`` (-0.02 per
@@ -108,7 +109,9 @@ class RoverDriveEnv(PolarMujocoEnv):
     ``is_success``, ``layout_seed``, ``time`` (s, of the image in the observation).
 
     ## Version History
-    - v0: first release.
+    - v0: first release. (Fixed without a version bump, since no accepted action behaves
+      differently: an action within the box's 1e-6 tolerance is clipped to the box; it used to
+      set the speed command and then be rejected by the rover.)
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -138,7 +141,6 @@ class RoverDriveEnv(PolarMujocoEnv):
 
         resolve_appearance(appearance, 0)  # a bad appearance raises now, not at the first reset
         self._appearance = self._episode_appearance = appearance
-        self._rig = None
         self.task = None
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = spaces.Dict(self._obs_spaces())
@@ -153,9 +155,6 @@ class RoverDriveEnv(PolarMujocoEnv):
         from polar_sim.sim.rover_sequences import KITTI_FOVY_DEG
 
         self._layout_seed = layout_seed
-        if self._rig is not None:
-            self._rig.close()
-            self._rig = None
         look = {} if self._episode_appearance is None else {"appearance": self._episode_appearance}
         return World(self._scene, seed=layout_seed, camera_fovy=KITTI_FOVY_DEG, **look)
 
@@ -168,8 +167,6 @@ class RoverDriveEnv(PolarMujocoEnv):
         return super().reset(seed=seed, options=options)
 
     def _reset_scene(self):
-        from polar_sim.sim.sensors import intrinsics
-
         w = self._world
         loop = np.asarray(w.meta["route"], dtype=np.float64)
         seg = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
@@ -179,10 +176,9 @@ class RoverDriveEnv(PolarMujocoEnv):
         self._path = RoutePath(pts[: int(np.searchsorted(s, self._route_length + ROUTE_EXTENSION)) + 1])
         tr = w.truth()
         self._T, self._pose, self._twist = tr["robot_pose"], tr["robot_pose2d"], tr["robot_twist"]
-        cid = w.model.camera("front").id
         width, height = self._camera_size
-        K = intrinsics(w.model.cam_fovy[cid], 2 * width, 2 * height) if self._supersample else \
-            intrinsics(w.model.cam_fovy[cid], width, height)
+        k = 2 if self._supersample else 1
+        K = w.camera_intrinsics("front", width=k * width, height=k * height)
         if self._supersample:
             K[:2] /= 2.0  # reduced pixel i is centred on full pixel 2i
         cfg = w.meta["rover_config"]
@@ -201,12 +197,13 @@ class RoverDriveEnv(PolarMujocoEnv):
     def _apply_action(self, a):
         target = float(a[0]) * self._max_speed
         if self._max_accel is None:
-            self._v_cmd = target
+            v_cmd = target
         else:
             step = self._max_accel * self._world.dt
-            self._v_cmd += float(np.clip(target - self._v_cmd, -step, step))
+            v_cmd = self._v_cmd + float(np.clip(target - self._v_cmd, -step, step))
         prev = self._pose
-        self._world.step((self._v_cmd, float(a[1]) * self._max_yaw_rate))
+        self._world.step((v_cmd, float(a[1]) * self._max_yaw_rate))
+        self._v_cmd = v_cmd  # committed only once the world has taken the command
         tr = self._world.truth()
         self._T, self._pose, self._twist = tr["robot_pose"], tr["robot_pose2d"], tr["robot_twist"]
         self._path_length += float(np.hypot(*(self._pose[:2] - prev[:2])))
@@ -214,22 +211,13 @@ class RoverDriveEnv(PolarMujocoEnv):
         self._s, _ = self._path.project(self._pose[:2], self._s)
         self._s_max = max(self._s_max, self._s)
         self._rgb = self._render_camera()
-        self._after_frame()
-
-    def _after_frame(self):
-        """Hook for subclasses that consume each new image (odometry)."""
 
     def _render_camera(self):
         from polar_sim.sim.rover_sequences import reduce2x
-        from polar_sim.sim.sensors import CameraRig
 
-        w = self._world
-        if self._rig is None:
-            self._rig = CameraRig(w.model)
         width, height = self._camera_size
         k = 2 if self._supersample else 1
-        rgb = self._rig.render(w.model, w.data, w.model.camera("front").id, k * width, k * height, None,
-                               rgb=True, depth=False, seg=False)[0]
+        rgb = self._world.camera("front", width=k * width, height=k * height, depth=False, labels=False).rgb
         return reduce2x(rgb) if self._supersample else rgb
 
     def _cross_track(self):
@@ -264,12 +252,6 @@ class RoverDriveEnv(PolarMujocoEnv):
         w, h = self._render_size
         return self._world.render_view(width=w, height=h, distance=14.0, azimuth=float(np.degrees(self._pose[2])),
                                        elevation=-20.0)
-
-    def close(self):
-        if self._rig is not None:
-            self._rig.close()
-            self._rig = None
-        super().close()
 
 
 def _positive(x, name):

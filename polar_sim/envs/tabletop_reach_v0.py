@@ -73,8 +73,7 @@ class TabletopReachEnv(PolarMujocoEnv):
     front of the table (4-10 cm at a time, turning up to 0.5 rad, every 0.8-2 s; the tabletop
     script ``reach``). Every episode builds a new table from the episode seed. This base
     environment emits the raw RGB-D image and the hand pose; where the object is comes from
-    whatever the user adds. ``ObjectTrack-v0`` (and the ``TrackerObservation`` wrapper) adds the
-    ``ObjectTracker`` estimate. The task (object model, intrinsics, camera pose, initial object
+    whatever the user adds; ``ObjectTrack-v0`` composes it with the ``ObjectTracker``. The task (object model, intrinsics, camera pose, initial object
     pose, grasp offset) is ``env.unwrapped.task`` after ``reset``.
 
     The camera renders at ``camera_size`` (default 320x240, half the scene's 640x480, for speed:
@@ -95,7 +94,8 @@ class TabletopReachEnv(PolarMujocoEnv):
     stays down. The palm centre stays inside the workspace box x in [-0.55, 0.55], y in [-0.45,
     0.55], z in [0.83, 1.45] m (fingertips above the table): motion stops at its faces. The hand
     touches only the target (it can push it). Actions outside the box or with NaN raise
-    ``ValueError``.
+    ``ValueError`` and leave the environment unchanged; within 1e-6 of the box they are taken as
+    its bound.
 
     ## Reward
     ``distance`` (minus the true distance to the pre-grasp pose: position error (m) + 0.05 m/rad x
@@ -195,7 +195,6 @@ class TabletopReachEnv(PolarMujocoEnv):
         tr = w.truth()
         self.task = ReachTask(tgt, P, N, self._K.copy(), self._T_world_cam.copy(), tr["objects"][tgt],
                               pregrasp_offset(w.object_mesh(tgt), self._clearance), sym, float(w.dt), module_seed)
-        self._script = w.meta["script"]
         self._truth = tr
 
     def _frame(self):
@@ -207,14 +206,10 @@ class TabletopReachEnv(PolarMujocoEnv):
         self._K, self._T_world_cam = f.K, f.T_world_cam
 
     def _apply_action(self, a):
-        self._script.command(a[:3] * self._max_speed, a[3] * self._max_yaw_rate)
+        self._world.command_hand(a[:3] * self._max_speed, a[3] * self._max_yaw_rate)
         self._world.step()
         self._truth = self._world.truth()
         self._frame()
-        self._after_frame()
-
-    def _after_frame(self):
-        """Hook for subclasses that consume each new frame (tracking)."""
 
     # -- truth ----------------------------------------------------------------------------
     def _errors(self):
@@ -260,15 +255,15 @@ class TabletopReachEnv(PolarMujocoEnv):
 
     def _render_frame(self):
         """A third-person view of the table beside the camera image."""
+        return self.view_beside(self._rgb)
+
+    def view_beside(self, image):
+        """A third-person view of the table (``render_size``) beside ``image`` (H, W, 3) uint8,
+        scaled to the view's height."""
         import cv2
 
         w, h = self._render_size
         view = self._world.render_view(width=w, height=h, lookat=[0.0, 0.0, 0.85], distance=1.25, azimuth=-60.0,
                                        elevation=-28.0)
-        cam = self._camera_overlay()
-        cam = cv2.resize(cam, (int(round(h * cam.shape[1] / cam.shape[0])), h), interpolation=cv2.INTER_AREA)
+        cam = cv2.resize(image, (int(round(h * image.shape[1] / image.shape[0])), h), interpolation=cv2.INTER_AREA)
         return np.hstack([view, cam])
-
-    def _camera_overlay(self):
-        """The camera image (subclasses draw their estimate on it)."""
-        return self._rgb.copy()

@@ -39,8 +39,12 @@ class GPISMap2D(GPISMapBase):
         Finite-difference step and initial line-search step, metres.
     min_position_noise, min_grad_noise, map_noise : float, default=0.01
         Noise floors (variances) of the sample model (spec §1).
-    sensor_offset : (2,) array_like, default=(0.08, 0.0)
-        Laser position in the robot base frame, metres.
+    sensor_offset : (2,) array_like, default=(0.0, 0.0)
+        Laser position in the frame of the pose given to :meth:`update`, metres. The default
+        takes the *sensor* pose, as the contract says (``World.lidar(...).T_world_sensor``).
+        To feed robot *base* poses, give the laser's mounting here: the published demo's
+        turtlebot (and the ``gazebo1`` log) use (0.08, 0), which is
+        ``load_gazebo1()["sensor_offset"]``. ``legacy=True`` does not change it.
     angle_obs_limit : (2,) array_like, default=(-3/4 pi, 3/4 pi)
         Field of view of the laser, rad: beams outside are ignored and samples outside are not
         re-evaluated.
@@ -90,7 +94,8 @@ class GPISMap2D(GPISMapBase):
         terms).
     legacy : bool, default=False
         Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
-        the query is then the published SDF f + fbias.
+        the query is then the published SDF f + fbias. The published demo's laser offset is a
+        parameter, not part of this switch: pass ``sensor_offset=(0.08, 0)`` with base poses.
 
     Attributes
     ----------
@@ -131,7 +136,7 @@ class GPISMap2D(GPISMapBase):
 
     def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
-                 sensor_offset=(0.08, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
+                 sensor_offset=(0.0, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
                  max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.05, blend_far=0.25,
                  surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
@@ -191,8 +196,9 @@ class GPISMap2D(GPISMapBase):
         ranges : array_like of shape (n,)
             Ranges, metres; NaN/inf (and values outside [min_range, max_range]) = no return.
         pose2d : array_like of shape (3,)
-            Robot base pose (x, y, theta) in the world, m and rad; the laser sits at
-            ``sensor_offset`` in the base frame.
+            Pose (x, y, theta) in the world, m and rad: the sensor's own pose with the default
+            ``sensor_offset=(0, 0)``; otherwise the frame in which the laser sits at
+            ``sensor_offset`` (a robot base).
 
         Returns
         -------
@@ -228,7 +234,11 @@ class GPISMap2D(GPISMapBase):
         if not p["legacy"]:
             dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
             model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
-        return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=t, rmax=float(r.max()),
+        # re-evaluation searches around the base in the published code (spec §2.1); the default
+        # searches around the laser, so that a sensor pose and a base pose with the mounting as
+        # sensor_offset give the same map
+        origin = t if p["legacy"] else R @ o + t
+        return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=origin, rmax=float(r.max()),
                                sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
                                lim=np.asarray(p["angle_obs_limit"], float), model=model)
 

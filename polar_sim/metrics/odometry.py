@@ -17,6 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from polar_sim._validation import as_float_array, as_int, as_points, as_positive_float, check_choice
+from polar_sim.fileio import atomic_write, check_source
+
 __all__ = [
     "KITTI_LENGTHS",
     "kitti_segment_errors",
@@ -41,12 +44,7 @@ KITTI_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 
 def _as_poses(x, name, *, tol=1e-4):
     """Return a finite (n, 4, 4) float64 stack of rigid transforms (n >= 1)."""
-    if x is None:
-        raise TypeError(f"{name}: expected an array of poses, got None")
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name}: expected a numeric array, got {type(x).__name__}") from exc
+    a = as_float_array(x, name)
     if a.ndim != 3 or a.shape[1:] != (4, 4) or a.shape[0] < 1:
         raise ValueError(f"{name}: expected shape (n, 4, 4) with n >= 1, got {a.shape}")
     if not np.isfinite(a).all():
@@ -58,6 +56,16 @@ def _as_poses(x, name, *, tol=1e-4):
     if err > tol or (np.linalg.det(R) < 0).any():
         raise ValueError(f"{name}: rotation blocks are not proper rotations (max |RᵀR - I| = {err:.2g})")
     return a
+
+
+def _as_lengths(lengths):
+    """Segment lengths (k,) in metres: a non-empty sequence of finite numbers > 0."""
+    a = as_float_array(lengths, "lengths")
+    if a.ndim != 1 or len(a) == 0:
+        raise ValueError(f"lengths: expected a non-empty sequence of segment lengths (m), got shape {a.shape}")
+    if not (np.isfinite(a) & (a > 0)).all():
+        raise ValueError(f"lengths: expected finite lengths > 0 m, got {a.tolist()[:8]}")
+    return tuple(float(x) for x in a)
 
 
 def _pair(gt_poses, est_poses):
@@ -92,6 +100,7 @@ def scaled_lengths(gt_poses, n=8):
     them as non-standard.
     """
     gt = _as_poses(gt_poses, "gt_poses")
+    n = as_int(n, "n", minimum=1, maximum=10_000)
     total = float(_trajectory_distances(gt)[-1])
     lmax = np.floor(0.9 * total / 10.0) * 10.0
     if lmax <= 0:
@@ -107,8 +116,9 @@ def kitti_segment_errors(gt_poses, est_poses, *, lengths=KITTI_LENGTHS, step=10,
     float32 like the devkit's records except ``first``.
     """
     gt, est = _pair(gt_poses, est_poses)
-    if step < 1:
-        raise ValueError(f"step: expected an integer >= 1, got {step!r}")
+    lengths = _as_lengths(lengths)
+    step = as_int(step, "step", minimum=1)
+    frame_period = as_positive_float(frame_period, "frame_period")
     dist = _trajectory_distances(gt)
     recs = []
     n = len(gt)
@@ -161,6 +171,12 @@ def kitti_errors(gt_poses, est_poses, *, lengths=KITTI_LENGTHS, step=10):
 def kitti_errors_pooled(sequences, *, lengths=KITTI_LENGTHS, step=10):
     """Pooled KITTI error over several sequences ``[(gt_poses, est_poses), ...]``: the mean over all
     segments of all sequences (the devkit's "all" average; long sequences weigh more)."""
+    if isinstance(sequences, (str, bytes, dict)) or not hasattr(sequences, "__iter__"):
+        raise TypeError(f"sequences: expected a list of (gt_poses, est_poses) pairs, got {type(sequences).__name__}")
+    sequences = list(sequences)
+    for i, pair in enumerate(sequences):
+        if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+            raise ValueError(f"sequences: item {i} is not a (gt_poses, est_poses) pair")
     recs = [kitti_segment_errors(g, e, lengths=lengths, step=step) for g, e in sequences]
     if not recs:
         return float("nan"), float("nan")
@@ -173,6 +189,10 @@ def kitti_errors_pooled(sequences, *, lengths=KITTI_LENGTHS, step=10):
 
 def umeyama(src, dst, *, with_scale=False):
     """Least-squares similarity (R (3, 3), t (3,), s) with dst ≈ s R src + t (Umeyama 1991); src, dst (n, 3)."""
+    src = as_points(src, 3, "src")
+    dst = as_points(dst, 3, "dst")
+    if len(src) != len(dst):
+        raise ValueError(f"src, dst: expected equal lengths, got {len(src)} and {len(dst)}")
     mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
     xs, xd = src - mu_s, dst - mu_d
     cov = xd.T @ xs / len(src)
@@ -194,8 +214,7 @@ def ate_errors(gt_poses, est_poses, *, align="se3"):
     relative to their own first frame).
     """
     gt, est = _pair(gt_poses, est_poses)
-    if align not in ("se3", "sim3", "none"):
-        raise ValueError(f"align: unknown value {align!r}; expected one of 'se3', 'sim3', 'none'")
+    check_choice(align, ("se3", "sim3", "none"), "align")
     p_gt, p_est = gt[:, :3, 3], est[:, :3, 3]
     if align != "none" and len(gt) >= 2:
         R, t, s = umeyama(p_est, p_gt, with_scale=align == "sim3")
@@ -215,8 +234,7 @@ def rpe_errors(gt_poses, est_poses, *, delta=1):
     E_i = (G_i⁻¹ G_{i+δ})⁻¹ (P_i⁻¹ P_{i+δ}), as evo's RPE.
     """
     gt, est = _pair(gt_poses, est_poses)
-    if isinstance(delta, bool) or not isinstance(delta, (int, np.integer)) or delta < 1:
-        raise ValueError(f"delta: expected an integer >= 1, got {delta!r}")
+    delta = as_int(delta, "delta", minimum=1)
     if len(gt) <= delta:
         raise ValueError(f"delta: {delta} frames needs at least {delta + 1} poses, got {len(gt)}")
     dg = _inv(gt[:-delta]) @ gt[delta:]
@@ -252,12 +270,13 @@ def rpe(gt_poses, est_poses, delta=1):
 def write_kitti(path, poses):
     """Write poses (n, 4, 4) as a KITTI pose file: 12 numbers (top 3x4 block, row-major) per line."""
     P = _as_poses(poses, "poses")
-    np.savetxt(path, P[:, :3, :].reshape(len(P), 12), fmt="%.17g", delimiter=" ")
+    with atomic_write(path, "path") as fh:
+        np.savetxt(fh, P[:, :3, :].reshape(len(P), 12), fmt="%.17g", delimiter=" ")
 
 
 def read_kitti(path):
     """Read a KITTI pose file into (n, 4, 4)."""
-    a = np.loadtxt(path, dtype=np.float64, ndmin=2)
+    a = _read_table(path)
     if a.shape[1] != 12:
         raise ValueError(f"path: expected 12 numbers per line in a KITTI pose file, got {a.shape[1]}")
     P = np.tile(np.eye(4), (len(a), 1, 1))
@@ -268,21 +287,38 @@ def read_kitti(path):
 def write_tum(path, timestamps, poses):
     """Write a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line (s, m, unit quaternion)."""
     P = _as_poses(poses, "poses")
-    ts = np.asarray(timestamps, dtype=np.float64)
+    ts = as_float_array(timestamps, "timestamps")
     if ts.shape != (len(P),):
         raise ValueError(f"timestamps: expected shape ({len(P)},) to match the poses, got {ts.shape}")
     if not np.isfinite(ts).all():
         raise ValueError("timestamps: contains NaN or inf")
     q = Rotation.from_matrix(P[:, :3, :3]).as_quat()  # (x, y, z, w), TUM order
-    np.savetxt(path, np.column_stack([ts, P[:, :3, 3], q]), fmt="%.17g", delimiter=" ")
+    with atomic_write(path, "path") as fh:
+        np.savetxt(fh, np.column_stack([ts, P[:, :3, 3], q]), fmt="%.17g", delimiter=" ")
 
 
 def read_tum(path):
     """Read a TUM trajectory; returns (timestamps (n,), poses (n, 4, 4)). Lines starting with # are skipped."""
-    a = np.loadtxt(path, dtype=np.float64, ndmin=2, comments="#")
+    a = _read_table(path)
     if a.shape[1] != 8:
         raise ValueError(f"path: expected 8 numbers per line in a TUM file, got {a.shape[1]}")
+    if not np.allclose(np.linalg.norm(a[:, 4:8], axis=1), 1.0, atol=1e-3):
+        raise ValueError("path: the quaternions (qx qy qz qw) of a TUM file must have unit norm")
     P = np.tile(np.eye(4), (len(a), 1, 1))
     P[:, :3, :3] = Rotation.from_quat(a[:, 4:8]).as_matrix()
     P[:, :3, 3] = a[:, 1:4]
     return a[:, 0].copy(), P
+
+
+def _read_table(path):
+    """Rows of numbers of a whitespace-separated text file (# comments), as a finite (n, k) array."""
+    p = check_source(path, "path")
+    try:
+        a = np.loadtxt(p, dtype=np.float64, ndmin=2, comments="#")
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"path: {str(p)[:200]!r} is not a table of numbers ({str(exc).splitlines()[0][:120]})") from None
+    if a.size == 0:
+        raise ValueError(f"path: {str(p)[:200]!r} holds no poses")
+    if not np.isfinite(a).all():
+        raise ValueError(f"path: {str(p)[:200]!r} contains NaN or inf")
+    return a

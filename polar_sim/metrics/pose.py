@@ -10,10 +10,12 @@ with BOP19 visibility, MSSD, MSPD and their thresholds), re-implemented from the
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
-from polar_sim._validation import as_intrinsics, as_points, as_pose, as_positive_float
+from polar_sim._validation import as_float_array, as_intrinsics, as_points, as_pose, as_positive_float
 
 __all__ = [
     "object_diameter",
@@ -27,6 +29,11 @@ __all__ = [
     "success_curve",
     "pose_auc",
     "frames_until_loss",
+    "rotation_drift",
+    "static_segments",
+    "static_rotation_drift",
+    "StaticDrift",
+    "pose_frame_errors",
     "mssd",
     "mspd",
     "vsd",
@@ -51,7 +58,7 @@ BOP_MSPD_PIXELS = np.arange(5, 51, 5).astype(float)
 
 def _as_poses(T, name):
     """(n, 4, 4) stack of checked poses and whether the input was a single pose."""
-    a = np.asarray(T, dtype=np.float64)
+    a = as_float_array(T, name)  # refuses strings, bools, complex and object arrays by name
     if a.ndim == 2:
         return as_pose(a, name)[None], True
     if a.ndim != 3 or a.shape[1:] != (4, 4):
@@ -186,6 +193,95 @@ def frames_until_loss(errors, threshold, patience=10):
         if run >= patience:
             return i - patience + 1
     return len(e)
+
+
+# -- drift of objects at rest --------------------------------------------------------------
+def rotation_drift(T_gt, T_est, start=0):
+    """Rotation drift (n - start,) in radians from frame ``start`` on: the angle between the
+    estimate's rotation since ``start``, ``R_est(k) R_est(start)^T``, and the object's true one,
+    ``R_gt(k) R_gt(start)^T`` (both in the camera frame, so a constant error of the estimate's
+    orientation is not drift). For an object at rest it is how far the estimate has turned.
+
+    The full rotation counts, including the turn about a symmetry axis that ADD-S cannot see."""
+    G, E, _ = _pair(T_gt, T_est)
+    s = int(start)
+    if not 0 <= s < len(G):
+        raise ValueError(f"start: expected a frame index in [0, {len(G)}), got {start!r}")
+    Rg = np.einsum("nij,kj->nik", G[s:, :3, :3], G[s, :3, :3])  # R_gt(k) R_gt(s)^T
+    Re = np.einsum("nij,kj->nik", E[s:, :3, :3], E[s, :3, :3])
+    c = (np.einsum("nij,nij->n", Rg, Re) - 1.0) / 2.0
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def static_segments(T_gt, *, max_rotation=np.deg2rad(1.0), max_translation=0.002, min_frames=30):
+    """Runs of frames in which the true pose stays at rest: ``[(start, stop), ...]`` (stop exclusive).
+
+    A run grows while every frame's true pose is within ``max_rotation`` (rad) and
+    ``max_translation`` (m) of the run's first frame; runs shorter than ``min_frames`` are dropped.
+    The poses are camera-frame: with a moving camera nothing is at rest."""
+    G, _ = _as_poses(T_gt, "T_gt")
+    as_positive_float(max_rotation, "max_rotation")
+    as_positive_float(max_translation, "max_translation")
+    out, s = [], 0
+    n = len(G)
+    while s < n:
+        c = (np.einsum("ij,nij->n", G[s, :3, :3], G[s:, :3, :3]) - 1.0) / 2.0
+        far = (np.arccos(np.clip(c, -1.0, 1.0)) > max_rotation) | \
+              (np.linalg.norm(G[s:, :3, 3] - G[s, :3, 3], axis=1) > max_translation)
+        e = s + (int(np.argmax(far)) if far.any() else n - s)
+        if e - s >= min_frames:
+            out.append((s, e))
+        s = max(e, s + 1)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class StaticDrift:
+    """Rotation drift of an object at rest (:func:`static_rotation_drift`).
+
+    Attributes
+    ----------
+    segments : list of (start, stop) runs of frames at rest.
+    drift : (len(segments),) largest drift within the first ``horizon`` frames of each run, rad.
+    end_drift : (len(segments),) drift at the last of those frames, rad.
+    frames : (len(segments),) frames scored per run (at most ``horizon``).
+    max_drift : largest of ``drift`` (NaN without a run at rest), rad.
+    """
+
+    segments: list
+    drift: np.ndarray
+    end_drift: np.ndarray
+    frames: np.ndarray
+    max_drift: float
+
+
+def static_rotation_drift(T_gt, T_est, *, horizon=300, **segment_kw):
+    """How far the estimated rotation of an object at rest drifts: for every run at rest
+    (:func:`static_segments`, keyword arguments passed on), the largest :func:`rotation_drift`
+    within its first ``horizon`` frames. The issue-13 target is 2 deg over 300 frames."""
+    G, E, _ = _pair(T_gt, T_est)
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 2:
+        raise ValueError(f"horizon: expected an integer >= 2, got {horizon!r}")
+    segs = static_segments(G, **segment_kw)
+    drift, end, frames = [], [], []
+    for s, e in segs:
+        e = min(e, s + int(horizon))
+        d = rotation_drift(G[s:e], E[s:e])
+        drift.append(float(d.max()))
+        end.append(float(d[-1]))
+        frames.append(e - s)
+    drift = np.array(drift)
+    return StaticDrift(segs, drift, np.array(end), np.array(frames, dtype=np.int64),
+                       float(drift.max()) if len(drift) else float("nan"))
+
+
+def pose_frame_errors(model_points, K, T_gt, T_est):
+    """Per-frame pose errors of a track, stacks (n, 4, 4): dict of (n,) arrays ``add``, ``adds``
+    (m), ``rot`` (rad), ``trans`` (m), ``mssd`` (m) and ``mspd`` (px)."""
+    return dict(add=np.atleast_1d(add(model_points, T_gt, T_est)), adds=np.atleast_1d(adds(model_points, T_gt, T_est)),
+                rot=np.atleast_1d(rotation_error(T_gt, T_est)), trans=np.atleast_1d(translation_error(T_gt, T_est)),
+                mssd=np.atleast_1d(mssd(model_points, T_gt, T_est)),
+                mspd=np.atleast_1d(mspd(model_points, K, T_gt, T_est)))
 
 
 # -- BOP ------------------------------------------------------------------------------------

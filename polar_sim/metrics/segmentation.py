@@ -15,6 +15,8 @@ __all__ = [
     "precision_recall",
     "occluder_as_target",
     "roc_auc",
+    "near_mask",
+    "mask_frame_scores",
 ]
 
 
@@ -111,3 +113,46 @@ def roc_auc(scores, labels):
     avg = first + (counts - 1) / 2.0 + 1.0
     ranks[order] = np.repeat(avg, counts)
     return float((ranks[y].sum() - npos * (npos + 1) / 2.0) / (npos * nneg))
+
+
+def near_mask(mask, radius_px):
+    """Pixels (H, W) within ``radius_px`` (Euclidean) of a mask: the mask dilated by a disc.
+
+    Used to count the hand pixels that touch or cover an object (its amodal mask, dilated)."""
+    from scipy.ndimage import distance_transform_edt
+
+    m = _as_mask(mask, "mask")
+    if m.ndim != 2:
+        raise ValueError(f"mask: expected shape (H, W), got {m.shape}")
+    if isinstance(radius_px, bool) or not isinstance(radius_px, (int, np.integer)) or radius_px < 0:
+        raise ValueError(f"radius_px: expected an integer >= 0, got {radius_px!r}")
+    out = np.zeros(m.shape, bool)
+    ys, xs = np.nonzero(m)
+    if not len(ys):
+        return out
+    r = int(radius_px)
+    y0, y1 = max(ys.min() - r, 0), min(ys.max() + r + 1, m.shape[0])
+    x0, x1 = max(xs.min() - r, 0), min(xs.max() + r + 1, m.shape[1])
+    out[y0:y1, x0:x1] = distance_transform_edt(~m[y0:y1, x0:x1]) <= r
+    return out
+
+
+def mask_frame_scores(pred, truth, occluder=None, within=None):
+    """Per-frame counts of a predicted mask (H, W) against the true visible mask: a dict with
+    ``iou``, ``n_pred``, ``n_gt``, ``n_tp`` and, given an ``occluder`` mask, ``hand_all`` /
+    ``hand_all_tgt`` (occluder pixels, and those labelled target) and ``hand_near`` /
+    ``hand_near_tgt`` (the same inside ``within``, e.g. :func:`near_mask` of the amodal mask).
+
+    Pooled rates follow from the sums: precision = sum n_tp / sum n_pred, the occluder-as-target
+    fraction = sum hand_near_tgt / sum hand_near."""
+    p = _as_mask(pred, "pred")
+    g = _as_mask(truth, "truth", p.shape)
+    if p.ndim != 2:
+        raise ValueError(f"pred: expected one frame (H, W), got {p.shape}")
+    out = {"iou": iou(p, g), "n_pred": int(p.sum()), "n_gt": int(g.sum()), "n_tp": int(np.logical_and(p, g).sum())}
+    if occluder is not None:
+        o = _as_mask(occluder, "occluder", p.shape)
+        out["hand_all"], out["hand_all_tgt"] = int(o.sum()), int(np.logical_and(p, o).sum())
+        near = o & _as_mask(within, "within", p.shape) if within is not None else o
+        out["hand_near"], out["hand_near_tgt"] = int(near.sum()), int(np.logical_and(p, near).sum())
+    return out

@@ -263,7 +263,9 @@ class Experiment:
             seeds = seeds[: int(n)]
         for key, value in (overrides or {}).items():
             if key == "seed":
-                seeds = [int(s) for s in _as_list(value)]
+                seeds = [_as_seed(s) for s in _as_list(value)]
+                if not seeds:
+                    raise ValueError(f"seed: {self.name}: --set seed={value!r} gives no seeds to run")
                 continue
             if key not in self.grid:
                 valid = ", ".join(sorted(self.grid)) + ", seed"
@@ -291,3 +293,9 @@ class Experiment:
     def seeds_of(self, split) -> list:
         return [int(s) for s in self.splits[self.pick_split(split)]["seeds"]]
 
+
+def _as_seed(s):
+    """A ``--set seed=...`` value: an int >= 0 (not 1.5, "abc", True or a dict)."""
+    from polar_sim._validation import as_int
+
+    return as_int(s, "seed", minimum=0)

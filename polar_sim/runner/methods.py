@@ -140,6 +140,34 @@ def describe_methods():
 # ---------------------------------------------------------------------------------------------
 
 # -- mapper2d / mapper3d / localizer2d (the GPIS experiments) --
+# Implementations: polar_sim.runner.gpis_methods (imports the heavy modules on first use).
+#
+# Besides the protocols above, the GPIS experiments use two optional parts: a mapper2d may offer
+# ``surface_points() -> (k, 2)`` (a point set, e.g. grid cells) instead of ``surface()``; and a
+# factory that names one of these keywords in its signature is given it when the experiment has it: ``seed`` (int, the
+# trial's seed), ``init_std`` ((3,) m, m, rad: the spread of the initial estimate, localisers),
+# ``exact_sdf`` (a callable points (k, 2) -> (k,): the scene's exact SDF, an oracle input that only
+# ground-truth baselines such as ``icpd_gt`` ask for). ``polar_sim.runner.gpis_methods.call_factory``
+# does this matching.
+from polar_sim.runner import gpis_methods as _gm  # noqa: E402  (light: no heavy imports at module level)
+
+for _name, _f, _d in [
+    ("gpis", _gm.gpis2d, "GPISMap2D, default mode, taking the sensor pose"),
+    ("gpis_legacy", _gm.gpis2d_legacy, "GPISMap2D(legacy=True): the published behaviour"),
+    ("grid5", lambda **kw: _gm.GridMapper2D(0.05, **kw), "5 cm occupancy grid; SDF = its signed EDT; surface = occupied cells next to free"),
+    ("grid10", lambda **kw: _gm.GridMapper2D(0.10, **kw), "10 cm occupancy grid (as grid5)"),
+    ("edt5", lambda **kw: _gm.EDTMapper2D(0.05, **kw), "signed EDT of a 5 cm grid; surface = its zero contour"),
+]:
+    register_method("mapper2d", _name, _f, description=_d)
+register_method("mapper3d", "gpis", _gm.gpis3d, description="GPISMap3D, default mode")
+register_method("mapper3d", "gpis_legacy", _gm.gpis3d_legacy, description="GPISMap3D(legacy=True)")
+for _n in (1000, 5000, 10000):
+    register_method("localizer2d", f"pf{_n}", _gm.pf_factory(_n),
+                    description=f"MCL, {_n} particles, likelihood field of a 5 cm grid")
+register_method("localizer2d", "icpd", _gm.ICPDLocalizer2D, description="ICP-D on the signed EDT of a 5 cm grid")
+register_method("localizer2d", "icpd_gt", _gm.icpd_gt,
+                description="ICP-D on the exact SDF sampled at 5 cm (the dissertation's ground-truth discrete SDF; oracle)")
+register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G on a GPISMap2D of the mapping drive")
 
 # -- vo (the ground experiments) --
 
@@ -182,3 +210,31 @@ register_method("vo", "mono", _held_scale_vo,
                             "the true speed once and then held through the structure; needs speed_truth=")
 
 # -- tracker (the tracking experiments) --
+#: Built-in trackers: ObjectTracker configurations (keyword arguments over its defaults).
+TRACKERS = {
+    "ww": ({}, "ObjectTracker, the default: W head, confidence-weighted self-labels"),
+    "wu": ({"appearance": "wu"}, "ObjectTracker, W head (weighted sum of per-scale heads), uniform self-labels"),
+    "sw": ({"appearance": "sw"}, "ObjectTracker, S head (one layer on stacked features), weighted self-labels"),
+    "su": ({"appearance": "su"}, "ObjectTracker, S head, uniform self-labels"),
+    "h": ({"appearance": "h"}, "ObjectTracker with the 216-bin HSV Naive Bayes (the ground chapter's classifier)"),
+    "shape-only": ({"appearance": "none"}, "ablation: appearance term off (prior x depth only)"),
+    "no-motion": ({"motion": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
+    "spatial-prior": ({"spatial_prior": True}, "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
+    "spatial-prior-0.1": ({"spatial_prior": True, "epsilon": 0.1}, "ablation: the silhouette prior softened to epsilon 0.1"),
+    "alpha-beta": ({"motion": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
+    "no-hold": ({"hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "plain-icp": ({"appearance": "none", "registration": "plain"}, "baseline: robust ICP on every ROI point"),
+}
+
+
+def _tracker(config):
+    def factory(model_points, K, initial_pose, *, model_normals=None, random_state=0, **kw):
+        from polar_sim.tracking import ObjectTracker
+
+        return ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state,
+                             **{**config, **kw})
+    return factory
+
+
+for _name, (_config, _description) in TRACKERS.items():
+    register_method("tracker", _name, _tracker(_config), description=_description)

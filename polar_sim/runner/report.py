@@ -1,15 +1,13 @@
-"""Helpers for experiment summaries (tables, grouped statistics, figures) and the combined report."""
+"""Helpers for experiment summaries: tables, grouped statistics, figures."""
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["markdown_table", "group_rows", "fmt", "savefig", "write_csv_table", "build_report"]
+__all__ = ["markdown_table", "group_rows", "fmt", "cell", "savefig", "write_csv_table"]
 
 
 def fmt(x, digits=4):
@@ -29,12 +27,17 @@ def fmt(x, digits=4):
     return str(x)
 
 
+def cell(x):
+    """A value formatted for a markdown table cell: ``|`` escaped, no line breaks."""
+    return fmt(x).replace("|", "\\|").replace("\n", " ")
+
+
 def markdown_table(rows, columns, headers=None):
-    """A markdown table of ``rows`` (dicts) restricted to ``columns``."""
+    """A markdown table of ``rows`` (dicts) restricted to ``columns``; ``|`` in cells is escaped."""
     headers = headers or columns
-    out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(columns)]
+    out = ["| " + " | ".join(cell(h) for h in headers) + " |", "|" + "---|" * len(columns)]
     for r in rows:
-        out.append("| " + " | ".join(fmt(r.get(c)) for c in columns) + " |")
+        out.append("| " + " | ".join(cell(r.get(c)) for c in columns) + " |")
     return "\n".join(out)
 
 
@@ -86,30 +89,3 @@ def savefig(fig, out_dir, name):
 
     plt.close(fig)
     return f"![{name}]({path.name})"
-
-
-def build_report(results, out_dir):
-    """One markdown report for several runs: a table of their checks, then each run's summary
-    with headings demoted a level and figure links rewritten to the run folder.
-
-    ``results`` is a list of ``RunResult``; returns the path of ``report.md``.
-    """
-    out_dir = Path(out_dir)
-
-    def rel(p):
-        p = Path(p)
-        return p.relative_to(out_dir) if p.is_relative_to(out_dir) else p
-
-    lines = ["# polar_sim report", "", "| experiment | checks passed | trials | folder |", "|---|---|---|---|"]
-    for r in results:
-        name = json.loads((r.out_dir / "config.json").read_text())["experiment"]
-        n_ok = sum(c.passed for c in r.checks)
-        lines.append(f"| {name} | {n_ok}/{len(r.checks)} | {len(r.table)} | {rel(r.out_dir)} |")
-    for r in results:
-        text = (r.out_dir / "summary.md").read_text()
-        text = re.sub(r"^(#+) ", r"#\1 ", text, flags=re.M)
-        text = re.sub(r"!\[([^\]]*)\]\((?!http)([^)]+)\)", lambda m: f"![{m[1]}]({rel(r.out_dir)}/{m[2]})", text)
-        lines += ["", text]
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path

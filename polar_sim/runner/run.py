@@ -211,6 +211,7 @@ def _ray_init(workers, address):
     if ray.is_initialized():
         return ray
     address = address or os.environ.get("RAY_ADDRESS") or None
+    _check_reachable(address)
     try:
         # With an address (or RAY_ADDRESS) this joins a running cluster; otherwise a local one starts.
         ray.init(address=address, num_cpus=None if address else workers, log_to_driver=False,
@@ -219,6 +220,22 @@ def _ray_init(workers, address):
         raise ValueError(f"address: cannot join the Ray cluster at {address!r}: {type(exc).__name__}: "
                          f"{str(exc).splitlines()[0] if str(exc) else ''}") from None
     return ray
+
+
+def _check_reachable(address, timeout=5.0):
+    """Fail fast on a HOST:PORT nobody listens at (ray.init would retry for minutes)."""
+    import socket
+
+    if not address or address == "auto" or "://" in address:
+        return
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"address: expected 'auto' or HOST:PORT, got {address!r}")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise ValueError(f"address: cannot reach the Ray cluster at {address!r} ({exc.strerror or exc}); "
+                         "start it with `ray start --head` or check the address") from None
 
 
 def _run_ray(exp, todo, out_dir, size, split, workers, timeout, address):
@@ -315,6 +332,8 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
     if trial_timeout is not None and not (isinstance(trial_timeout, (int, float)) and trial_timeout > 0):
         raise ValueError(f"trial_timeout: expected a positive number of seconds, got {trial_timeout!r}")
+    if backend == "ray":
+        _check_reachable(address or os.environ.get("RAY_ADDRESS") or None)
     size = exp.pick_size(size or ("quick" if quick else "full"))
     split = exp.pick_split(split)
     grid, seeds = exp.resolve(size, split, overrides)

@@ -58,17 +58,19 @@ ACTIONS = ("touch", "push", "lift", "turn", "fast", "pass")
 APPROACHES = {"front": 0.0, "side": -np.pi / 2, "left": np.pi / 2}
 
 
-def add_hand(spec: mujoco.MjSpec, pos, quat):
+def add_hand(spec: mujoco.MjSpec, pos, quat, *, skin=HAND_SKIN, sleeve=SLEEVE):
     """Add the mocap body ``hand`` (palm box, capsule fingers and thumb, a sleeved forearm).
 
     Every geom collides with the objects (bit 2) but not with the static scene; all are in the
-    dynamic geom group and labelled occluder (body name ``hand``).
+    dynamic geom group and labelled occluder (body name ``hand``). ``skin`` and ``sleeve`` are
+    the RGB(A) colours (0..1) of the hand and of the forearm's sleeve.
     """
     from polar_sim.sim.robots import GROUP
 
+    skin, sleeve_rgba = tuple(skin)[:3] + (1.0,), tuple(sleeve)[:3] + (1.0,)
     body = spec.worldbody.add_body(name="hand", mocap=True, pos=list(pos), quat=list(quat))
     common = dict(group=GROUP["dynamic"], contype=COLLIDE_HAND, conaffinity=COLLIDE_HAND,
-                  friction=[0.8, 0.005, 0.0001], rgba=list(HAND_SKIN))
+                  friction=[0.8, 0.005, 0.0001], rgba=list(skin))
     cap = mujoco.mjtGeom.mjGEOM_CAPSULE
     body.add_geom(name="hand_palm", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(PALM_HALF), **common)
     for k, (x, L) in enumerate(zip(FINGER_X, FINGER_LEN)):
@@ -80,7 +82,7 @@ def add_hand(spec: mujoco.MjSpec, pos, quat):
                   fromto=[0.030, -0.050, -0.004, 0.020, THUMB_Y, -0.030], **common)
     body.add_geom(name="hand_thumb_distal", type=cap, size=[THUMB_R, 0, 0],
                   fromto=[0.020, THUMB_Y, -0.030, 0.012, THUMB_Y, -0.058], **common)
-    sleeve = dict(common, rgba=list(SLEEVE))
+    sleeve = dict(common, rgba=list(sleeve_rgba))
     # The wrist and forearm stay above the palm's underside, which rests on objects.
     body.add_geom(name="hand_wrist", type=cap, size=[0.024, 0, 0],
                   fromto=[0, -0.05, 0.013, 0, -0.09, 0.03], **common)

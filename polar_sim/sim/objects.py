@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-__all__ = ["OBJECTS", "ObjectInfo", "object_names", "object_info", "load_mesh", "make_mesh",
+__all__ = ["OBJECTS", "DEFAULT_OBJECTS", "PARTS", "ObjectInfo", "object_names", "object_info", "load_mesh", "make_mesh",
            "write_assets", "asset_dir", "asset_path", "diameter", "ATLAS_TILES"]
 
 logger = logging.getLogger(__name__)
@@ -221,6 +221,21 @@ def _cube():
     return _box([0.045, 0.045, 0.045], [0, 0, 0.0225])
 
 
+# blocks: a box body, a round post standing on it and a small block on its other end
+_BLK_BODY = (0.14, 0.075, 0.06)            # extents x, y, z of the body (m)
+_BLK_POST = (0.014, 0.085, 0.035)          # radius, height, x of the post's axis
+_BLK_CUBE = (0.04, -0.04)                  # edge and x of the small block's centre
+
+
+def _blocks():
+    bx, by, bz = _BLK_BODY
+    r, h, xp = _BLK_POST
+    e, xc = _BLK_CUBE
+    post = trimesh.creation.cylinder(radius=r, height=h + 0.004, sections=40)
+    post.apply_translation([xp, 0.0, bz + h / 2 - 0.002])  # sunk 4 mm into the body: one solid
+    return _union([_box([bx, by, bz], [0, 0, bz / 2]), post, _box([e, e, e], [xc, 0.0, bz + e / 2 - 0.002])])
+
+
 def _cyl(r, h, z0=0.0):
     return {"type": "cylinder", "size": (r, h / 2), "pos": (0.0, 0.0, z0 + h / 2), "axis": "z"}
 
@@ -253,10 +268,21 @@ OBJECTS = {
                           0.20, 0.025),
     "cube": ObjectInfo("cube", "small 4.5 cm cube (a small, indistinct shape)",
                        (_bx((0.0225, 0.0225, 0.0225), (0, 0, 0.0225)),), 0.08, 0.0225),
+    "blocks": ObjectInfo("blocks", "three primitives: a box body, a round post, a small block (one colour each)",
+                         (_bx((_BLK_BODY[0] / 2, _BLK_BODY[1] / 2, _BLK_BODY[2] / 2), (0, 0, _BLK_BODY[2] / 2)),
+                          _cyl(_BLK_POST[0], _BLK_POST[1], _BLK_BODY[2]) | {"pos": (_BLK_POST[2], 0.0,
+                                                                                 _BLK_BODY[2] + _BLK_POST[1] / 2)},
+                          _bx((_BLK_CUBE[0] / 2,) * 3, (_BLK_CUBE[1], 0.0, _BLK_BODY[2] + _BLK_CUBE[0] / 2))),
+                         0.30, _BLK_BODY[1] / 2),
 }
+#: The objects a ``tabletop`` scene draws from when no target is named (the catalogue before
+#: ``blocks`` was added: keeping this list fixed keeps every seed's scene as it was).
+DEFAULT_OBJECTS = ("mug", "box", "can", "bottle", "drill", "bracket", "cube")
+#: Objects made of parts that each sample their own atlas tile: part name -> tile.
+PARTS = {"blocks": {"body": ATLAS_TILES["body"], "post": ATLAS_TILES["accent"], "block": ATLAS_TILES["label"]}}
 
 _BUILDERS = {"mug": _mug, "box": _box_obj, "can": _can, "bottle": _bottle, "drill": _drill,
-             "bracket": _bracket, "cube": _cube}
+             "bracket": _bracket, "cube": _cube, "blocks": _blocks}
 _REVOLVED = {"mug", "can", "bottle"}
 
 
@@ -306,6 +332,10 @@ def _face_tiles(name, mesh):
         tile[grip] = ATLAS_TILES["dark"]
     elif name == "cube":
         tile[n[:, 2] > 0.9] = ATLAS_TILES["accent"]
+    elif name == "blocks":
+        above = c[:, 2] > _BLK_BODY[2] + 1e-6
+        tile[above & (c[:, 0] > 0)] = ATLAS_TILES["accent"]  # the post
+        tile[above & (c[:, 0] < 0)] = ATLAS_TILES["label"]   # the small block
     return tile
 
 

@@ -1,4 +1,4 @@
-"""Pictures of scenes and sensor frames: colourised depth and labels, and scene sheets."""
+"""Pictures of scenes and sensor frames: colourised depth and labels, and labelled figures."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 
 from polar_sim.sim.truth import LABELS
 
-__all__ = ["colourise_depth", "colourise_labels", "LABEL_COLOURS", "render_scene_pictures", "save_png"]
+__all__ = ["colourise_depth", "colourise_labels", "LABEL_COLOURS", "render_scene_pictures", "save_png", "save_figure",
+           "image_figure", "camera_figure", "lidar_map_figure"]
 
 #: RGB colour per label (none, ground, obstacle, target, occluder, robot).
 LABEL_COLOURS = np.array([[0, 0, 0], [90, 160, 60], [200, 60, 50], [250, 200, 30], [230, 140, 180],
@@ -43,23 +44,121 @@ def save_png(path, rgb):
     return path
 
 
+def save_figure(fig, path):
+    """Save a matplotlib figure as PNG (and close it); returns the path."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def image_figure(rgb, title, *, caption=None):
+    """A titled figure of one RGB image (no axes ticks), for renders a user looks at."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h, w = rgb.shape[:2]
+    fig, ax = plt.subplots(figsize=(min(12.0, 2.0 + w / 80), 1.0 + h / 80))
+    ax.imshow(rgb)
+    ax.set_title(title)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if caption:
+        ax.set_xlabel(caption, fontsize=8)
+    return fig
+
+
+def camera_figure(frame, title):
+    """RGB, metric depth (colour bar in metres) and per-pixel labels (legend) of one camera frame."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    ax[0].imshow(frame.rgb)
+    ax[0].set_title("RGB")
+    d = np.where(np.isfinite(frame.depth), frame.depth, np.nan)
+    ok = np.isfinite(d)
+    hi = float(np.percentile(d[ok], 98)) if ok.any() else 1.0
+    im = ax[1].imshow(d, cmap="inferno_r", vmin=0.0, vmax=hi)
+    ax[1].set_title("depth along the optical axis (white: none)")
+    fig.colorbar(im, ax=ax[1], shrink=0.8, label="depth [m]")
+    ax[2].imshow(colourise_labels(frame.labels))
+    ax[2].set_title("per-pixel truth labels")
+    present = sorted(set(np.unique(frame.labels).tolist()) & set(LABELS.values()))
+    names = {v: k for k, v in LABELS.items()}
+    ax[2].legend(handles=[Patch(color=LABEL_COLOURS[v] / 255.0, label=names[v]) for v in present],
+                 loc="lower right", fontsize=8, framealpha=0.8)
+    for a in ax:
+        a.set_xlabel("u [px]")
+        a.set_ylabel("v [px]")
+    fig.suptitle(title)
+    return fig
+
+
+def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=400):
+    """Top-down map around the robot: the exact SDF of the static scene in the lidar plane
+    (colour bar in metres, zero level in black), the scan's end points and the sensor pose.
+    The window covers the scan's end points plus ``margin`` (at most ``max_half`` m each way)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    scan = world.lidar(lidar)
+    T = scan.T_world_sensor
+    cx, cy = T[0, 3], T[1, 3]
+    P = scan.points()
+    W = P[:, :2] @ T[:2, :2].T + T[:2, 3] if len(P) else np.zeros((0, 2))
+    span = np.vstack([W, [[cx, cy]]])
+    lo = np.maximum(span.min(0) - margin, [cx - max_half, cy - max_half])
+    hi = np.minimum(span.max(0) + margin, [cx + max_half, cy + max_half])
+    res = float(max(hi - lo)) / n_cells
+    xs, ys = np.arange(lo[0], hi[0], res), np.arange(lo[1], hi[1], res)
+    X, Y = np.meshgrid(xs, ys)
+    sdf = world.sdf(np.stack([X.ravel(), Y.ravel()], 1)).reshape(X.shape)
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    im = ax.imshow(np.clip(sdf, -1.0, 3.0), origin="lower", extent=[xs[0], xs[-1], ys[0], ys[-1]], cmap="RdBu",
+                   norm=TwoSlopeNorm(vmin=-1.0, vcenter=0.0, vmax=3.0))
+    ax.contour(X, Y, sdf, levels=[0.0], colors="k", linewidths=0.8)
+    fig.colorbar(im, ax=ax, shrink=0.85, label="exact signed distance in the lidar plane [m] (clipped to -1..3)")
+    if len(W):
+        ax.scatter(W[:, 0], W[:, 1], s=2, c="orange", label=f"lidar end points ({len(W)} returns)")
+    yaw = np.arctan2(T[1, 0], T[0, 0])
+    L = 0.06 * float(max(hi - lo))
+    ax.arrow(cx, cy, L * np.cos(yaw), L * np.sin(yaw), width=0.15 * L, color="k", label="sensor pose")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_aspect("equal")
+    return fig
+
+
 def render_scene_pictures(world, out_dir, *, width=640, height=480):
-    """Write, for every camera, ``<cam>_rgb/_depth/_labels.png``, an overview and a sheet that
-    puts them side by side. Returns the written paths."""
+    """Write a labelled picture of every camera (``<scene>_<cam>.png``: RGB, depth with its colour
+    bar, labels with their legend) and an overview (``<scene>_overview.png``: a top-down exact-SDF
+    map with the lidar scan where the scene has a 2D lidar, else a third-person render).
+    Returns the written paths."""
     out_dir = Path(out_dir)
     paths = []
-    tiles = []
     for cam in world.cameras:
         f = world.camera(cam, width=width, height=height)
-        for kind, img in (("rgb", f.rgb), ("depth", colourise_depth(f.depth)), ("labels", colourise_labels(f.labels))):
-            paths.append(save_png(out_dir / f"{world.scene}_{cam}_{kind}.png", img))
-            tiles.append(img)
-    overview = world.render_view(width=width, height=height)
-    paths.append(save_png(out_dir / f"{world.scene}_overview.png", overview))
-    tiles.append(overview)
-    small = [cv2.resize(t, (width // 2, height // 2), interpolation=cv2.INTER_AREA) for t in tiles]
-    while len(small) % 2:
-        small.append(np.zeros_like(small[0]))
-    rows = [np.hstack(small[i : i + 2]) for i in range(0, len(small), 2)]
-    paths.append(save_png(out_dir / f"{world.scene}_sheet.png", np.vstack(rows)))
+        paths.append(save_figure(camera_figure(f, f"{world.scene}: camera {cam!r} at t = {f.t:.2f} s, "
+                                                  f"{width}x{height}"), out_dir / f"{world.scene}_{cam}.png"))
+    lidars2d = [n for n in world.lidars if getattr(world.lidar(n), "angles", None) is not None]
+    if lidars2d:
+        fig = lidar_map_figure(world, lidars2d[0], f"{world.scene}: exact SDF around the robot and "
+                                                   f"lidar {lidars2d[0]!r}")
+    else:
+        fig = image_figure(world.render_view(width=width, height=height), f"{world.scene}: third-person view")
+    paths.append(save_figure(fig, out_dir / f"{world.scene}_overview.png"))
     return paths

@@ -234,6 +234,8 @@ class RecordingReader:
             shape = inf.get("shape")
             if not isinstance(shape, list) or any(type(s) is not int or s < 0 for s in shape) or len(shape) > 4:
                 raise ValueError(f"{where}: key {k!r} has a malformed shape {shape!r}")
+            if not isinstance(inf.get("dtype"), str):       # np.dtype(None) would be float64
+                raise ValueError(f"{where}: key {k!r} has a malformed dtype {inf.get('dtype')!r}")
             try:
                 dtype = np.dtype(inf.get("dtype"))
             except TypeError:

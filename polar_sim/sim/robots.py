@@ -54,6 +54,22 @@ class RoverConfig:
     wheel_kv: float  # velocity-actuator gain, N m s / rad
     wheel_torque: float  # torque limit per wheel, N m
 
+    def __post_init__(self):
+        # Every field is a positive finite length, mass, speed or gain; the sensors sit above
+        # the ground (a negative camera_height would put the camera underground).
+        from polar_sim._validation import as_float
+
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "chassis_half":
+                if not isinstance(v, (tuple, list)) or len(v) != 3:
+                    raise ValueError(f"chassis_half: expected 3 half sizes (m), got {v!r}")
+                for x in v:
+                    as_float(x, "chassis_half", minimum=0.0, exclusive_minimum=True)
+                continue
+            hi = 179.0 if f.name == "camera_fovy_deg" else None
+            as_float(v, f.name, minimum=0.0, exclusive_minimum=True, maximum=hi)
+
 
 ROVER_PRESETS = {
     # Car-sized, KITTI-like camera height; for the outdoor scenes.
@@ -80,9 +96,16 @@ def add_rover(spec: mujoco.MjSpec, config: RoverConfig, pose2d=(0.0, 0.0, 0.0), 
     two frictionless casters, and the
     sensor declarations (``<custom><text name="sensor:...">``) that :mod:`sensors` reads.
     """
+    from polar_sim._validation import as_int, as_pose2d
+
+    if not isinstance(config, RoverConfig):
+        raise TypeError(f"config: expected a RoverConfig, got {type(config).__name__}")
+    lidar_beams = as_int(lidar_beams, "lidar_beams", minimum=1, maximum=100_000)
+    camera_width = as_int(camera_width, "camera_width", minimum=1, maximum=8192)
+    camera_height_px = as_int(camera_height_px, "camera_height_px", minimum=1, maximum=8192)
     c = config
     r = c.wheel_radius
-    x, y, th = pose2d
+    x, y, th = as_pose2d(pose2d, "pose2d")
     body = spec.worldbody.add_body(name="rover", pos=[x, y, z0 + r + 0.01])
     body.quat = [np.cos(th / 2), 0.0, 0.0, np.sin(th / 2)]
     body.add_freejoint(name="rover_free")

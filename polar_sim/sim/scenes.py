@@ -10,13 +10,24 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import inspect
+import os
+import xml.etree.ElementTree as ET
 from importlib import resources
 from pathlib import Path
 from typing import Callable
 
 import mujoco
 
-__all__ = ["list_scenes", "scene_dir", "load_scene", "scene_options", "SceneEntry", "SCENES", "describe_scene"]
+from polar_sim._validation import as_float, as_int, check_choice
+from polar_sim.fileio import check_source
+
+__all__ = ["list_scenes", "scene_dir", "load_scene", "scene_options", "SceneEntry", "SCENES", "describe_scene",
+           "MAX_ASSET_BYTES", "MAX_MESH_FACES"]
+
+#: Largest asset file (mesh, texture, heightfield) a user MJCF may reference, bytes.
+MAX_ASSET_BYTES = 256 * 2**20
+#: Most mesh faces a compiled scene may hold (all meshes together).
+MAX_MESH_FACES = 5_000_000
 
 
 def scene_dir() -> Path:
@@ -56,6 +67,9 @@ SCENES = {
                              "the rover_terrain route and obstacles on flat ground"),
     "office2d": SceneEntry("office2d.xml", "polar_sim.sim.office:build_office",
                            "30 x 30 m lab floor: rooms, doors, furniture; indoor rover with a 2D lidar"),
+    "warehouse2d": SceneEntry("warehouse2d.xml", "polar_sim.sim.worlds2d:build_warehouse",
+                              "randomised warehouse: shelf rows and racks, thin and curved walls, pillars, "
+                              "crates, clutter, an open yard; indoor rover with a 2D lidar"),
     "navworld": SceneEntry("navworld.xml", "polar_sim.sim.navworld:build_navworld",
                            "seeded rooms, doors and clutter with a start and a reachable goal (GPISNav)"),
     "tabletop": SceneEntry("tabletop.xml", "polar_sim.sim.tabletop:build_tabletop",
@@ -81,18 +95,93 @@ def scene_options(name):
     return {p.name: p.default for p in sig.parameters.values() if p.kind == p.KEYWORD_ONLY}
 
 
+def _check_generic_options(options):
+    """Validate the options several scene builders share (rover and sensor options), by name."""
+    from polar_sim.sim.robots import ROVER_PRESETS
+
+    out = dict(options)
+    checks = {
+        "camera_height": lambda v: as_float(v, "camera_height", minimum=0.0, exclusive_minimum=True, maximum=100.0),
+        "camera_fovy": lambda v: as_float(v, "camera_fovy", minimum=0.0, exclusive_minimum=True, maximum=179.0),
+        "lidar_beams": lambda v: as_int(v, "lidar_beams", minimum=1, maximum=100_000),
+        "lidar_range": lambda v: as_float(v, "lidar_range", minimum=0.0, exclusive_minimum=True, maximum=1000.0),
+        "rover": lambda v: _check_rover(v, ROVER_PRESETS),
+    }
+    for k, fn in checks.items():
+        if k in out and out[k] is not None:
+            out[k] = fn(out[k])
+    return out
+
+
+def _check_rover(v, presets):
+    if not isinstance(v, str):
+        raise TypeError(f"rover: expected a preset name (str), got {type(v).__name__}")
+    return check_choice(v, tuple(presets), "rover")
+
+
+_ASSET_TAGS = {"mesh": "meshdir", "texture": "texturedir", "hfield": "assetdir", "skin": "assetdir",
+               "include": None, "model": None}
+
+
+def _check_mjcf_files(path: Path):
+    """Refuse MJCF whose files (includes, meshes, textures, heightfields) lie outside the scene's
+    folder, are missing, or are larger than :data:`MAX_ASSET_BYTES`, before MuJoCo reads them."""
+    root = path.resolve().parent
+    seen = set()
+
+    def scan(xml_path):
+        if xml_path in seen:
+            return
+        seen.add(xml_path)
+        try:
+            tree = ET.parse(xml_path)
+        except ET.ParseError as exc:
+            raise ValueError(f"scene: malformed MJCF in {str(xml_path)!r}: {exc}") from None
+        dirs = {"meshdir": "", "texturedir": "", "assetdir": ""}
+        for comp in tree.iter("compiler"):
+            for k in dirs:
+                if comp.get(k) is not None:
+                    dirs[k] = comp.get(k)
+        if dirs["assetdir"]:
+            dirs["meshdir"] = dirs["meshdir"] or dirs["assetdir"]
+            dirs["texturedir"] = dirs["texturedir"] or dirs["assetdir"]
+        for tag, dkey in _ASSET_TAGS.items():
+            for el in tree.iter(tag):
+                f = el.get("file")
+                if f is None:
+                    continue
+                base = root / (dirs.get(dkey, "") if dkey else "")
+                target = (base / f).resolve()
+                if not target.is_relative_to(root):
+                    raise ValueError(f"scene: <{tag} file={f!r}> in {xml_path.name!r} points outside the scene "
+                                     f"folder {str(root)!r}")
+                try:
+                    size = target.stat().st_size
+                except OSError:
+                    raise FileNotFoundError(f"scene: <{tag} file={f!r}> in {xml_path.name!r}: "
+                                            f"{str(target)!r} does not exist") from None
+                if size > MAX_ASSET_BYTES:
+                    raise ValueError(f"scene: <{tag} file={f!r}> is {size / 2**20:.0f} MiB; the limit is "
+                                     f"{MAX_ASSET_BYTES // 2**20} MiB (MAX_ASSET_BYTES)")
+                if tag == "include":
+                    scan(target)
+
+    scan(path.resolve())
+
+
 def load_scene(scene, seed=0, **options):
     """Build the ``MjSpec`` of a scene name or MJCF path; returns ``(spec, metadata)``.
 
-    Raises ``ValueError`` for an unknown name, an unknown option or malformed MJCF, and
-    ``FileNotFoundError`` for a missing file.
+    Raises ``ValueError`` for an unknown name, an unknown or invalid option, malformed MJCF, an
+    MJCF whose files lie outside its folder or exceed :data:`MAX_ASSET_BYTES`, and
+    ``FileNotFoundError`` for a missing file (the MJCF or an asset it names).
     """
-    if isinstance(scene, Path) or (isinstance(scene, str) and scene.endswith(".xml")):
-        path = Path(scene)
-        if not path.is_file():
-            raise FileNotFoundError(f"scene: MJCF file {str(path)!r} does not exist")
+    seed = as_int(seed, "seed", minimum=0)
+    if isinstance(scene, os.PathLike) or (isinstance(scene, str) and scene.endswith(".xml")):
+        path = check_source(scene, "scene")
         if options:
             raise ValueError(f"scene options {sorted(options)} apply to named scenes only, not to an MJCF path")
+        _check_mjcf_files(path)
         try:
             spec = mujoco.MjSpec.from_file(str(path))
         except Exception as exc:  # mujoco raises its own error types for XML problems
@@ -101,12 +190,13 @@ def load_scene(scene, seed=0, **options):
     if not isinstance(scene, str):
         raise TypeError(f"scene: expected a scene name or a path to an MJCF file, got {type(scene).__name__}")
     if scene not in SCENES:
-        raise ValueError(f"scene: unknown scene {scene!r}; expected one of {', '.join(list_scenes())} "
+        raise ValueError(f"scene: unknown scene {scene[:200]!r}; expected one of {', '.join(list_scenes())} "
                          "or a path to an MJCF file")
     valid = scene_options(scene)
     unknown = sorted(set(options) - set(valid))
     if unknown:
         raise ValueError(f"{scene}: unknown scene option(s) {unknown}; valid: {sorted(valid)}")
+    options = _check_generic_options(options)
     spec = mujoco.MjSpec.from_file(str(scene_dir() / SCENES[scene].file))
     meta = SCENES[scene].load_builder()(spec, seed, **options)
     return spec, meta

@@ -13,14 +13,18 @@ import dataclasses
 import mujoco
 import numpy as np
 
+from polar_sim._validation import as_float, as_int
 from polar_sim.geometry import CV_FROM_GL, make_pose
 from polar_sim.sim.render import OffscreenRenderer
 from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
 
 __all__ = [
     "CameraFrame", "LidarScan", "LidarScan3D", "LidarSpec", "RangeNoise", "DepthNoise",
-    "parse_lidars", "Lidar", "CameraRig", "intrinsics",
+    "parse_lidars", "Lidar", "CameraRig", "intrinsics", "MAX_LIDAR_RAYS",
 ]
+
+#: Most rays one declared lidar may cast per scan (a 3D lidar's rows x cols included).
+MAX_LIDAR_RAYS = 1_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,9 +93,8 @@ class RangeNoise:
     dropout: float = 0.0
 
     def __post_init__(self):
-        if not (np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError(f"sigma: expected a finite value >= 0, got {self.sigma}")
-        if not 0.0 <= self.dropout < 1.0:
+        as_float(self.sigma, "sigma", minimum=0.0)
+        if as_float(self.dropout, "dropout", minimum=0.0) >= 1.0:
             raise ValueError(f"dropout: expected a probability in [0, 1), got {self.dropout}")
 
     def apply(self, ranges, rng):
@@ -124,6 +127,14 @@ class DepthNoise:
     edge_jump: float = 0.05
     dropout: float = 0.01
     rgb_sigma: float = 2.0
+
+    def __post_init__(self):
+        for name in ("sigma0", "sigma2", "disparity_step", "edge_jump", "rgb_sigma"):
+            as_float(getattr(self, name), name, minimum=0.0)
+        as_float(self.baseline, "baseline", minimum=0.0, exclusive_minimum=True)
+        as_int(self.edge_px, "edge_px", minimum=0, maximum=64)
+        if as_float(self.dropout, "dropout", minimum=0.0) >= 1.0:
+            raise ValueError(f"dropout: expected a probability in [0, 1), got {self.dropout}")
 
     def apply(self, rgb, depth, fx, rng):
         z = depth.astype(np.float64)
@@ -170,46 +181,91 @@ def _parse_kv(text, where):
     out = {}
     for tok in text.split():
         if "=" not in tok:
-            raise ValueError(f"{where}: expected key=value tokens, got {tok!r}")
+            raise ValueError(f"{where}: expected key=value tokens, got {tok[:80]!r}")
         k, v = tok.split("=", 1)
         out[k] = v
     return out
 
 
+_LIDAR_KEYS = {"lidar2d": ("type", "site", "beams", "fov_deg", "min", "max"),
+               "lidar3d": ("type", "site", "rows", "cols", "vfov_min_deg", "vfov_max_deg", "min", "max")}
+
+
+def _num(kv, key, default, where, *, integer=False, lo=None, hi=None, lo_open=False):
+    """Value ``key`` of a sensor declaration as a checked int or float."""
+    text = kv.get(key)
+    if text is None:
+        return default
+    try:
+        v = int(text) if integer else float(text)
+    except ValueError:
+        kind = "an integer" if integer else "a number"
+        raise ValueError(f"{where}: {key}={text[:40]!r} is not {kind}") from None
+    bad = (not np.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo))
+           or (hi is not None and v > hi))
+    if bad:
+        rng = f"{'(' if lo_open else '['}{lo}, {hi}]"
+        raise ValueError(f"{where}: {key}={text[:40]!r} is out of range; expected a value in {rng}")
+    return v
+
+
 def parse_lidars(model):
-    """Lidar declarations of a compiled model, as ``{name: LidarSpec}``."""
+    """Lidar declarations of a compiled model, as ``{name: LidarSpec}``.
+
+    Every value is checked: ``beams`` (1 .. :data:`MAX_LIDAR_RAYS`), ``fov_deg`` (0, 360],
+    ``rows``/``cols`` (rows x cols <= :data:`MAX_LIDAR_RAYS`), ``vfov_min_deg`` <= ``vfov_max_deg``
+    in [-90, 90], and 0 <= ``min`` < ``max``; a malformed one raises ``ValueError`` naming the
+    declaration and the key.
+    """
     out = {}
     for i in range(model.ntext):
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TEXT, i) or ""
         if not name.startswith("sensor:"):
             continue
         sname = name.split(":", 1)[1]
+        where = f"<text name={name!r}>"
         adr, size = model.text_adr[i], model.text_size[i]
-        text = bytes(model.text_data[adr : adr + size]).rstrip(b"\0").decode()
-        kv = _parse_kv(text, f"<text name={name!r}>")
+        try:
+            text = bytes(model.text_data[adr : adr + size]).rstrip(b"\0").decode()
+        except UnicodeDecodeError:
+            raise ValueError(f"{where}: the declaration is not UTF-8 text") from None
+        kv = _parse_kv(text, where)
         kind = kv.get("type")
+        if kind not in _LIDAR_KEYS:
+            raise ValueError(f"{where}: unknown sensor type {kind!r}; expected lidar2d or lidar3d")
+        unknown = sorted(set(kv) - set(_LIDAR_KEYS[kind]))
+        if unknown:
+            raise ValueError(f"{where}: unknown key(s) {unknown}; {kind} takes {list(_LIDAR_KEYS[kind])}")
         try:
             site = kv["site"]
             model.site(site)
         except KeyError as exc:
-            raise ValueError(f"<text name={name!r}>: site {kv.get('site')!r} does not exist") from exc
-        lo, hi = float(kv.get("min", 0.0)), float(kv.get("max", 30.0))
+            raise ValueError(f"{where}: site {kv.get('site')!r} does not exist") from exc
+        lo = _num(kv, "min", 0.0, where, lo=0.0, hi=1e6)
+        hi = _num(kv, "max", 30.0, where, lo=0.0, hi=1e6, lo_open=True)
+        if not lo < hi:
+            raise ValueError(f"{where}: min={lo} must be smaller than max={hi}")
         if kind == "lidar2d":
-            n = int(kv.get("beams", 1081))
-            fov = np.radians(float(kv.get("fov_deg", 270.0)))
+            n = _num(kv, "beams", 1081, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+            fov = np.radians(_num(kv, "fov_deg", 270.0, where, lo=0.0, hi=360.0, lo_open=True))
             # A full circle must not repeat its first beam at +180 deg.
             ang = np.linspace(-fov / 2, fov / 2, n, endpoint=fov < 2 * np.pi - 1e-9)
             dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(n)], 1)
             out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, ang)
-        elif kind == "lidar3d":
-            rows, cols = int(kv.get("rows", 32)), int(kv.get("cols", 1024))
-            el = np.radians(np.linspace(float(kv.get("vfov_min_deg", -25)), float(kv.get("vfov_max_deg", 15)), rows))
+        else:
+            rows = _num(kv, "rows", 32, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+            cols = _num(kv, "cols", 1024, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+            if rows * cols > MAX_LIDAR_RAYS:
+                raise ValueError(f"{where}: rows x cols = {rows * cols} rays exceeds {MAX_LIDAR_RAYS} (MAX_LIDAR_RAYS)")
+            e0 = _num(kv, "vfov_min_deg", -25.0, where, lo=-90.0, hi=90.0)
+            e1 = _num(kv, "vfov_max_deg", 15.0, where, lo=-90.0, hi=90.0)
+            if e0 > e1:
+                raise ValueError(f"{where}: vfov_min_deg={e0} must not exceed vfov_max_deg={e1}")
+            el = np.radians(np.linspace(e0, e1, rows))
             az = np.linspace(-np.pi, np.pi, cols, endpoint=False)
             E, A = np.meshgrid(el, az, indexing="ij")
             dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
             out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, None)
-        else:
-            raise ValueError(f"<text name={name!r}>: unknown sensor type {kind!r}; expected lidar2d or lidar3d")
     return out
 
 

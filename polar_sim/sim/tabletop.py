@@ -35,6 +35,8 @@ from polar_sim.sim import objects as _objects
 from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HAND_SKIN, HandScript, ReachScript, add_hand,
                                 look_at_quat, matrix_to_quat)
 from polar_sim.sim.robots import GROUP
+from polar_sim.sim.tabletop_appearance import (HAND_COLOURS, SLEEVE_COLOURS, appearance_rng, flat_texture,
+                                               resolve_appearance, table_texture)
 
 __all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "AGENT_SCRIPTS", "COLOURS", "OrbitScript",
            "object_texture"]
@@ -293,7 +295,7 @@ def _camera_sway(p0, look):
 
 
 def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None, n_objects=4,
-                   target_colour=None, distractor_like_target=False, camera_motion="static"):
+                   target_colour=None, distractor_like_target=False, camera_motion="static", appearance=None):
     """``tabletop``: 4-6 objects on a table, a scripted mocap hand, a static RGB-D camera.
 
     Options: ``script`` (one of :data:`SCRIPTS` or :data:`AGENT_SCRIPTS`), ``target`` (an object name from
@@ -301,23 +303,33 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
     (4-6), ``target_colour`` (a name of :data:`COLOURS`, e.g. ``"skin"`` for an object the colour
     of the hand; default seeded), ``distractor_like_target`` (give one other object the
     target's colours), ``camera_motion`` ("static" or "sway": the camera drifts slowly, always
-    looking at the table).
+    looking at the table), ``appearance`` (None: the scene as it has always been rendered; a
+    family name, ``"random"`` or a dict spec: see :mod:`polar_sim.sim.tabletop_appearance`).
+    A target named explicitly may also be ``"blocks"``; without ``target`` the seed chooses among
+    :data:`polar_sim.sim.objects.DEFAULT_OBJECTS`.
 
     Returns the metadata: ``objects``, ``target``, ``control_dt``, ``script`` (a
-    :class:`polar_sim.sim.hand.HandScript`), ``script_name``, ``colours``, ``table_z``.
+    :class:`polar_sim.sim.hand.HandScript`), ``script_name``, ``colours``, ``table_z``, and
+    ``appearance`` (the resolved spec as a dict) when one was given.
     """
     _check(script, tuple(SCRIPTS) + AGENT_SCRIPTS, "script")
-    names = _objects.object_names()
+    names = list(_objects.DEFAULT_OBJECTS)
     if target is not None:
-        _check(target, tuple(names), "target")
+        _check(target, tuple(_objects.object_names()), "target")
     if isinstance(n_objects, bool) or not isinstance(n_objects, (int, np.integer)) or not 4 <= n_objects <= 6:
         raise ValueError(f"n_objects: expected an integer in 4..6, got {n_objects!r}")
     if target_colour is not None:
         _check(target_colour, tuple(COLOURS), "target_colour")
     _check(camera_motion, CAMERA_MOTIONS, "camera_motion")
+    context = f"{script}/{target}"
+    app = resolve_appearance(appearance, seed, context)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7101]))
+    # the appearance draws from its own stream: the layout's draws below stay those of the default
+    arng = appearance_rng(seed, context) if app is not None else None
     spec.option.timestep = TIMESTEP
-    _add_texture(spec, "table_wood", _wood_texture(rng))
+    table = _wood_texture(rng)
+    # "wood" is the scene's own wood (the default's, from the layout stream)
+    _add_texture(spec, "table_wood", table if app is None or app.table == "wood" else table_texture(app.table, arng))
     _add_texture(spec, "wall", _wall_texture(rng))
 
     if target is None:
@@ -336,12 +348,20 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
         colours[others[0]] = colours[target]
     for o in [target] + others:
         base, accent = colours[o]
-        _add_texture(spec, f"tex_{o}", object_texture(COLOURS[base], COLOURS[accent], rng))
+        tex = object_texture(COLOURS[base], COLOURS[accent], rng)
+        if app is not None:
+            tex, colours[o] = _styled_texture(app, o, tex, colours[o], arng)
+        _add_texture(spec, f"tex_{o}", tex)
         x, y, yaw = layout[o]
         _add_object(spec, o, (x, y, TABLE_Z), yaw, f"tex_{o}", target=(o == target))
 
     home = (np.array([0.32, 0.42, 1.32]), matrix_to_quat(np.diag([-1.0, -1.0, 1.0])))
-    add_hand(spec, *home)
+    if app is None:
+        add_hand(spec, *home)
+    else:
+        add_hand(spec, *home, skin=HAND_COLOURS[app.hand], sleeve=SLEEVE_COLOURS[app.sleeve])
+        _apply_light(spec, app.light)
+    extra = {} if app is None else {"appearance": app.as_dict()}
     cam_body = spec.body("camera_rig")
     cam_pos = np.array(cam_body.pos, float)
     if script in AGENT_SCRIPTS:
@@ -353,7 +373,7 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
                          region=region, workspace=REACH_WORKSPACE)
         return {"objects": [target] + others, "target": target, "control_dt": CONTROL_DT, "script": hs,
                 "script_name": script, "colours": {o: list(c) for o, c in colours.items()},
-                "table_z": TABLE_Z}
+                "table_z": TABLE_Z, **extra}
     actions = SCRIPTS[script]
     light = None
     if script == "light":
@@ -370,7 +390,38 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
         "script_name": script,
         "colours": {o: list(c) for o, c in colours.items()},
         "table_z": TABLE_Z,
+        **extra,
     }
+
+
+def _styled_texture(app, name, textured, colours, arng):
+    """The atlas of object ``name`` under appearance ``app``: the printed one, or a flat one whose
+    tiles are the object's colours (body, accent, and a third drawn from the palette unless the
+    spec names it). Returns the texture and the object's colour names."""
+    flat = app.objects == "flat" or (app.objects == "mixed" and arng.random() < 0.5)
+    palette = [c for c in COLOURS if c != "skin"]
+    third = [c for c in palette if c not in colours]
+    names = list(colours) + [str(third[int(arng.integers(len(third)))])]
+    given = app.colours.get(name, [])
+    names[: len(given)] = given
+    if not flat:
+        if given:  # the printed atlas in the named body and accent colours
+            return object_texture(COLOURS[names[0]], COLOURS[names[1]], arng), names
+        return textured, names
+    return flat_texture([COLOURS[c] for c in names]), names
+
+
+def _apply_light(spec, light):
+    """Key light turned about the vertical through the table centre, scaled and tinted; fill and
+    ambient scaled (the base values are those of scenes/tabletop.xml)."""
+    key, fill = spec.light("key"), spec.light("fill")
+    a = np.radians(light["azimuth_deg"])
+    Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    key.pos = list(Rz @ np.asarray(key.pos, float))
+    key.dir = list(Rz @ np.asarray(key.dir, float))
+    key.diffuse = list(np.asarray(key.diffuse, float) * light["intensity"] * np.asarray(light["tint"]))
+    fill.diffuse = list(np.asarray(fill.diffuse, float) * light["fill"])
+    spec.visual.headlight.ambient = [light["ambient"]] * 3
 
 
 class OrbitScript:

@@ -1,9 +1,11 @@
 """Tracking sequences: scripted ``tabletop`` (and one ``object_orbit``) runs rendered from the
 RGB-D camera with exact truth, for the tracking chapter (issue 6, tracking spec Sec. 9.6).
 
->>> from polar_sim.sim.tabletop_sequences import SEQUENCES, record_sequence
->>> rec = record_sequence("mug_touch", seed=0, n_frames=30, cache_dir="~/.cache/polar_sim")
+>>> from polar_sim.sim.tabletop_sequences import cached_sequence, record_sequence
+>>> rec = record_sequence("mug_touch", seed=0, n_frames=30)       # in memory
 >>> rec.meta["K"], rec.stack("T_cam_obj").shape          # (3, 3) list, (30, 4, 4)
+>>> r = cached_sequence("mug_touch", seed=0)             # recorded once into $POLAR_SIM_CACHE/tabletop
+>>> for i, frame in r.frames(0, 10): ...                 # a lazy reader: one frame in memory at a time
 
 Each frame of the :class:`~polar_sim.sim.recording.Recording` holds
 
@@ -42,15 +44,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import zlib
-from pathlib import Path
 
 import numpy as np
 
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.sensors import DepthNoise
 
-__all__ = ["SEQUENCES", "SequenceSpec", "PHASES", "list_sequences", "record_sequence", "sequence_world",
-           "depth_realism", "NOISE"]
+__all__ = ["SEQUENCES", "DEV_APPEARANCE_SEQUENCES", "TEST_SEQUENCES", "SPLITS", "SequenceSpec", "PHASES", "list_sequences", "SPLIT_SEEDS",
+           "sequence_spec", "record_sequence", "cached_sequence", "sequence_world", "depth_realism", "NOISE",
+           "RECORDING_VERSION"]
 
 logger = logging.getLogger(__name__)
 
@@ -61,16 +63,23 @@ PHASES = ("rest", "reach", "descend", "touch", "withdraw", "push", "release", "g
 
 @dataclasses.dataclass(frozen=True)
 class SequenceSpec:
-    """A scripted sequence: a scene, its options, a length and what happens in it."""
+    """A scripted sequence: a scene, its options, a length and what happens in it, and its split
+    (``dev``: tuning data, ``test``: held out; scored at the seeds of :data:`SPLIT_SEEDS`)."""
 
     scene: str
     options: dict
     frames: int
     description: str
+    split: str = "dev"
 
 
 def _tt(script, target, frames, description, **extra):
     return SequenceSpec("tabletop", dict(script=script, target=target, **extra), frames, description)
+
+
+def _test(script, target, frames, appearance, description):
+    return SequenceSpec("tabletop", dict(script=script, target=target, appearance=appearance), frames,
+                        description, split="test")
 
 
 #: The sequence suite (name -> spec). Occlusion ranges are measured by
@@ -99,15 +108,73 @@ SEQUENCES = {
 }
 
 
-def list_sequences():
-    """Names of the sequences, in suite order."""
-    return list(SEQUENCES)
+#: Dev sequences beyond the 16 (the same split, seed 0, dev appearance families only): the cases of
+#: issue 13 the tracker was diagnosed and tuned on: an untextured three-part object, an
+#: untextured symmetric object at rest, and the default scene of seed 0 (a bottle at rest while the
+#: hand reaches and touches it).
+DEV_APPEARANCE_SEQUENCES = {
+    "blocks_turn_flat": _tt("turn", "blocks", 600, "untextured 3-part object lifted, turned and rolled, twice",
+                            appearance="flat"),
+    "blocks_touch_flat": _tt("touch", "blocks", 450, "untextured 3-part object at rest under the palm",
+                             appearance="flat"),
+    "can_touch_flat": _tt("touch", "can", 450, "untextured can (symmetric) at rest under the palm", appearance="flat"),
+    "bottle_demo": _tt("demo", "bottle", 450, "the default scene of seed 0: the bottle at rest while the hand "
+                                              "reaches, touches and passes, then lifts it"),
+}
+
+#: The held-out sequences (the ``test`` split, scored at seeds >= 10,000): untextured and
+#: multi-coloured objects, and the appearance families never used while tuning (``gloved``,
+#: ``studio``; and ``random``). Every figure the tracking experiments headline is scored on these.
+TEST_SEQUENCES = {
+    "blocks_touch_studio": _test("touch", "blocks", 450, "studio",
+                                 "untextured 3-part object, the palm on it and the fingers over its front"),
+    "blocks_push_gloved": _test("push", "blocks", 450, "gloved", "3-part object pushed right and back by a glove"),
+    "blocks_turn_primary": _test("turn", "blocks", 600,
+                                 {"family": "studio", "colours": {"blocks": ["blue", "yellow", "red"]}},
+                                 "blue body, yellow post, red block (no texture): lifted, turned and rolled, twice"),
+    "bottle_touch_studio": _test("touch", "bottle", 450, "studio",
+                                 "untextured bottle (symmetric) standing still under the palm"),
+    "can_pass_gloved": _test("pass", "can", 480, {"family": "gloved", "objects": "textured"},
+                             "printed can (symmetric) standing still while a glove passes in front, twice"),
+    "mug_lift_gloved": _test("lift", "mug", 450, "gloved", "a gloved hand lifts, tilts and turns the mug"),
+    "drill_turn_studio": _test("turn", "drill", 600, "studio", "untextured drill turned and rolled, twice"),
+    "box_fast_random": _test("fast", "box", 450, "random", "held and shaken fast, random appearance"),
+    "bracket_push_random": _test("push", "bracket", 450, "random", "pushed right and back, random appearance"),
+    "cube_push_studio": _test("push", "cube", 450, "studio", "small untextured cube pushed right and back"),
+    "mug_touch_random": _test("touch", "mug", 450, "random", "the palm rests on the mug twice"),
+    "bottle_light_gloved": _test("light", "bottle", 570, "gloved",
+                                 "lighting ramp while a glove touches and turns the bottle"),
+    "box_pass_studio": _test("pass", "box", 480, "studio", "an untextured box; the hand crosses in front twice"),
+}
+SPLITS = ("dev", "dev_appearance", "test")
+#: The seeds each split is scored at: the dev sequences as they have always been recorded (seed 0),
+#: the test sequences at held-out seeds.
+SPLIT_SEEDS = {"dev": (0,), "dev_appearance": (0,), "test": (10_000,)}
+
+
+_GROUPS = {"dev": SEQUENCES, "dev_appearance": DEV_APPEARANCE_SEQUENCES, "test": TEST_SEQUENCES}
+
+
+def list_sequences(split="dev"):
+    """Names of the sequences of a group, in suite order: "dev" (the 16 tuning sequences),
+    "dev_appearance" (the 4 more of the dev split), "test" (the held-out ones), or "all"."""
+    if split == "all":
+        return [n for g in _GROUPS.values() for n in g]
+    if split not in _GROUPS:
+        raise ValueError(f"split: unknown group {split!r}; expected one of {', '.join(map(repr, _GROUPS))}, 'all'")
+    return list(_GROUPS[split])
+
+
+def sequence_spec(name):
+    """The :class:`SequenceSpec` of a dev or test sequence."""
+    return _spec(name)
 
 
 def _spec(name):
-    if name not in SEQUENCES:
-        raise ValueError(f"name: unknown sequence {name!r}; expected one of {', '.join(SEQUENCES)}")
-    return SEQUENCES[name]
+    for g in _GROUPS.values():
+        if name in g:
+            return g[name]
+    raise ValueError(f"name: unknown sequence {name!r}; expected one of {', '.join(list_sequences('all'))}")
 
 
 def sequence_world(name, seed=0):
@@ -160,28 +227,48 @@ def _grazing(depth, K, max_incidence_deg):
     return out & ok
 
 
-def _cache_name(name, seed, n, width, height, noise):
-    return f"{name}_s{seed}_n{n}_{width}x{height}_{'noisy' if noise else 'clean'}.npz"
+#: Version of the recording code (the cache key's ``version``): bump when what is recorded changes.
+RECORDING_VERSION = 1
 
 
-def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_dir=None, width=640,
-                    height=480, progress=False) -> Recording:
+def _cache_key(name, seed, n, width, height, noise):
+    s = _spec(name)
+    return {"sequence": name, "scene": s.scene, "options": dict(s.options), "seed": int(seed), "frames": int(n),
+            "width": int(width), "height": int(height), "noise": bool(noise)}
+
+
+def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, height=480, progress=False):
+    """The recording of :func:`record_sequence` from the one cache (:mod:`polar_sim.sim.sequences`,
+    kind ``"tabletop"``), recorded on first use under the cache's lock; a lazy
+    :class:`~polar_sim.sim.recording.RecordingReader` (``len``, ``meta``, ``stack``, ``frames``)."""
+    from polar_sim._validation import as_int
+    from polar_sim.sim import sequences
+
+    s = _spec(name)
+    n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
+    key = _cache_key(name, as_int(seed, "seed"), n, as_int(width, "width", minimum=16),
+                     as_int(height, "height", minimum=16), noise)
+    return sequences.cached("tabletop", key, lambda: record_sequence(name, seed, n, noise, width=width, height=height,
+                                                                     progress=progress), version=RECORDING_VERSION)
+
+
+def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=640, height=480,
+                    progress=False) -> Recording:
     """Run sequence ``name`` and record every camera frame with its truth (see the module doc).
 
     Parameters
     ----------
     name : str
-        A key of :data:`SEQUENCES`.
+        A key of :data:`SEQUENCES` (dev) or :data:`TEST_SEQUENCES` (test).
     seed : int
-        Scene layout, colours and sensor noise; the same seed gives the same bytes.
+        Scene layout, colours and sensor noise; the same seed gives the same bytes. The splits
+        are scored at :data:`SPLIT_SEEDS` (0 for dev, 10,000 for test).
     n_frames : int, optional
         Record only the first ``n_frames`` frames (the suite's length by default), e.g. for CI.
     noise : bool
         Apply Kinect-like depth noise and RGB noise (``depth_clean`` is always exact).
     out : path, optional
-        Also save the recording there (``.npz``).
-    cache_dir : path, optional
-        Load the recording from this folder if it is there, else record and save it there.
+        Also save the recording there (``.npz``). :func:`cached_sequence` keeps it in the cache.
     width, height : int
         Image size; the intrinsics scale with it (fovy is fixed).
     progress : bool
@@ -196,17 +283,6 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
     seed = as_int(seed, "seed")
     n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
     width, height = as_int(width, "width", minimum=16), as_int(height, "height", minimum=16)
-    cache = None
-    if cache_dir is not None:
-        cache = Path(cache_dir).expanduser() / _cache_name(name, seed, n, width, height, noise)
-        if cache.is_file():
-            try:
-                rec = Recording.load(cache)
-                if out is not None:
-                    rec.save(out)
-                return rec
-            except ValueError:
-                logger.warning("cached recording %s is unreadable; recording it again", cache)
     w = sequence_world(name, seed)
     try:
         target = w.meta["target"]
@@ -224,6 +300,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
             "noise": dataclasses.asdict(NOISE) | {"max_incidence_deg": 75.0} if noise else None,
             "depth_unit": "m", "depth_missing": "inf", "phases": list(PHASES),
         }
+        if s.split != "dev" or "appearance" in w.meta:  # (the dev recordings' headers stay as they were)
+            meta.update(split=s.split, appearance=w.meta.get("appearance"))
         rec = Recording(meta)
         it = range(n)
         if progress:
@@ -254,8 +332,6 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, cache_
             })
     finally:
         w.close()
-    if cache is not None:
-        rec.save(cache)
     if out is not None:
         rec.save(out)
     return rec

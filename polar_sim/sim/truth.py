@@ -254,6 +254,8 @@ class SceneSDF:
         Vertical boxes, cylinders and capsules and all spheres are exact closed forms; any
         other shape is sectioned as a mesh (exact for meshes, 96-gon for tilted cylinders).
         """
+        if len(points2d) > 4096:  # bound the (points x shapes) temporaries of scenes with many geoms
+            return np.concatenate([self.section(points2d[i : i + 4096], z) for i in range(0, len(points2d), 4096)])
         boxes, discs, other = self._section_tables()
         out = np.full(len(points2d), np.inf)
         if boxes is not None:

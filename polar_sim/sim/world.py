@@ -7,7 +7,7 @@ import numbers
 import mujoco
 import numpy as np
 
-from polar_sim._validation import as_int, as_rng
+from polar_sim._validation import as_bool, as_float, as_float_array, as_int, as_positive_float, as_rng
 from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat
 from polar_sim.sim import truth as _truth
 from polar_sim.sim.robots import GROUP, RoverController
@@ -63,13 +63,19 @@ class World:
     def __init__(self, scene="rover_flat", seed=0, *, kinematic=False, noise=None, control_dt=None,
                  **scene_options):
         self.scene = scene
-        self.seed = as_int(seed, "seed")
+        self.seed = as_int(seed, "seed", minimum=0)
+        kinematic = as_bool(kinematic, "kinematic")
+        if noise is not None and not isinstance(noise, dict):
+            raise TypeError(f"noise: expected a dict {{sensor name: noise model}} or None, got {type(noise).__name__}")
+        if control_dt is not None:
+            control_dt = as_positive_float(control_dt, "control_dt")
         spec, self.meta = load_scene(scene, self.seed, **scene_options)
         try:
             self.model = spec.compile()
         except Exception as exc:
             raise ValueError(f"scene: {scene!r} does not compile: {exc}") from exc
         m = self.model
+        _check_model(m, scene)
         # Cameras render primitives as polygons: a cylinder of radius r drawn with n slices lies up
         # to r (1 - cos(pi / n)) inside its exact surface, 2.7 mm for a 0.43 m round table at
         # MuJoCo's default 28. Use enough slices that the widest static cylinder or capsule is drawn
@@ -82,7 +88,7 @@ class World:
         self.lidars = tuple(self._lidars)
         self._rig = None
         self._closed = False
-        self.kinematic = bool(kinematic)
+        self.kinematic = kinematic
         # A rover is one added by a scene builder (it brings its configuration and controller).
         self._has_rover = "rover_config" in self.meta and _has_body(m, "rover")
         if self.kinematic and not self._has_rover:
@@ -96,7 +102,7 @@ class World:
             control_dt = max(1, round(dt0 / ts)) * ts
         self.dt = float(control_dt)
         self._substeps = int(round(self.dt / ts))
-        if self._substeps < 1 or abs(self._substeps * ts - self.dt) > 1e-9:
+        if self._substeps < 1 or self._substeps > 1_000_000 or abs(self._substeps * ts - self.dt) > 1e-9:
             raise ValueError(f"control_dt: {self.dt} s is not a positive multiple of the physics timestep {ts} s")
         self._noise = {}
         for name, model_ in (noise or {}).items():
@@ -118,7 +124,7 @@ class World:
         the constructor's seed; build a new ``World`` for another layout)."""
         self._check_open()
         if seed is not None:
-            self._rng = as_rng(as_int(seed, "seed"))
+            self._rng = as_rng(as_int(seed, "seed", minimum=0))
         elif not hasattr(self, "_rng"):
             self._rng = as_rng(self.seed)
         mujoco.mj_resetData(self.model, self.data)
@@ -189,12 +195,20 @@ class World:
         if self._script is not None:
             self._script.after_step(self.model, self.data)
 
+    def command_hand(self, velocity, yaw_rate):
+        """Command the scripted hand (scenes whose script takes commands, e.g. ``tabletop`` with
+        ``script="reach"``): velocity (3,) m/s in the world frame and yaw rate (rad/s, about world
+        z), held until the next call. Raises ``ValueError`` for a scene without such a hand, or
+        non-finite values (the command is then unchanged)."""
+        self._check_open()
+        if not callable(getattr(self._script, "command", None)):
+            raise ValueError(f"command_hand: scene {self.scene!r} has no commanded hand (tabletop, script='reach')")
+        self._script.command(velocity, yaw_rate)
+
     def _check_action(self, action):
         if action is None:
             return 0.0, 0.0
-        if isinstance(action, (str, bytes)):
-            raise TypeError(f"action: expected (v, omega) numbers, got {type(action).__name__}")
-        a = np.asarray(action, dtype=np.float64)
+        a = as_float_array(action, "action")
         if a.shape != (2,):
             raise ValueError(f"action: expected (v [m/s], omega [rad/s]) of shape (2,), got shape {a.shape}")
         if not np.isfinite(a).all():
@@ -242,6 +256,7 @@ class World:
     # -- sensors --------------------------------------------------------------------------
     def set_noise(self, sensor, model):
         """Switch a sensor's noise model on (``RangeNoise`` / ``DepthNoise``) or off (``None``)."""
+        _check_name(sensor, "sensor")
         if sensor not in self.cameras and sensor not in self._lidars:
             raise ValueError(f"sensor: unknown sensor {sensor!r}; this scene has {sorted(self.cameras + self.lidars)}")
         want = DepthNoise if sensor in self.cameras else RangeNoise
@@ -252,26 +267,40 @@ class World:
         else:
             self._noise[sensor] = model
 
-    def camera(self, name, *, width=None, height=None):
+    def camera(self, name, *, width=None, height=None, depth=True, labels=True):
         """Render camera ``name``: a :class:`CameraFrame` (rgb, depth, labels, geom ids, K, pose, t).
 
-        ``width``/``height`` default to the camera's resolution in the scene.
+        ``width``/``height`` default to the camera's resolution in the scene. ``depth=False`` and
+        ``labels=False`` skip those renders (faster): the frame's ``depth`` / ``labels`` and
+        ``geom_ids`` are then None (a camera with a noise model still renders depth for it).
         """
         self._check_open()
-        if name not in self.cameras:
-            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
-        cid = self.model.camera(name).id
-        res = self.model.cam_resolution[cid]
-        w = int(width or res[0] or 640)
-        h = int(height or res[1] or 480)
+        cid = self._camera_id(name)
+        w, h = self._camera_size(cid, width, height)
         if self._rig is None:
             self._rig = CameraRig(self.model)
-        rgb, depth, labels, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels)
-        K = intrinsics(self.model.cam_fovy[cid], w, h)
         noise = self._noise.get(name)
+        rgb, d, lab, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels,
+                                             depth=bool(depth) or noise is not None, seg=bool(labels))
+        K = intrinsics(self.model.cam_fovy[cid], w, h)
         if noise is not None:
-            rgb, depth = noise.apply(rgb, depth, K[0, 0], self._rng)
-        return CameraFrame(rgb, depth, labels, gids, K, camera_pose(self.data, cid), self.time)
+            rgb, d = noise.apply(rgb, d, K[0, 0], self._rng)
+        if not labels:
+            lab = gids = None
+        return CameraFrame(rgb, d if depth else None, lab, gids, K, camera_pose(self.data, cid), self.time)
+
+    def camera_intrinsics(self, name, *, width=None, height=None):
+        """Intrinsics K (3, 3) (OpenCV) of camera ``name`` rendered at ``width`` x ``height`` px."""
+        cid = self._camera_id(name)
+        return intrinsics(self.model.cam_fovy[cid], *self._camera_size(cid, width, height))
+
+    def _camera_id(self, name):
+        if _check_name(name, "name") not in self.cameras:
+            raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
+        return self.model.camera(name).id
+
+    def _camera_size(self, cid, width, height):
+        return _image_size(self.model, cid, width, height)
 
     def render_view(self, *, width=640, height=480, lookat=None, distance=None, azimuth=90.0,
                     elevation=-45.0):
@@ -282,6 +311,15 @@ class World:
         straight down (a top-down map view).
         """
         self._check_open()
+        width, height = _image_size(self.model, None, width, height)
+        if lookat is not None:
+            lookat = as_float_array(lookat, "lookat")
+            if lookat.shape != (3,) or not np.isfinite(lookat).all():
+                raise ValueError(f"lookat: expected a finite point (3,), got shape {lookat.shape}")
+        if distance is not None:
+            distance = as_float(distance, "distance", minimum=0.0, exclusive_minimum=True, maximum=1e6)
+        azimuth = as_float(azimuth, "azimuth")
+        elevation = as_float(elevation, "elevation", minimum=-90.0, maximum=90.0)
         if lookat is None:
             if self._has_rover:
                 lookat = self.data.xpos[self.model.body("rover").id]
@@ -300,25 +338,28 @@ class World:
         nothing occluded it (its geoms are in the target group). Compare with
         ``frame.labels == LABELS["target"]``, the visible part, for the occlusion ratio."""
         self._check_open()
-        if name not in self.cameras:
+        if _check_name(name, "name") not in self.cameras:
             raise ValueError(f"name: unknown camera {name!r}; this scene has {list(self.cameras)}")
         cid = self.model.camera(name).id
-        res = self.model.cam_resolution[cid]
+        w, h = _image_size(self.model, cid, width, height)
         if self._rig is None:
             self._rig = CameraRig(self.model)
-        return self._rig.render_target_mask(self.model, self.data, cid, int(width or res[0] or 640),
-                                            int(height or res[1] or 480))
+        return self._rig.render_target_mask(self.model, self.data, cid, w, h)
 
-    def lidar(self, name):
-        """Cast lidar ``name``: a :class:`LidarScan` (2D) or :class:`LidarScan3D`."""
+    def lidar(self, name, *, noise=True):
+        """Cast lidar ``name``: a :class:`LidarScan` (2D) or :class:`LidarScan3D`.
+
+        ``noise=False`` casts the exact scan, ignoring the sensor's noise model (and drawing
+        nothing from the noise generator, so the noisy scans that follow are unchanged).
+        """
         self._check_open()
-        if name not in self._lidars:
+        if _check_name(name, "name") not in self._lidars:
             raise ValueError(f"name: unknown lidar {name!r}; this scene has {list(self.lidars)}")
-        return self._lidars[name].scan(self.model, self.data, self._noise.get(name), self._rng)
+        return self._lidars[name].scan(self.model, self.data, self._noise.get(name) if noise else None, self._rng)
 
     def lidar_spec(self, name):
         """The declaration (beams, range limits, site) of lidar ``name``."""
-        if name not in self._lidars:
+        if _check_name(name, "name") not in self._lidars:
             raise ValueError(f"name: unknown lidar {name!r}; this scene has {list(self.lidars)}")
         return self._lidars[name].spec
 
@@ -378,9 +419,9 @@ class World:
         """
         from polar_sim._validation import as_points
 
-        p = np.asarray(points) if not isinstance(points, np.ndarray) else points
-        dim = p.shape[1] if (hasattr(p, "ndim") and p.ndim == 2 and p.shape[1] in (2, 3)) else 3
-        p = as_points(points, dim, "points")
+        p = as_float_array(points, "points")
+        dim = p.shape[1] if (p.ndim == 2 and p.shape[1] in (2, 3)) else 3
+        p = as_points(p, dim, "points")
         if self._sdf is None:
             self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
         if dim == 3:
@@ -421,7 +462,48 @@ class World:
 
     def object_mesh(self, name):
         """``trimesh.Trimesh`` of object ``name`` in its own frame."""
-        return _truth.body_trimesh(self.model, self.model.body(name).id)
+        return _truth.body_trimesh(self.model, self._body_id(name))
+
+    def _body_id(self, name):
+        try:
+            return self.model.body(_check_name(name, "name")).id
+        except KeyError:
+            raise ValueError(f"name: unknown object {name!r}; objects: {list(self.meta.get('objects', ()))}") from None
+
+
+def _check_name(name, arg):
+    """A sensor or body name must be a str (a list or array would compare elementwise)."""
+    if not isinstance(name, str):
+        raise TypeError(f"{arg}: expected a name (str), got {type(name).__name__}")
+    return name
+
+
+def _image_size(model, cam_id, width, height):
+    """(width, height) in pixels: positive ints within the scene's offscreen buffer; None takes
+    the camera's resolution in the scene (640 x 480 if it has none)."""
+    res = model.cam_resolution[cam_id] if cam_id is not None else (0, 0)
+    g = model.vis.global_
+    out = []
+    for arg, v, default, limit in (("width", width, res[0] or 640, g.offwidth),
+                                   ("height", height, res[1] or 480, g.offheight)):
+        v = default if v is None else as_int(v, arg, minimum=1)
+        if v > limit:
+            raise ValueError(f"{arg}: {v} px exceeds the scene's offscreen buffer ({g.offwidth} x {g.offheight}; "
+                             "<visual><global offwidth/offheight> in the MJCF)")
+        out.append(int(v))
+    return tuple(out)
+
+
+def _check_model(m, scene):
+    """Refuse a compiled model the simulator cannot step or ray-cast sensibly."""
+    ts = float(m.opt.timestep)
+    if not np.isfinite(ts) or ts <= 0:
+        raise ValueError(f"scene: {str(scene)[:200]!r} has a physics timestep of {ts} s; expected > 0")
+    from polar_sim.sim.scenes import MAX_MESH_FACES
+
+    if m.nmeshface > MAX_MESH_FACES:
+        raise ValueError(f"scene: {str(scene)[:200]!r} holds {m.nmeshface} mesh faces; the limit is "
+                         f"{MAX_MESH_FACES} (MAX_MESH_FACES)")
 
 
 def _has_body(model, name):

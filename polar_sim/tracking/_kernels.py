@@ -52,14 +52,17 @@ def nearest_visible(Y, origin, inv_h, knn, P, vis):
 
 
 @njit(cache=True, nogil=True)
-def roi_distances(depth, x0, y0, fx, fy, cx, cy, R, t, origin, inv_h, knn, P, N, vis, kappa, out):
+def roi_distances(depth, x0, y0, fx, fy, cx, cy, R, t, origin, inv_h, knn, P, N, vis, kappa, slack, out):
     """Distance (h, w) from each back-projected ROI pixel to the nearest visible model point.
 
     ``depth`` is the ROI crop (h, w) in metres, its top-left pixel at (x0, y0) of the image; R, t
     map camera to model coordinates. With ``kappa > 1`` the offset from the matched point m is
     split along its normal n: ``sqrt((n.d)^2 + |d - (n.d) n|^2 / kappa^2)``, so a point that slid
-    along the surface counts less than one off it. Missing depth (0, NaN, inf) gives NaN; no
-    visible candidate or a point outside the grid gives inf. Written into ``out`` (h, w) float32.
+    along the surface counts less than one off it. Where ``slack[j] > 0`` (m, per model point:
+    where the model is sparser than on average) the first ``slack[j]`` of the tangential offset
+    does not count: ``sqrt((n.d)^2 + max(0, |d_t| - slack)^2 / kappa^2)``. Missing depth (0, NaN,
+    inf) gives NaN; no visible candidate or a point outside the grid gives inf. Written into
+    ``out`` (h, w) float32.
     """
     h, w = depth.shape
     for v in range(h):
@@ -75,12 +78,15 @@ def roi_distances(depth, x0, y0, fx, fy, cx, cy, R, t, origin, inv_h, knn, P, N,
             py = R[1, 0] * xc + R[1, 1] * yc + R[1, 2] * z + t[1]
             pz = R[2, 0] * xc + R[2, 1] * yc + R[2, 2] * z + t[2]
             j, d = _lookup(px, py, pz, origin, inv_h, knn, P, vis)
-            if j >= 0 and kappa > 1.0:
+            if j >= 0 and (kappa > 1.0 or slack[j] > 0.0):
                 dx = px - P[j, 0]
                 dy = py - P[j, 1]
                 dz = pz - P[j, 2]
                 dn = dx * N[j, 0] + dy * N[j, 1] + dz * N[j, 2]
                 dt2 = max(d * d - dn * dn, 0.0)
+                if slack[j] > 0.0:
+                    et = max(np.sqrt(dt2) - slack[j], 0.0)
+                    dt2 = et * et
                 d = np.sqrt(dn * dn + dt2 / (kappa * kappa))
             out[v, u] = d
 
@@ -197,3 +203,4 @@ def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
         H[5, 1] += -mu2 * s1[0]
         H[3, 2] += -mu2 * s1[1]
         H[4, 2] += mu2 * s1[0]
+

@@ -18,7 +18,7 @@ from polar_sim.geometry import inv_pose, se3_exp, se3_log
 from polar_sim.tracking._kernels import icp_normal_equations, icp_residuals
 from polar_sim.tracking.visibility import project_model
 
-__all__ = ["ICPResult", "weighted_icp", "tukey"]
+__all__ = ["ICPResult", "weighted_icp", "tukey", "unobserved_directions"]
 
 
 @dataclass
@@ -26,7 +26,8 @@ class ICPResult:
     """Registration output: pose ``T`` (4, 4) T_cam_cen, covariance ``cov`` (6, 6) of the body
     twist (omega rad, v m), ``fitness`` in [0, 1], inlier RMSE (m), inlier count, points with a
     correspondence, iterations, ``ok`` (False: too few correspondences or a singular system), the
-    robust scale ``sigma`` (m) and the visibility flags (M,) at ``T``."""
+    robust scale ``sigma`` (m), the visibility flags (M,) at ``T`` and ``support``, the model
+    points (indices) the inliers were registered to."""
 
     T: np.ndarray
     cov: np.ndarray
@@ -38,6 +39,7 @@ class ICPResult:
     ok: bool
     sigma: float
     vis: np.ndarray
+    support: np.ndarray | None = None
 
 
 def tukey(u):
@@ -207,4 +209,65 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     except np.linalg.LinAlgError:
         cov = np.eye(6)
     cov = 0.5 * (cov + cov.T)
-    return ICPResult(T, cov, fitness, rmse, int(inl.sum()), int(sel.sum()), it, True, sigma, vis)
+    return ICPResult(T, cov, fitness, rmse, int(inl.sum()), int(sel.sum()), it, True, sigma, vis, idx[inl])
+
+
+def unobserved_directions(model, support, cov, *, step=None, min_std=0.001, n_probe=3, max_rms=0.1,
+                          max_points=600):
+    """Directions of the pose that the observed surface does not constrain (issue 13 item 5).
+
+    ``support``: indices of the model points that observed points were registered to (the
+    surface the data saw). The registration's covariance ``cov`` (6, 6) (body twist (omega, v)
+    about the centre) is scaled to metres of surface motion, ``W cov W`` with
+    ``W = diag(rho I, I)`` and ``rho`` half the model's diameter; each of its ``n_probe`` least
+    certain eigen-directions with a standard deviation above ``min_std`` is probed. The supported
+    points are moved by ``+-step`` (m of surface motion at ``rho``; default a tenth of the
+    diameter) along it, and their distance to the model surface measured: the normal offset to
+    the nearest of 4 model points with a similar normal, plus the tangential offset beyond that
+    point's own spacing (the gap random samples leave); no such point counts as ``step``. If the
+    RMS distance stays below ``max_rms * step`` both ways, the observed surface maps onto itself
+    and the direction is unobserved: a revolved object turning about its axis, a face sliding
+    along itself while its edges are not seen. (The linearised covariance cannot tell: faceted
+    normals and the tangential term make such directions look measured.)
+
+    Returns ``(U, rho)``: U (6, k) orthonormal unobserved directions in the scaled coordinates
+    (``W xi``), k = 0..n_probe.
+    """
+    rho = 0.5 * model.diameter
+    Wd = np.array([rho, rho, rho, 1.0, 1.0, 1.0])
+    Cs = cov * np.outer(Wd, Wd)
+    lam, vec = np.linalg.eigh(0.5 * (Cs + Cs.T))
+    h = float(step) if step is not None else 0.1 * model.diameter
+    sup = np.unique(np.asarray(support, dtype=np.int64))
+    sup = sup[(sup >= 0) & (sup < len(model.P))]
+    if len(sup) < 6:
+        return np.zeros((6, 0)), rho
+    if len(sup) > max_points:
+        sup = sup[np.linspace(0, len(sup) - 1, max_points).astype(np.int64)]
+    M, Nm = model.P[sup], model.N[sup]
+
+    def rms(xi):
+        T = se3_exp(xi)
+        Y = M @ T[:3, :3].T + T[:3, 3]
+        Ny = Nm @ T[:3, :3].T
+        _, nb = model.tree.query(Y, k=4)
+        ok = np.einsum("nkj,nj->nk", model.N[nb], Ny) > 0.7
+        d = Y[:, None, :] - model.P[nb]
+        dist = np.where(ok, np.linalg.norm(d, axis=2), np.inf)
+        c = np.argmin(dist, axis=1)
+        j = nb[np.arange(len(Y)), c]
+        dd = d[np.arange(len(Y)), c]
+        dn = np.einsum("ij,ij->i", dd, model.N[j])
+        dt = np.sqrt(np.maximum(np.einsum("ij,ij->i", dd, dd) - dn * dn, 0.0))
+        e2 = dn * dn + np.maximum(dt - model.local_spacing[j], 0.0) ** 2
+        e2 = np.where(ok.any(axis=1), np.minimum(e2, h * h), h * h)
+        return float(np.sqrt(e2.mean()))
+
+    out = []
+    for k in np.argsort(lam)[::-1][:n_probe]:
+        if not np.sqrt(max(lam[k], 0.0)) > min_std:
+            break
+        xi = vec[:, k] / Wd * h
+        if max(rms(xi), rms(-xi)) < max_rms * h:
+            out.append(vec[:, k])
+    return (np.stack(out, axis=1) if out else np.zeros((6, 0))), rho

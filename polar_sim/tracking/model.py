@@ -69,7 +69,15 @@ class ShapeModel:
     ----------
     centroid : (3,) object-frame centroid; ``P`` = points - centroid; ``N`` normals;
     diameter, spacing (1/sqrt(points per area) = 2 x mean nearest-neighbour distance) and
-    margin (of the lookup grid around the points), all in metres.
+    margin (of the lookup grid around the points), all in metres; ``local_spacing`` (M,) the
+    radius each point covers: ``spacing`` where the model is about as dense as on average, and
+    2x the local 1/sqrt(density) (from its 16 nearest neighbours, averaged over them) where that
+    is more than 1.3x ``spacing``, m. (The local estimates of a uniformly sampled model stay below
+    1.3x the mean, 99.9th percentile, so such a model keeps ``spacing`` everywhere. Random
+    samples leave empty discs up to about 1.3 / sqrt(density) in radius; on average they are covered by
+    ``spacing``'s splats together with their neighbours', which a sparse patch does not have.) A model need not be
+    sampled uniformly (a user may sample each part of an object with the same number of points,
+    so that a large face is sparse): splats and distance bands use the spacing where they are.
     """
 
     def __init__(self, points, normals, *, grid_cells=64, k=4):
@@ -83,8 +91,15 @@ class ShapeModel:
             # 1/sqrt(density): for random (Poisson) surface samples the mean nearest-neighbour
             # distance is half of it, and splats need the larger value to close their gaps
             self.spacing = 2.0 * float(np.mean(d[:, 1]))
+            kk = min(17, len(self.P))
+            dk, nb = self.tree.query(self.P, k=kk)
+            # E[r_k^2] = k / (pi rho) for surface samples of density rho: 1/sqrt(rho) = r_k sqrt(pi / k)
+            est = (dk[:, -1] * np.sqrt(np.pi / (kk - 1)))[nb].mean(axis=1)
+            self.local_spacing = np.ascontiguousarray(np.where(est > 1.3 * self.spacing, 2.0 * est, self.spacing))
         else:
             self.spacing = 0.001
+            self.local_spacing = np.full(len(self.P), 0.001)
+        self.slack = np.ascontiguousarray(self.local_spacing - self.spacing)
         self.k = min(k, len(self.P))
         self.margin = float(np.clip(0.25 * self.diameter, 0.03, 0.06))
         lo = self.P.min(axis=0) - self.margin
@@ -96,7 +111,16 @@ class ShapeModel:
         self.inv_h = 1.0 / h
         axes = [lo[i] + (np.arange(dims[i]) + 0.5) * h for i in range(3)]
         C = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        _, nb = self.tree.query(C, k=self.k)
+        if (self.slack > 0).any():
+            # a non-uniform model: rank candidates by distance in units of their own spacing, so a
+            # cell over a sparse face keeps that face's points rather than a dense face's nearby
+            kk = min(4 * self.k, len(self.P))
+            dd, nb = self.tree.query(C, k=kk)
+            nb = nb.reshape(len(C), kk)
+            order = np.argsort(dd.reshape(len(C), kk) / self.local_spacing[nb], axis=1, kind="stable")[:, : self.k]
+            nb = np.take_along_axis(nb, order, axis=1)
+        else:
+            _, nb = self.tree.query(C, k=self.k)
         self.knn = np.ascontiguousarray(nb.reshape(*dims, self.k).astype(np.int32))
 
     def nearest_visible(self, Y, vis, *, exact=False):

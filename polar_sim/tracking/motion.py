@@ -80,8 +80,11 @@ class MotionFilter:
         f = np.minimum(1.0, self.cap / s)
         return P * np.outer(f, f)
 
-    def update(self, T_meas, cov, dt, *, inflate=1.0):
-        """Fuse a registration T_meas (4, 4) with covariance cov (6, 6); ``inflate`` scales P after."""
+    def update(self, T_meas, cov, dt, *, inflate=1.0, hold=None):
+        """Fuse a registration T_meas (4, 4) with covariance cov (6, 6); ``inflate`` scales P after.
+
+        ``hold``: ``(U, scale)`` with U (6, k) orthonormal directions of the scaled twist
+        ``scale * xi`` that the measurement does not see; the velocity along them is set to 0."""
         if self.mode == "none":
             self.T = T_meas.copy()
             return
@@ -89,6 +92,7 @@ class MotionFilter:
             step = se3_log(inv_pose(self.T) @ T_meas) / max(dt, 1e-6)
             self.xi = (1.0 - self.beta) * self.xi + self.beta * step
             self.T = T_meas.copy()
+            self._hold(hold)
             return
         e = se3_log(inv_pose(self.T_bar) @ T_meas)
         S = self.P_bar[:6, :6] + cov + np.diag(self.floor)
@@ -101,6 +105,15 @@ class MotionFilter:
         if not (np.all(np.isfinite(self.T)) and np.all(np.isfinite(self.xi)) and np.all(np.isfinite(self.P))):
             # cannot happen with the caps above; never let a numerical failure escape as a pose
             self.T, self.xi, self.P = T_meas.copy(), np.zeros(6), self._cap(self.P_bar.copy())
+        self._hold(hold)
+
+    def _hold(self, hold):
+        # no velocity where no measurement constrains the motion: an object at rest stays at rest
+        if hold is None or hold[0].shape[1] == 0:
+            return
+        U, scale = hold
+        xs = self.xi * scale
+        self.xi = (xs - U @ (U.T @ xs)) / scale
 
     def coast(self, *, velocity_decay=1.0, inflate=1.0):
         """No (usable) measurement: keep the prediction, damp the velocity, scale P by ``inflate``."""

@@ -17,11 +17,12 @@ import cv2
 import numpy as np
 
 from polar_sim._validation import as_intrinsics, as_pose, as_positive_float, check_choice
-from polar_sim.geometry import inv_pose, make_pose, se3_log
+from polar_sim.geometry import inv_pose, make_pose, se3_exp, se3_log
 from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
 from polar_sim.tracking._kernels import roi_distances
 from polar_sim.tracking.appearance import make_appearance
-from polar_sim.tracking.icp import weighted_icp
+from polar_sim.tracking.calibration import OnlineCalibration
+from polar_sim.tracking.icp import unobserved_directions, weighted_icp
 from polar_sim.tracking.model import ShapeModel, estimate_normals
 from polar_sim.tracking.motion import MotionFilter
 from polar_sim.tracking.visibility import disc, project_model, splat_silhouette
@@ -49,7 +50,9 @@ class TrackResult:
     mask : (H, W) bool target segmentation (O == 1, plus undecided pixels without depth inside
         the registered silhouette that the appearance model calls target); empty when the frame
         had no usable registration.
-    prob : (H, W) float32 prediction map P(L=1 | I, D, T_bar) (0 outside the ROI).
+    prob : (H, W) float32 P(target): the prediction map P(L=1 | I, D, T_bar), calibrated online
+        against the tracker's own labels (``calibrate=True``; see
+        :mod:`polar_sim.tracking.calibration`), 0 outside the ROI.
     labels : (H, W) int8 O: 1 target, 0 not target, -1 undecided.
     fitness : prior-weighted fraction of registered points within the inlier band.
     inlier_rmse : m (NaN when the frame was lost).
@@ -68,6 +71,10 @@ class TrackResult:
         appearance, registration, labels, learning, output).
     attention, appearance, silhouette : (H, W) maps (debug_maps=True only, else None): the spatial
         prior pi, the appearance probability sigmoid(log Lambda_I), the registered silhouette.
+    prob_raw : (H, W) float32 the prediction map before calibration (what the registration
+        thresholds at ``tau_y``).
+    n_unobserved : pose directions the registered points did not constrain this frame (held
+        at the prediction, see ``hold_unobserved``).
     """
 
     pose: np.ndarray
@@ -91,6 +98,8 @@ class TrackResult:
     attention: np.ndarray | None = None
     appearance: np.ndarray | None = None
     silhouette: np.ndarray | None = None
+    prob_raw: np.ndarray | None = None
+    n_unobserved: int = 0
 
 
 class _Clock:
@@ -104,6 +113,12 @@ class _Clock:
         now = time.perf_counter()
         self.stages[name] = self.stages.get(name, 0.0) + now - self.t
         self.t = now
+
+
+def _logit(p):
+    """log(p / (1 - p)) of a probability map (float32), finite for p in [0, 1]."""
+    p = np.clip(p.astype(np.float32), np.float32(1e-6), np.float32(1 - 1e-6))
+    return np.log(p) - np.log1p(-p)
 
 
 def _rot_angle(R):
@@ -129,8 +144,14 @@ class ObjectTracker:
         216-bin HSV Naive Bayes; "none" the shape-and-motion-only ablation (gamma = 0).
     motion : {"ekf", "alpha-beta", "none"}, default="ekf"
         Constant-velocity filter; "none" predicts the last pose (motion-prior-off ablation).
-    spatial_prior : bool, default=True
-        Blurred predicted silhouette as the prior pi; False gives pi = 0.5 in the ROI.
+    spatial_prior : bool, default=False
+        Blurred predicted silhouette as the prior pi (the spec's form, with floor ``epsilon``);
+        False gives pi = 0.5 in the ROI, which the ROI (the predicted silhouette's box, grown by
+        3 sigma) still bounds. Off by default since issue 13: at epsilon = 0.02 the prior's
+        log-odds (+-3.9) outweighs the depth term (at most +3.1), so wherever the prediction is off
+        the map copies the predicted silhouette and a mispredicted object cannot re-enter the
+        registration; chosen on the dev split, where no prior and a softened one (epsilon = 0.1)
+        score alike (see benchmarks/RESULTS.md).
     registration : {"weighted", "plain"}, default="weighted"
         "plain": robust ICP on every ROI point with depth (no label weighting) - the baseline.
     correspondence : {"grid", "kdtree"}, default="grid"
@@ -182,6 +203,16 @@ class ObjectTracker:
     pose_prior : bool, default=True
         Register as a MAP estimate with the motion filter's prediction as the prior (its 6x6
         covariance): directions the visible points leave unconstrained keep the prediction.
+    hold_unobserved : bool, default=True
+        Probe the registration's least certain directions (:func:`polar_sim.tracking.icp.unobserved_directions`):
+        along a direction in which moving the model does not change its fit to the points (a
+        revolved object turning about its axis; a flat face whose boundary is hidden), the pose
+        keeps the prediction and the filter's velocity is zeroed, so an object at rest stays at
+        rest where its shape cannot see.
+    calibrate : bool, default=True
+        Report ``prob`` calibrated by :class:`polar_sim.tracking.calibration.OnlineCalibration`,
+        learned from the labels O of the accepted frames (never from truth); False reports the
+        raw prediction map. The registration always uses the raw map.
     random_state : int, default=0
         Seed of the sampling Generator (point selection, training samples, mini-batches).
     debug_maps : bool, default=False
@@ -189,13 +220,13 @@ class ObjectTracker:
     """
 
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
-                 motion="ekf", spatial_prior=True, registration="weighted", correspondence="grid",
+                 motion="ekf", spatial_prior=False, registration="weighted", correspondence="grid",
                  fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
                  fitness_min=0.5, min_inliers=50, min_coverage=0.1, learn_coverage=0.25, max_jump=(0.5, 0.1),
                  max_mahalanobis=50.0,
                  lost_after=10, lost_velocity_decay=0.5, decay=0.7, lr=1e-2, epochs=2, replay=10,
-                 n_samples=500, max_iterations=30, em_refine=True, pose_prior=True, random_state=0,
-                 debug_maps=False):
+                 n_samples=500, max_iterations=30, em_refine=True, pose_prior=True, hold_unobserved=True,
+                 calibrate=True, random_state=0, debug_maps=False):
         self.model_points = model_points
         self.K = K
         self.initial_pose = initial_pose
@@ -227,6 +258,8 @@ class ObjectTracker:
         self.max_iterations = max_iterations
         self.em_refine = em_refine
         self.pose_prior = pose_prior
+        self.hold_unobserved = hold_unobserved
+        self.calibrate = calibrate
         self.random_state = random_state
         self.debug_maps = debug_maps
         self._check_params()
@@ -246,7 +279,7 @@ class ObjectTracker:
         check_choice(self.motion, ("ekf", "alpha-beta", "none"), "motion")
         check_choice(self.registration, ("weighted", "plain"), "registration")
         check_choice(self.correspondence, ("grid", "kdtree"), "correspondence")
-        for name in ("spatial_prior", "em_refine", "pose_prior", "debug_maps"):
+        for name in ("spatial_prior", "em_refine", "pose_prior", "hold_unobserved", "calibrate", "debug_maps"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
         for name in ("fps", "sigma_min_px", "lr", "max_mahalanobis"):
@@ -280,6 +313,8 @@ class ObjectTracker:
         kw = dict(decay=self.decay, lr=self.lr, epochs=self.epochs, replay=self.replay)
         self._app = make_appearance(self.appearance, **kw)
         self._rng = np.random.default_rng(self.random_state)
+        self._cal = OnlineCalibration() if self.calibrate else None
+        self._n_unobserved = 0
         self._shape = None
         self._t_prev = None
         self._rejections = 0
@@ -332,6 +367,7 @@ class ObjectTracker:
         H, W = self._shape
         f = float(K[0, 0])
         filt = self._filter
+        self._n_unobserved = 0
         T_bar, P_bar = filt.predict(dt)
         sig_rot = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[:3, :3]).max(), 0.0)))
         sig_tr = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[3:, 3:]).max(), 0.0)))
@@ -402,9 +438,22 @@ class ObjectTracker:
             return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, n_points=n_sel, res=res)
         good_fit = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
         accepted = good_fit and coverage >= self.learn_coverage
-        T_hat = res.T
+        T_hat, hold = res.T, None
+        if self.hold_unobserved:
+            # directions the points cannot see (a revolved object's axis, a face whose edges are
+            # hidden) keep the prediction, and the filter integrates no velocity along them
+            U, rho = unobserved_directions(m, res.support, res.cov)
+            if U.shape[1]:
+                hold = (U, np.array([rho, rho, rho, 1.0, 1.0, 1.0]))
+                es = se3_log(inv_pose(T_bar) @ res.T) * hold[1]
+                T_hat = T_bar @ se3_exp((es - U @ (U.T @ es)) / hold[1])
+        self._n_unobserved = 0 if hold is None else hold[0].shape[1]
         O, S_hat, r_hat = self._labels(D, roi, T_hat, vis=res.vis)
         self._clock.lap("labels")
+        cal = self._calibrated(Pmap)  # the prediction, before this frame's labels are learned
+        if accepted and self._cal is not None:
+            z = _logit(Pmap[O >= 0])
+            self._cal.update(z, O[O >= 0] == 1)
         if accepted and self._app is not None:
             self._train(feats, O, S_hat, r_hat, D)
         self._clock.lap("learning")
@@ -412,7 +461,7 @@ class ObjectTracker:
         # reported (spec 3.7) but not fused: the filter coasts (widened x4, velocity damped) and
         # the frame counts towards lost mode, in which the prediction is reported instead
         if good_fit:
-            filt.update(T_hat, res.cov, dt)
+            filt.update(T_hat, res.cov, dt, hold=hold)
             self._rejections = 0
         else:
             filt.coast(velocity_decay=self.lost_velocity_decay, inflate=4.0)
@@ -422,14 +471,14 @@ class ObjectTracker:
             T_hat = T_bar
             O[O == 1] = -1
         return self._emit(T_hat, roi, O, S_hat, Pmap, pi, lI, valid, gamma, res.fitness, res.rmse,
-                          n_sel, lost, accepted, res.cov, res.iterations, res.n_inliers)
+                          n_sel, lost, accepted, res.cov, res.iterations, res.n_inliers, cal=cal)
 
     # ------------------------------------------------------------------------------------------
     def _prediction_map(self, D, roi, T, proj, sig_pos, lI, gamma):
         """Prediction map P (h, w), prior pi (h, w) and silhouette S (h, w) around pose T (spec 3.3-3.4)."""
         m, f = self._model, float(self._K[0, 0])
         zb = proj.z_mean
-        S = splat_silhouette(proj.uv[proj.vis], zb, f, m.spacing, roi)
+        S = splat_silhouette(proj.uv[proj.vis], zb, f, m.local_spacing[proj.vis], roi)
         if self.spatial_prior:
             sigma_px = max(self.sigma_min_px, f * sig_pos / zb)
             blur = cv2.GaussianBlur(S.astype(np.float32), (0, 0), sigma_px)
@@ -496,7 +545,7 @@ class ObjectTracker:
         out = np.empty(D.shape, np.float32)
         roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                       np.ascontiguousarray(Ti[:3, :3]), np.ascontiguousarray(Ti[:3, 3]),
-                      m.origin, m.inv_h, m.knn, m.P, m.N, vis, float(kappa), out)
+                      m.origin, m.inv_h, m.knn, m.P, m.N, vis, float(kappa), m.slack, out)
         return out
 
     def _backproject(self, D, roi, flat):
@@ -514,7 +563,7 @@ class ObjectTracker:
         pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing, zbuffer=vis is None)
         if vis is not None:
             pr.vis = vis
-        S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.spacing, roi)
+        S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.local_spacing[pr.vis], roi)
         inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
         outer = cv2.dilate(S, disc(2)) > 0
         # distances only where they can matter: inside the dilated silhouette's bounding box
@@ -579,13 +628,21 @@ class ObjectTracker:
         return self._emit(T_bar, roi, O, S, Pmap, pi, lI, D > 0, gamma, 0.0, float("nan"), n_points,
                           True, False, cov, it, 0)
 
+    def _calibrated(self, Pmap):
+        if self._cal is None or Pmap is None:
+            return Pmap
+        return self._cal(_logit(Pmap))
+
     def _emit(self, T_cen, roi, O, S, Pmap, pi, lI, valid, gamma, fitness, rmse, n_points, lost,
-              accepted, cov, iterations, n_inliers):
+              accepted, cov, iterations, n_inliers, cal=None):
         H, W = self._shape
         x0, y0, x1, y1 = roi
         labels = np.zeros((H, W), np.int8)
         mask = np.zeros((H, W), bool)
         prob = np.zeros((H, W), np.float32)
+        prob_raw = np.zeros((H, W), np.float32)
+        if cal is None:
+            cal = self._calibrated(Pmap)
         if x1 > x0 and y1 > y0:
             labels[y0:y1, x0:x1] = O
             inner = cv2.erode(S, disc(1), borderType=cv2.BORDER_CONSTANT, borderValue=1) > 0
@@ -594,7 +651,8 @@ class ObjectTracker:
                 und &= lI > 0
             if not lost or accepted:
                 mask[y0:y1, x0:x1] = (O == 1) | und
-            prob[y0:y1, x0:x1] = Pmap
+            prob[y0:y1, x0:x1] = cal
+            prob_raw[y0:y1, x0:x1] = Pmap
         extra = {}
         if self.debug_maps:
             att = np.zeros((H, W), np.float32)
@@ -612,4 +670,5 @@ class ObjectTracker:
                     accepted=bool(accepted), covariance=np.array(cov, dtype=float),
                     pose_filtered=self._filter.T @ self._Cinv,
                     pose_predicted=self._filter.T_bar @ self._Cinv, roi=tuple(int(v) for v in roi),
-                    gamma=float(gamma), iterations=int(iterations), n_inliers=int(n_inliers), **extra)
+                    gamma=float(gamma), iterations=int(iterations), n_inliers=int(n_inliers), prob_raw=prob_raw,
+                    n_unobserved=int(self._n_unobserved), **extra)

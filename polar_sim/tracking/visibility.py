@@ -89,8 +89,12 @@ def project_model(P, N, R, t, K, shape, spacing, *, cos_backface=np.cos(np.deg2r
 def splat_silhouette(uv, z_mean, f, spacing, roi):
     """Silhouette (h, w) uint8 {0, 1} of visible points ``uv`` (n, 2) inside ``roi`` = (x0, y0, x1, y1).
 
-    Each point is a disc of radius ``r_s = max(1, ceil(f s / z))`` px; the splats are joined by a
-    closing and shrunk back by ``r_s - 1`` so the silhouette does not grow past the outermost points.
+    ``spacing``: the radius each point covers, m, one value or one per point (n,). Each point is a
+    disc of radius ``r_s = max(1, ceil(f s / z))`` px; the discs are joined by a closing (which
+    shrinks them back, so the silhouette does not grow past the outermost points). With one
+    radius this is OpenCV's dilation and erosion by that disc; with several, the union of every
+    point's disc eroded by the smallest radius of the discs that cover each pixel (a closing with
+    a varying radius: a sparsely sampled face closes with its own, larger discs).
     """
     x0, y0, x1, y1 = roi
     h, w = y1 - y0, x1 - x0
@@ -100,9 +104,30 @@ def splat_silhouette(uv, z_mean, f, spacing, roi):
     iu = np.rint(uv[:, 0]).astype(np.int64) - x0
     iv = np.rint(uv[:, 1]).astype(np.int64) - y0
     ok = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
-    S[iv[ok], iu[ok]] = 1
-    r = int(max(1, np.ceil(f * spacing / max(z_mean, 1e-3))))
-    S = cv2.dilate(S, disc(r))
-    S = cv2.erode(S, disc(r), borderType=cv2.BORDER_CONSTANT, borderValue=1)
-    S = cv2.dilate(S, disc(1))
-    return S
+    sp = np.broadcast_to(np.asarray(spacing, dtype=np.float64), (len(uv),))
+    rad = np.maximum(1, np.ceil(f * sp / max(z_mean, 1e-3))).astype(np.int64)
+    radii = np.unique(rad[ok])
+    if len(radii) <= 1:
+        r = int(radii[0]) if len(radii) else int(rad.max())
+        S[iv[ok], iu[ok]] = 1
+        S = cv2.dilate(S, disc(r))
+        S = cv2.erode(S, disc(r), borderType=cv2.BORDER_CONSTANT, borderValue=1)
+        return cv2.dilate(S, disc(1))
+    big = np.int32(1 << 20)
+    e = np.full((h, w), big, np.int32)  # smallest radius of a disc covering each pixel
+    for rv in radii:
+        G = np.zeros((h, w), np.uint8)
+        sel = ok & (rad == rv)
+        G[iv[sel], iu[sel]] = 1
+        cover = cv2.dilate(G, disc(rv)) > 0
+        e[cover] = np.minimum(e[cover], np.int32(rv))
+    D = (e < big).astype(np.uint8)
+    # distance to the nearest pixel outside the union; the ROI's border counts as inside (as the
+    # erosion's border value 1 above)
+    dt = cv2.distanceTransform(cv2.copyMakeBorder(D, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1), cv2.DIST_L2,
+                               cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+    S = ((D > 0) & (dt > e)).astype(np.uint8)
+    # the outermost samples of a sparse patch lie about half their spacing inside its edge: grow the
+    # closed silhouette back by half the local radius (one pixel where the samples are dense)
+    ds = cv2.distanceTransform(1 - S, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return ((ds <= np.maximum(1.0, 0.5 * np.where(e < big, e, 0))) & (D > 0) | (S > 0)).astype(np.uint8)

@@ -3,7 +3,7 @@
 import numpy as np
 
 from polar_sim.baselines import OccupancyGrid2D, RoomSDF2D
-from polar_sim.baselines._common import transform2d
+from polar_sim.registration import transform2d
 
 # Rotated so that walls cut the grid cells at every offset: an axis-aligned wall at a fixed offset
 # inside its cells would bias a grid map by up to half a cell, the same way for every cell.

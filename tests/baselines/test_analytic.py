@@ -3,7 +3,7 @@ import pytest
 from baselines_scene import ANGLES, world_pose
 
 from polar_sim.baselines import RoomSDF2D, RoomSDF3D
-from polar_sim.baselines._common import transform2d
+from polar_sim.registration import transform2d
 
 
 def test_ray_end_points_lie_on_the_zero_level(room):

@@ -5,7 +5,7 @@ import pytest
 from baselines_scene import ANGLES, world_pose
 
 from polar_sim.baselines import OccupancyGrid2D
-from polar_sim.baselines._common import transform2d
+from polar_sim.registration import transform2d
 from polar_sim.errors import NotUpdatedError
 
 CS = 0.05

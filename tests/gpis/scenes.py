@@ -45,7 +45,7 @@ def ray_cast_2d(origin, dirs):
     return np.minimum(r, tc)
 
 
-def scan_2d(pose, angles, offset=(0.08, 0.0), noise=0.0, rng=None):
+def scan_2d(pose, angles, offset=(0.0, 0.0), noise=0.0, rng=None):
     """Ranges (n,) of a laser at ``offset`` in the base frame of ``pose`` = (x, y, theta)."""
     x, y, th = pose
     c, s = np.cos(th), np.sin(th)
@@ -179,7 +179,7 @@ def box_sdf(p, centre=BOX_C, half=BOX_HALF):
     return out + np.minimum(q.max(1), 0.0)
 
 
-def observed_2d(points, poses, behind=0.3, fov=np.deg2rad(135.0), offset=(0.08, 0.0), max_range=30.0):
+def observed_2d(points, poses, behind=0.3, fov=np.deg2rad(135.0), offset=(0.0, 0.0), max_range=30.0):
     """True where some scan saw the point: inside the field of view, at most ``behind`` metres
     behind the first surface along the ray from the laser (so free space and thin bands on
     both sides of observed surfaces count; occluded space does not)."""
@@ -198,7 +198,7 @@ def observed_2d(points, poses, behind=0.3, fov=np.deg2rad(135.0), offset=(0.08, 
     return seen
 
 
-def observed_hits_2d(poses, step_deg=0.1, offset=(0.08, 0.0), fov_deg=135.0):
+def observed_hits_2d(poses, step_deg=0.1, offset=(0.0, 0.0), fov_deg=135.0):
     """Dense points of the true surfaces that the laser hit from ``poses`` (fine angular step)."""
     a = np.deg2rad(np.arange(-fov_deg, fov_deg, step_deg))
     out = []

@@ -209,3 +209,30 @@ def test_bad_params():
             GPISMap2D(**kw).update(ANG, scan_2d(pose, ANG), pose)
     with pytest.raises(ValueError, match="obs_skip"):
         GPISMap3D(obs_skip=0).update(np.ones((4, 4)), intrinsics(4, 4, 3.0), np.eye(4))
+
+
+# the default takes the sensor pose (sensor_offset (0, 0), legacy too); a base pose with the
+# laser's mounting as sensor_offset builds the same map (issue 14 item 4; legacy mode searches
+# for re-evaluation around the base, as published, so only the default mode is equivalent)
+def test_default_takes_the_sensor_pose():
+    assert tuple(GPISMap2D().sensor_offset) == (0.0, 0.0)
+    assert tuple(GPISMap2D(legacy=True).sensor_offset) == (0.0, 0.0)
+    off = np.array([0.08, 0.0])
+    a = GPISMap2D()
+    b = GPISMap2D(sensor_offset=off)
+    for pose in room_path(4):
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        base = pose - [c * off[0], s * off[0], 0.0]          # the base 8 cm behind the laser
+        r = scan_2d(pose, ANG)
+        a.update(ANG, r, pose)
+        b.update(ANG, r, base)
+    from scipy.spatial import cKDTree
+
+    sa, sb = a.samples(), b.samples()
+    assert len(sa["points"]) == len(sb["points"]) > 50
+    d, i = cKDTree(sb["points"]).query(sa["points"])        # same samples (the order may differ)
+    assert d.max() < 1e-9 and len(np.unique(i)) == len(i)
+    np.testing.assert_allclose(sa["normals"], sb["normals"][i], atol=1e-6)
+    P = sa["points"][::5] + 0.1
+    for x, y in zip(a.query(P), b.query(P)):
+        np.testing.assert_allclose(x, y, atol=1e-6)

@@ -13,7 +13,7 @@ from polar_sim.gpis._obsgp import ObsGP1D
 def demo_map():
     g = load_gazebo1()
     ref = np.load(data_path("gpismap/ref2d_demo.npz"), allow_pickle=False)
-    m = GPISMap2D(legacy=True)
+    m = GPISMap2D(legacy=True, sensor_offset=g["sensor_offset"])   # the log gives base poses
     counts = []
     for k in g["demo_frames"]:
         m.update(g["thetas"], g["ranges"][k], g["poses"][k])

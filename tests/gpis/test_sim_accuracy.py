@@ -2,7 +2,8 @@
 
 office2d: a seeded 60 s drive through the rooms with the 2D lidar (sigma 1 cm); object_orbit:
 an RGB-D orbit with Kinect-like noise. The definitions ("observed", the evaluation sets) are
-those of ``experiments/gpis_accuracy.py`` (``experiments/_gpis_common.py``); this is its CI size
+those of ``experiments/gpis_accuracy.py`` (``polar_sim.metrics.maps``, drives from
+``polar_sim.sim.drives2d``, orbits from ``polar_sim.sim.orbits``); this is its CI size
 (a scan every 3rd step, 20 RGB-D frames; ``POLAR_SIM_FULL=1``: every step, 40 frames).
 
 Bounds that the current GPISMap2D/3D miss are marked ``xfail(strict=True)`` with the measured
@@ -15,8 +16,8 @@ import os
 import numpy as np
 import pytest
 
-from polar_sim.experiments import _gpis_common as C
 from polar_sim.gpis import GPISMap2D, GPISMap3D
+from polar_sim.metrics import maps as M
 
 pytestmark = pytest.mark.slow
 FULL = os.environ.get("POLAR_SIM_FULL", "") == "1"
@@ -31,19 +32,21 @@ SEED = 0
 
 @pytest.fixture(scope="module")
 def office():
+    from polar_sim.sim.drives2d import lidar_world, recorded_drives
+
     every = size(1, 3)
-    w = C.office_world(SEED)
-    d = C.drive(w, C.route(w, SEED), duration=60.0, speed=1.0, every_steps=every)
+    d, = recorded_drives("office2d", SEED, [dict(route_seed=SEED, n_rooms=5, duration=60.0, speed=1.0, every_steps=every)])
+    w = lidar_world("office2d", SEED, noise=False)
     m = GPISMap2D(sensor_offset=(0.0, 0.0))
     leg = GPISMap2D(sensor_offset=(0.0, 0.0), legacy=True)
     for p, r in zip(d.poses, d.ranges):
         m.update(d.angles, r, p)
         leg.update(d.angles, r, p)
-    obs = C.Observation(d)
-    E = C.eval_points_2d(w, obs, size(60_000, 30_000), SEED)
-    s, _ = C.score_sdf_2d(m, E)
-    sl, _ = C.score_sdf_2d(leg, E)
-    surf, _ = C.score_surface_2d(w, C.polyline_points(m.surface()), obs)
+    obs = M.ObservedArea(d.angles, d.poses, d.clean)
+    E = M.sample_eval_points(obs, w.sdf, size(60_000, 30_000), SEED)
+    s, _ = M.sdf_map_scores(*m.query(E["P"])[:2], E)
+    sl, _ = M.sdf_map_scores(*leg.query(E["P"])[:2], E)
+    surf, _ = M.surface_scores_2d(M.polyline_points(m.surface()), w.sdf, obs)
     yield dict(w=w, d=d, m=m, obs=obs, E=E, s=s, legacy=sl, surf=surf)
     w.close()
 
@@ -51,13 +54,21 @@ def office():
 @pytest.fixture(scope="module")
 def orbit():
     from polar_sim.sim import World
+    from polar_sim.sim.orbits import ObjectTruth, recorded_orbit
 
     w = World("object_orbit", seed=SEED)
-    orb = C.orbit_capture(w, size(40, 20), SEED)
+    orb = recorded_orbit(w, size(40, 20), SEED)
     m = GPISMap3D()
     for z, K, T in zip(orb.depths, orb.Ks, orb.poses):
         m.update(z, K, T)
-    res, _ = C.score_3d(w, m, orb, n_eval=size(4000, 2000), seed=SEED)
+    truth = ObjectTruth(w, orb)
+    E = truth.eval_points(size(4000, 2000), SEED)
+    S = m.surface()
+    V, F = np.asarray(S.vertices), np.asarray(S.faces)
+    c = truth.compare_mesh(V, F, E["samples"][E["seen"]])
+    v = c["visible"]
+    res = M.object_map_scores(m.query(E["P"])[0], E["gt"], dist=c["dist"], visible=v, to_surface=c["to_surface"],
+                              vertex_grad=m.query(V[v])[1], true_normals=c["true_normals"][v])
     yield res
     w.close()
 

@@ -149,3 +149,49 @@ def test_bad_input_raises(call):
     # malformed points, poses, errors or images raise ValueError
     with pytest.raises(ValueError):
         call()
+
+
+def _turning(angles_deg, axis=(0, 0, 1), t=(0, 0, 0.8)):
+    return np.stack([make_pose(so3_exp(np.deg2rad(a) * np.asarray(axis, float)), t) for a in angles_deg])
+
+
+def test_rotation_drift_of_object_at_rest():
+    # the true pose is still; the estimate turns 0.1 deg per frame about z: drift = 0.1 k deg exactly,
+    # whatever the true orientation
+    G = np.stack([make_pose(so3_exp([0.3, -0.2, 0.5]), [0.1, 0, 0.7])] * 50)
+    E = G @ _turning(0.1 * np.arange(50), t=(0, 0, 0))
+    assert np.allclose(np.rad2deg(metrics.rotation_drift(G, E)), 0.1 * np.arange(50), atol=1e-9)
+    assert np.allclose(np.rad2deg(metrics.rotation_drift(G, E, start=10)), 0.1 * np.arange(40), atol=1e-9)
+
+
+def test_rotation_drift_follows_true_motion():
+    # an estimate that turns exactly as the object does has no drift; a constant offset has none either
+    G = _turning(np.linspace(0, 40, 30), axis=(1, 0, 0))
+    off = make_pose(so3_exp([0, 0.2, 0]), [0.01, 0, 0])
+    assert np.allclose(metrics.rotation_drift(G, G @ off), 0.0, atol=1e-7)
+    assert metrics.rotation_drift(G, np.stack([G[0]] * 30))[-1] == pytest.approx(np.deg2rad(40))
+
+
+def test_static_segments_and_drift():
+    # 100 frames at rest, 20 frames turning 2 deg each, 81 frames at rest (the last turning frame
+    # reaches the final angle): two runs; the estimate spins
+    # 0.05 deg per frame throughout, so each run's drift is 0.05 deg times its (horizon-capped) length
+    ang = np.concatenate([np.zeros(100), 2.0 * np.arange(1, 21), np.full(80, 40.0)])
+    G = _turning(ang)
+    E = G @ _turning(0.05 * np.arange(200), t=(0, 0, 0))
+    assert metrics.static_segments(G) == [(0, 100), (119, 200)]
+    d = metrics.static_rotation_drift(G, E, horizon=60)
+    assert d.segments == [(0, 100), (119, 200)] and list(d.frames) == [60, 60]
+    assert np.allclose(np.rad2deg(d.drift), 0.05 * 59) and d.max_drift == pytest.approx(np.deg2rad(0.05 * 59))
+    assert np.isnan(metrics.static_rotation_drift(_turning(np.arange(50) * 3.0), _turning(np.arange(50) * 3.0)).max_drift)
+
+
+def test_pose_frame_errors_match_the_single_metrics():
+    # the per-frame bundle equals the separate metrics
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    G = _turning(np.arange(5) * 3.0)
+    E = G.copy()
+    E[:, 0, 3] += 0.01
+    out = metrics.pose_frame_errors(CUBE, K, G, E)
+    assert np.allclose(out["add"], 0.01) and np.allclose(out["trans"], 0.01) and np.allclose(out["rot"], 0, atol=1e-6)
+    assert np.allclose(out["mssd"], 0.01) and np.allclose(out["adds"], metrics.adds(CUBE, G, E))

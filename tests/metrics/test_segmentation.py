@@ -71,3 +71,23 @@ def test_bad_input_raises(call):
     # mismatched shapes, non-boolean masks, empty inputs, one-class labels raise ValueError
     with pytest.raises(ValueError):
         call()
+
+
+def test_near_mask_is_a_disc_dilation():
+    # one pixel dilated by r = 3: exactly the pixels within Euclidean distance 3
+    m = np.zeros((20, 20), bool)
+    m[10, 10] = True
+    n = metrics.near_mask(m, 3)
+    yy, xx = np.mgrid[0:20, 0:20]
+    assert np.array_equal(n, (yy - 10) ** 2 + (xx - 10) ** 2 <= 9)
+    assert not metrics.near_mask(np.zeros((5, 5), bool), 2).any()
+
+
+def test_mask_frame_scores_counts():
+    # hand-computed counts for a 4x4 prediction, a 4x6 truth and a hand overlapping both
+    pred, gt = _rect(0, 4, 0, 4), _rect(0, 4, 2, 8)
+    hand = _rect(2, 6, 0, 2)
+    s = metrics.mask_frame_scores(pred, gt, hand, within=_rect(0, 3, 0, 10))
+    assert s["n_pred"] == 16 and s["n_gt"] == 24 and s["n_tp"] == 8
+    assert s["iou"] == pytest.approx(8 / 32)
+    assert s["hand_all"] == 8 and s["hand_all_tgt"] == 4 and s["hand_near"] == 2 and s["hand_near_tgt"] == 2

@@ -182,15 +182,24 @@ def test_reset_replays_the_script_exactly():
     assert np.array_equal(np.array(a), np.array(b))
 
 
-def test_recorded_sequence_is_deterministic_and_cached(tmp_path):
-    # Same name and seed: byte-identical frames; a cached recording loads back identical.
-    a = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120, cache_dir=tmp_path)
+def test_recorded_sequence_is_deterministic_and_cached(tmp_path, monkeypatch):
+    # Same name and seed: byte-identical frames; the cached recording (polar_sim.sim.sequences) reads
+    # back identical, frame by frame, and a second call reads the cache instead of recording
+    from polar_sim.sim.tabletop_sequences import cached_sequence
+
+    monkeypatch.setenv("POLAR_SIM_CACHE", str(tmp_path))
+    a = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
     b = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
-    c = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120, cache_dir=tmp_path)
-    assert a.keys == b.keys
+    c = cached_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
+    assert a.keys == b.keys and set(a.keys) == set(c.keys)
     for k in a.keys:
         assert np.array_equal(a.stack(k), b.stack(k)) and np.array_equal(a.stack(k), c.stack(k)), k
-    assert a.meta == c.meta and a.meta["object"] == "mug" and np.array(a.meta["K"]).shape == (3, 3)
+    files = list((tmp_path / "tabletop").glob("*.npz"))
+    assert len(files) == 1
+    mtime = files[0].stat().st_mtime_ns
+    d = cached_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
+    assert files[0].stat().st_mtime_ns == mtime and len(d) == 3
+    assert c.meta["object"] == a.meta["object"] == "mug" and np.array(a.meta["K"]).shape == (3, 3)
     f = a[2]
     missing = ~np.isfinite(f["depth"])
     assert missing.mean() > 0.005 and np.isfinite(f["depth_clean"]).all()
@@ -224,3 +233,152 @@ def test_bad_scene_options_raise(scene, options, valid):
     # A bad option value or name raises ValueError naming what is valid.
     with pytest.raises(ValueError, match=valid):
         World(scene, seed=0, **options)
+
+
+# -- appearance (issue 13): families, explicit specs, and the truth they must not change -------------
+
+def _frames(seed, appearance, target="blocks", script="touch", n=75):
+    w = World("tabletop", seed=seed, script=script, target=target, appearance=appearance)
+    for _ in range(n):
+        w.step()
+    f = w.camera("rgbd", width=W, height=H)
+    full = w.amodal_mask("rgbd", width=W, height=H)
+    out = dict(f=f, full=full, meta=w.meta, model=w.model, truth=w.truth())
+    out["hand_geoms"] = {g for g in range(w.model.ngeom) if w.model.body(w.model.geom_bodyid[g]).name == "hand"}
+    out["target_geoms"] = {g for g in range(w.model.ngeom) if w.model.geom_bodyid[g] == w.model.body(target).id}
+    w.close()
+    return out
+
+
+@pytest.fixture(scope="module")
+def looks():
+    """Seed 5, the palm on the blocks object, under no appearance and every family."""
+    return {a: _frames(5, a) for a in (None, "default", "textured", "flat", "gloved", "studio", "random")}
+
+
+def test_default_appearance_renders_as_before(looks):
+    # "default" is the scene as it has always been: the same bytes as no appearance at all
+    a, b = looks[None]["f"], looks["default"]["f"]
+    for k in ("rgb", "depth", "labels", "geom_ids"):
+        assert np.array_equal(getattr(a, k), getattr(b, k)), k
+
+
+def test_appearance_changes_colours_only(looks):
+    # every family keeps the seed's layout and motion: depth, labels, geom ids and the amodal mask are
+    # identical to the default's bit for bit, while the colours differ
+    ref = looks[None]
+    for a, x in looks.items():
+        if a in (None, "default"):
+            continue
+        for k in ("depth", "labels", "geom_ids"):
+            assert np.array_equal(getattr(x["f"], k), getattr(ref["f"], k)), (a, k)
+        assert np.array_equal(x["full"], ref["full"]), a
+        assert np.abs(x["f"].rgb.astype(int) - ref["f"].rgb).mean() > 3, a
+        assert x["meta"]["appearance"]["family"] == a
+
+
+def test_labels_come_from_geoms_under_every_appearance(looks):
+    # target pixels come only from the target's geoms and occluder pixels only from the hand's (a glove too)
+    for a, x in looks.items():
+        f = x["f"]
+        vis, occ = f.labels == LABELS["target"], f.labels == LABELS["occluder"]
+        assert vis.sum() > 500 and occ.sum() > 300, a
+        assert set(np.unique(f.geom_ids[vis])) <= x["target_geoms"], a
+        assert set(np.unique(f.geom_ids[occ])) <= x["hand_geoms"], a
+        assert not (vis & ~x["full"]).any(), a
+
+
+def test_blocks_depth_and_silhouette_are_exact(looks):
+    # the three-part object: clean depth back-projects onto its mesh (< 0.5 mm) and the projected mesh
+    # covers the amodal mask (IoU > 0.99)
+    x = looks["flat"]
+    f, full = x["f"], x["full"]
+    T_co = inv_pose(f.T_world_cam) @ x["truth"]["objects"]["blocks"]
+    mesh = O.load_mesh("blocks")
+    P = transform_points(inv_pose(T_co), _backproject(f.depth, f.K, f.labels == LABELS["target"]))
+    _, d, _ = trimesh.proximity.closest_point(mesh, P)
+    assert len(d) > 300 and np.percentile(d, 99) < 5e-4
+    V = transform_points(T_co, mesh.vertices)
+    sil = _rasterise(V[:, :2] / V[:, 2:] * np.diag(f.K)[:2] + f.K[:2, 2], mesh.faces, H, W)
+    assert (sil & full).sum() / (sil | full).sum() > 0.99
+
+
+def _texture(model, name):
+    t = model.texture(name)
+    return model.tex_data[t.adr[0]: t.adr[0] + t.height[0] * t.width[0] * 3].reshape(t.height[0], t.width[0], 3)
+
+
+def test_explicit_spec_sets_flat_part_colours_hand_and_light():
+    # {"colours": ...} with flat objects: each atlas tile of the blocks object is exactly one named colour;
+    # the hand is the named glove; the key light is turned and scaled as asked
+    from polar_sim.sim.tabletop import COLOURS
+    from polar_sim.sim.tabletop_appearance import HAND_COLOURS
+
+    spec = {"objects": "flat", "hand": "glove_black", "colours": {"blocks": ["blue", "yellow", "red"]},
+            "light": {"intensity": 0.5, "azimuth_deg": 90.0}}
+    w = World("tabletop", seed=5, script="touch", target="blocks", appearance=spec)
+    ref = World("tabletop", seed=5, script="touch", target="blocks")
+    try:
+        img = _texture(w.model, "tex_blocks")
+        h = img.shape[0] // 2
+        for k, c in enumerate(["blue", "yellow", "red"]):
+            tile = img[(k // 2) * h:(k // 2 + 1) * h, (k % 2) * h:(k % 2 + 1) * h].reshape(-1, 3)
+            assert (tile == np.array(COLOURS[c], np.uint8)).all(), c
+        palm = w.model.geom("hand_palm").id
+        assert np.allclose(w.model.geom_rgba[palm, :3], HAND_COLOURS["glove_black"])
+        k0, k1 = ref.model.light("key").id, w.model.light("key").id
+        p0 = ref.model.light_pos[k0]
+        assert np.allclose(w.model.light_pos[k1], [-p0[1], p0[0], p0[2]], atol=1e-9)
+        assert np.allclose(w.model.light_diffuse[k1], 0.5 * ref.model.light_diffuse[k0])
+        assert w.meta["colours"]["blocks"] == ["blue", "yellow", "red"]
+    finally:
+        w.close()
+        ref.close()
+
+
+def test_appearance_is_seeded():
+    # the same seed and family give the same choices; another seed gives other choices
+    from polar_sim.sim.tabletop_appearance import resolve_appearance
+
+    a, b = resolve_appearance("random", 3), resolve_appearance("random", 3)
+    assert a == b
+    assert any(resolve_appearance("random", s) != a for s in range(4, 8))
+    assert resolve_appearance(None, 0) is None
+
+
+@pytest.mark.parametrize("appearance, match", [
+    ("velvet", "unknown family 'velvet'.*'studio'"),
+    ({"colour": "red"}, "unknown field.*'colour'.*'hand'"),
+    ({"hand": "purple"}, "field 'hand'.*glove_blue"),
+    ({"table": "glass"}, "field 'table'.*marble"),
+    ({"objects": "shiny"}, "field 'objects'.*flat"),
+    ({"light": {"intensity": 9.0}}, "field 'light.intensity'"),
+    ({"light": {"hue": 1.0}}, "field 'light'.*hue"),
+    ({"light": {"tint": [1, 1]}}, "field 'light.tint'"),
+    ({"colours": {"banana": ["red"]}}, "field 'colours'.*banana"),
+    ({"colours": {"box": ["plaid"]}}, "field 'colours.box'"),
+    ({"family": "nope"}, "field 'family'"),
+    (7, "dict spec"),
+])
+def test_bad_appearance_raises(appearance, match):
+    # an unknown family or field, or a malformed value, raises ValueError naming it and what is valid
+    with pytest.raises(ValueError, match=match):
+        World("tabletop", seed=0, appearance=appearance)
+
+
+def test_test_split_sequences_are_held_out():
+    # the test split: seeds >= 10,000, untextured and multi-part objects, held-out appearance families only
+    from polar_sim.sim.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
+    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, TEST_SEQUENCES, list_sequences
+
+    assert len(list_sequences("test")) >= 10 and min(SPLIT_SEEDS["test"]) >= 10_000
+    assert list_sequences("dev") == list(SEQUENCES) and SPLIT_SEEDS["dev"] == (0,)
+    assert not set(TEST_SEQUENCES) & set(SEQUENCES)
+    fams = set()
+    for s in TEST_SEQUENCES.values():
+        a = s.options["appearance"]
+        fams.add(a if isinstance(a, str) else a.get("family", "default"))
+        assert 300 <= s.frames <= 600
+    assert fams <= set(TEST_FAMILIES) | {"random"} and not fams & set(DEV_FAMILIES)
+    assert "blocks" in {s.options["target"] for s in TEST_SEQUENCES.values()}
+    assert {"touch", "pass"} & {s.options["script"] for s in TEST_SEQUENCES.values()}  # static targets

@@ -134,3 +134,131 @@ def test_close():
     w.close()
     with pytest.raises(RuntimeError):
         w.step((1.0, 0.0))
+
+
+# World options are validated by name before anything is built (issue 17, finding 7).
+@pytest.mark.parametrize("kwargs, exc, match", [
+    ({"camera_height": -1.0}, ValueError, "camera_height"),
+    ({"camera_height": "1.2"}, TypeError, "camera_height"),
+    ({"camera_fovy": float("nan")}, ValueError, "camera_fovy"),
+    ({"camera_fovy": 180.0}, ValueError, "camera_fovy"),
+    ({"control_dt": "0.1"}, TypeError, "control_dt"),
+    ({"control_dt": 0.0}, ValueError, "control_dt"),
+    ({"control_dt": float("inf")}, ValueError, "control_dt"),
+    ({"kinematic": "no"}, TypeError, "kinematic"),
+    ({"kinematic": 1}, TypeError, "kinematic"),
+    ({"seed": -1}, ValueError, "seed"),
+    ({"seed": 1.5}, TypeError, "seed"),
+    ({"seed": True}, TypeError, "seed"),
+    ({"noise": ["lidar"]}, TypeError, "noise"),
+    ({"rover": "tank"}, ValueError, "rover"),
+    ({"rover": 3}, TypeError, "rover"),
+])
+def test_world_options_validated(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        World("rover_flat", **kwargs)
+
+
+# Generic rover options of the indoor scenes are validated centrally too.
+def test_indoor_options_validated():
+    with pytest.raises(ValueError, match="lidar_beams"):
+        World("navworld", lidar_beams=0)
+    with pytest.raises(TypeError, match="lidar_beams"):
+        World("navworld", lidar_beams=10.5)
+    with pytest.raises(ValueError, match="camera_height"):
+        World("office2d", camera_height=-0.5)
+
+
+# Camera sizes are whole positive pixels within the offscreen buffer; names are strings.
+def test_camera_size_and_names(flat):
+    for w, h, exc in ((0, 24, ValueError), (32, 31.5, TypeError), (-4, 24, ValueError), (True, 24, TypeError),
+                      (32, "24", TypeError), (100_000, 24, ValueError)):
+        with pytest.raises(exc, match="width|height"):
+            flat.camera("front", width=w, height=h)
+    with pytest.raises(TypeError, match="name"):
+        flat.camera(["front"])
+    with pytest.raises(TypeError, match="name"):
+        flat.lidar(0)
+    with pytest.raises(ValueError, match="name"):
+        flat.object_mesh("nope")
+    f = flat.camera("front", width=33, height=21)
+    assert f.rgb.shape == (21, 33, 3) and f.depth.shape == (21, 33)
+    with pytest.raises(ValueError, match="elevation"):
+        flat.render_view(width=32, height=24, elevation=float("nan"))
+
+
+# Actions of the wrong kind are refused by name and leave the world as it was.
+def test_action_kinds_refused(flat):
+    flat.reset()
+    before = (flat.data.qpos.copy(), flat.time)
+    for bad in ([1 + 1j, 0.0], [True, False], np.array([None, 0.0], object), "1, 0", ["1", "0"]):
+        with pytest.raises(TypeError, match="action"):
+            flat.step(bad)
+    np.testing.assert_array_equal(flat.data.qpos, before[0])
+    assert flat.time == before[1]
+
+
+def _mjcf(tmp_path, body="", custom="", option="", asset="", name="s.xml"):
+    p = tmp_path / name
+    p.write_text(f"<mujoco>{option}<asset>{asset}</asset><worldbody><site name='s'/><geom type='plane' size='5 5 .1'/>"
+                 f"{body}</worldbody><custom>{custom}</custom></mujoco>")
+    return str(p)
+
+
+# Malformed lidar declarations in user MJCF fail with a message naming the key.
+@pytest.mark.parametrize("decl, match", [
+    ("type=lidar2d site=s beams=abc", "beams='abc' is not an integer"),
+    ("type=lidar2d site=s beams=-5", "beams='-5' is out of range"),
+    ("type=lidar2d site=s beams=1e9", "beams='1e9' is not an integer"),
+    ("type=lidar2d site=s beams=2000000", "beams='2000000' is out of range"),
+    ("type=lidar2d site=s fov_deg=nan", "fov_deg"),
+    ("type=lidar2d site=s min=5 max=1", "min=5.0 must be smaller than max=1.0"),
+    ("type=lidar2d site=s bogus=1", "unknown key"),
+    ("type=lidar3d site=s rows=2000 cols=2000", "MAX_LIDAR_RAYS"),
+    ("type=lidar3d site=s vfov_min_deg=20 vfov_max_deg=-20", "vfov_min_deg"),
+    ("type=sonar site=s", "unknown sensor type"),
+    ("type=lidar2d site=nope", "site 'nope' does not exist"),
+])
+def test_mjcf_lidar_declarations(tmp_path, decl, match):
+    p = _mjcf(tmp_path, custom=f"<text name='sensor:l' data='{decl}'/>")
+    with pytest.raises(ValueError, match=match):
+        World(p)
+
+
+# Malformed scenes fail before anything renders: bad XML, a zero timestep, a missing mesh, files
+# outside the scene folder, a huge asset.
+def test_malformed_mjcf(tmp_path, monkeypatch):
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><geom type='sphere' size='.1'></worldbody>")
+    with pytest.raises(ValueError, match="malformed MJCF"):
+        World(str(bad))
+    with pytest.raises(ValueError, match="timestep"):
+        World(_mjcf(tmp_path, option="<option timestep='0'/>"))
+    with pytest.raises(FileNotFoundError, match="nope.stl"):
+        World(_mjcf(tmp_path, asset="<mesh name='m' file='nope.stl'/>", body="<geom type='mesh' mesh='m'/>"))
+    with pytest.raises(ValueError, match="outside the scene folder"):
+        World(_mjcf(tmp_path, asset="<mesh name='m' file='../../../etc/passwd'/>", body="<geom type='mesh' mesh='m'/>"))
+    inc = tmp_path / "inc.xml"
+    inc.write_text("<mujoco><include file='/etc/hosts'/></mujoco>")
+    with pytest.raises(ValueError, match="outside the scene folder"):
+        World(str(inc))
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.stl")
+    p = _mjcf(tmp_path, asset="<mesh name='m' file='ball.stl'/>", body="<geom type='mesh' mesh='m'/>", name="ball.xml")
+    World(p).close()                                   # within the limits it loads
+    import polar_sim.sim.scenes as scenes
+
+    monkeypatch.setattr(scenes, "MAX_ASSET_BYTES", 1000)
+    with pytest.raises(ValueError, match="MAX_ASSET_BYTES"):
+        World(p)
+    monkeypatch.setattr(scenes, "MAX_ASSET_BYTES", 2**30)
+    monkeypatch.setattr(scenes, "MAX_MESH_FACES", 100)
+    with pytest.raises(ValueError, match="MAX_MESH_FACES"):
+        World(p)
+    for path in ("/tmp/" + "x" * 5000 + ".xml", str(tmp_path / "ñandú √.xml"), str(tmp_path / "a\x00.xml")):
+        with pytest.raises((ValueError, FileNotFoundError), match="scene"):
+            World(path)
+    monkeypatch.setattr(scenes, "MAX_MESH_FACES", 10**7)
+    with World(p) as w, pytest.raises(ValueError, match="name: unknown camera"):
+        w.camera("front")

@@ -19,7 +19,8 @@ def mug():
 
 
 def _track(seq, P, N, frames, **kw):
-    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, **kw)
+    kw.setdefault("model_normals", N)
+    tr = ObjectTracker(P, seq.K, seq.poses[0], **kw)
     return tr, [tr.process(f["rgb"], f["depth"]) for f in frames]
 
 
@@ -65,15 +66,69 @@ def test_hand_pixels_are_labelled_background(mug):
     assert (O[hand] == 0).mean() > 0.8
 
 
+@pytest.fixture(scope="module")
+def moving_mug():
+    """The hand-held mug at twice the speed: by frame 30 it has slid about 7 cm and turned."""
+    seq = make_sequence(N_FRAMES, "mug", speed=2.0)
+    P, N = seq.model(3000)
+    return seq, P, N, [seq.frame(i) for i in range(N_FRAMES)]
+
+
 @pytest.mark.parametrize("kw", [dict(appearance="none"), dict(motion="none"), dict(motion="alpha-beta"),
-                                dict(spatial_prior=False), dict(correspondence="kdtree"),
-                                dict(appearance="Su"), dict(appearance="wu"), dict(appearance="SW")])
-def test_variants_and_ablations_run(mug, kw):
-    # each switch runs; on this short, gentle sequence they all stay on target
+                                dict(spatial_prior=True), dict(correspondence="kdtree"), dict(hold_unobserved=False),
+                                dict(calibrate=False), dict(appearance="Su"), dict(appearance="wu"),
+                                dict(appearance="SW"), dict(appearance="h")])
+def test_variants_and_ablations_track_a_moving_object(moving_mug, kw):
+    # each switch keeps ADD < 0.1 d on every frame of an object that moves well beyond that bound: a
+    # tracker that held the initial pose would fail by frame 30 (checked on the truth itself)
+    seq, P, N, frames = moving_mug
+    d = metrics.object_diameter(P)
+    G = np.stack([f["pose"] for f in frames])
+    assert metrics.add(P, G[0], G[-1]) > 3 * 0.1 * d  # holding the first pose fails the bound
+    _, res = _track(seq, P, N, frames, **kw)
+    add = metrics.add(P, G, np.stack([r.pose for r in res]))
+    assert np.all(add < 0.1 * d), (kw, add.max() / d)
+
+
+def test_static_revolved_object_does_not_spin():
+    # a cylinder at rest: its rotation about the axis is seen by nothing, so the estimate must not turn
+    # (issue 13 item 5); without holding the unobserved direction the same tracker spins by tens of degrees
+    seq = make_sequence(60, "cylinder", speed=0.0, hand=False)
+    P, N = seq.model(3000)
+    frames = [seq.frame(i) for i in range(60)]
+    drift = {}
+    for hold in (True, False):
+        _, res = _track(seq, P, N, frames, hold_unobserved=hold)
+        drift[hold] = np.rad2deg(metrics.rotation_drift(seq.poses, np.stack([r.pose for r in res]))).max()
+        if hold:
+            assert all(r.n_unobserved == 1 for r in res)
+    assert drift[True] < 1.0 and drift[False] > 5.0
+
+
+def test_static_box_has_no_unobserved_direction():
+    # a box at rest, two faces and their edges in view: every direction is observed, nothing is held
+    seq = make_sequence(20, "box", speed=0.0, hand=False)
+    P, N = seq.model(3000)
+    _, res = _track(seq, P, N, [seq.frame(i) for i in range(20)])
+    assert all(r.n_unobserved == 0 for r in res)
+    assert np.rad2deg(metrics.rotation_drift(seq.poses[:20], np.stack([r.pose for r in res]))).max() < 1.0
+
+
+def test_prob_is_calibrated_by_the_tracker_own_labels(mug):
+    # P(target) in the ROI, pooled over frames 10-29, is closer to calibrated (ECE against the true visible
+    # mask) than the raw prediction map, and the raw map is kept beside it
     seq, P, N, frames = mug
-    _, res = _track(seq, P, N, frames[:8], **kw)
-    add = metrics.add(P, np.stack([f["pose"] for f in frames[:8]]), np.stack([r.pose for r in res]))
-    assert np.all(add < 0.1 * metrics.object_diameter(P))
+    _, res = _track(seq, P, N, frames)
+    roi = np.zeros((len(res),) + seq.shape, bool)
+    for k, r in enumerate(res):
+        x0, y0, x1, y1 = r.roi
+        roi[k, y0:y1, x0:x1] = True
+    truth = np.stack([f["mask"] for f in frames])
+    cal = np.stack([r.prob for r in res])
+    raw = np.stack([r.prob_raw for r in res])
+    e_cal = metrics.expected_calibration_error(cal[10:], truth[10:], valid=roi[10:])
+    e_raw = metrics.expected_calibration_error(raw[10:], truth[10:], valid=roi[10:])
+    assert e_cal < e_raw and e_cal < 0.05, (e_cal, e_raw)
 
 
 def test_plain_icp_baseline_runs(mug):
@@ -213,3 +268,25 @@ def test_accepts_strided_views(mug):
     a = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(bgr[..., ::-1], f["depth"].astype(float))
     b = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).process(f["rgb"], f["depth"])
     assert np.array_equal(a.pose, b.pose) and np.array_equal(a.mask, b.mask)
+
+
+def test_sparse_faces_of_a_non_uniform_model_are_segmented():
+    # a box model with 2700 points on its two small faces and 300 on the four large ones (9x sparser): the
+    # mask still recalls >= 78 % of the true visible pixels at >= 95 % precision (issue 13 item 4: with one
+    # global point spacing the sparse faces fell out of the silhouette and the labels, recall 0.65)
+    import trimesh
+
+    seq = make_sequence(20, "box", hand=False)
+    frames = [seq.frame(i) for i in range(20)]
+    mesh = seq.target.mesh
+    small = np.abs(mesh.face_normals[:, 0]) > 0.9
+
+    def sample(faces, n, seed):
+        sub = mesh.submesh([np.flatnonzero(faces)], append=True)
+        p, f = trimesh.sample.sample_surface(sub, n, seed=seed)
+        return np.asarray(p), sub.face_normals[f]
+
+    (P1, N1), (P2, N2) = sample(small, 2700, 0), sample(~small, 300, 1)
+    _, res = _track(seq, np.vstack([P1, P2]), None, frames, model_normals=np.vstack([N1, N2]))
+    prec, rec = metrics.precision_recall(np.stack([r.mask for r in res]), np.stack([f["mask"] for f in frames]))
+    assert rec >= 0.78 and prec >= 0.95, (prec, rec)

@@ -1,4 +1,5 @@
-"""LidarNav-v0 / GPISNav-v0: gymnasium and SB3 checks, seeding, bad input, wrappers, vector envs."""
+"""LidarNav-v0 / GPISNav-v0 (the GPS+compass variant): gymnasium and SB3 checks, seeding, bad input,
+the composition, vector envs."""
 
 import warnings
 
@@ -7,9 +8,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import polar_sim  # noqa: F401  (registers the ids)
+import polar_sim.envs  # noqa: F401  (registers the ids)
+from polar_sim.envs.lidar_nav import LidarNavEnv
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
-from polar_sim.envs.wrappers import GPISObservation
 
 SMALL = dict(rooms=2, room_size=4.0, clutter=3)
 
@@ -85,6 +86,10 @@ def test_bad_input_and_lifecycle():
         gym.make("polar_sim/GPISNav-v0", sdf_sorce="gpis")
     with pytest.raises(ValueError, match="sdf_source"):
         gym.make("polar_sim/GPISNav-v0", sdf_source="lidar")
+    with pytest.raises(ValueError, match="pose_source: version 0"):
+        gym.make("polar_sim/GPISNav-v0", pose_source="slam")
+    with pytest.raises(ValueError, match="lidar_noise: version 0"):
+        gym.make("polar_sim/GPISNav-v0", lidar_noise=(0.01, 0.0))
     env = gym.make("polar_sim/GPISNav-v0", sdf_source="truth", **SMALL)
     with pytest.raises(RuntimeError, match="reset"):
         env.unwrapped.step(np.zeros(2, np.float32))
@@ -99,19 +104,21 @@ def test_bad_input_and_lifecycle():
         env.unwrapped.step(np.zeros(2, np.float32))
 
 
-# GPISObservation on the raw LidarNav-v0 gives the same observation as GPISNav-v0.
-def test_wrapper_matches_env():
-    a = GPISObservation(gym.make("polar_sim/LidarNav-v0", **SMALL), sdf_source="truth")
+# GPISNav-v0 is the composition of the raw LidarNav-v0 and the map: its goal and twist are the
+# base's observation, and its unwrapped env is the composition itself (what check_env sees).
+def test_gpisnav_is_lidarnav_plus_map():
+    a = gym.make("polar_sim/LidarNav-v0", **SMALL)
     b = gym.make("polar_sim/GPISNav-v0", sdf_source="truth", **SMALL)
+    assert isinstance(b.unwrapped.base, LidarNavEnv) and b.unwrapped is not b.unwrapped.base
     oa, _ = a.reset(seed=7)
     ob, _ = b.reset(seed=7)
-    assert a.observation_space == b.observation_space
     for _ in range(3):
         act = np.array([0.4, 0.2], np.float32)
         oa, *_ = a.step(act)
         ob, *_ = b.step(act)
-    for k in ob:
-        np.testing.assert_allclose(oa[k], ob[k], atol=1e-6)
+    for k in ("goal", "twist"):
+        np.testing.assert_array_equal(oa[k], ob[k])
+    assert sorted(ob) == ["goal", "sdf", "sdf_grad", "sdf_var", "twist"]
     a.close()
     b.close()
 
@@ -175,7 +182,7 @@ def test_render():
 # Sync and Async (spawn) vector environments step in lockstep and autoreset.
 def test_vector_envs():
     kw = dict(sdf_source="truth", **SMALL)
-    fns = [lambda: gym.make("polar_sim:polar_sim/GPISNav-v0", **kw) for _ in range(2)]
+    fns = [lambda: gym.make("polar_sim.envs:polar_sim/GPISNav-v0", **kw) for _ in range(2)]
     sync = gym.vector.SyncVectorEnv(fns)
     asyn = gym.vector.AsyncVectorEnv(fns, context="spawn")
     try:

@@ -134,3 +134,47 @@ def test_normal_equations_kernel_matches_brute_force():
                                res, w, P, N, Y, 0.3)
     assert np.allclose(H, Hb, atol=1e-10) and np.allclose(g, gb, atol=1e-10)
     assert np.allclose(Hn, Hb, atol=1e-10) and np.allclose(gn, gb, atol=1e-10)
+
+
+def _front(model, T):
+    # model points facing a camera at the origin under T (T_cam_cen)
+    Pc = model.P @ T[:3, :3].T + T[:3, 3]
+    return np.flatnonzero(np.einsum("ij,ij->i", model.N @ T[:3, :3].T, Pc) < 0)
+
+
+def test_unobserved_directions_of_a_cylinder_and_a_box():
+    # probing with a broad covariance: a revolved object's only unobserved direction is the turn about its
+    # axis (scaled twist +-e_z rotation); a box with several faces and their edges in view has none
+    from polar_sim.tracking.icp import unobserved_directions
+
+    T = make_pose(so3_exp([-2.2, 0.0, 0.4]), [0.0, 0.0, 0.6])
+    cov = np.diag(np.array([0.05, 0.049, 0.048, 0.012, 0.011, 0.010]) ** 2)  # distinct: canonical eigenvectors
+    P, N = sample_model(make_object("cylinder"), 3000, seed=1)
+    cyl = ShapeModel(P, N)
+    U, rho = unobserved_directions(cyl, _front(cyl, T), cov, n_probe=6)
+    axis = np.linalg.svd(cyl.P - cyl.P.mean(0))[2][0]  # the longest extent: the cylinder's axis
+    assert U.shape == (6, 1) and abs(abs(U[:3, 0] @ axis) - 1) < 0.02 and np.abs(U[3:, 0]).max() < 0.02
+    P, N = sample_model(make_object("box"), 3000, seed=1)
+    box = ShapeModel(P, N)
+    U, _ = unobserved_directions(box, _front(box, T), cov, n_probe=6)
+    assert U.shape == (6, 0)
+
+
+def test_unobserved_directions_of_a_face_without_its_edges():
+    # only the middle of one face supported (its edges hidden): the slides along it and the turn about its
+    # normal are unobserved, the motion along the normal and the tilts are not
+    from polar_sim.tracking.icp import unobserved_directions
+
+    P, N = sample_model(make_object("box"), 3000, seed=1)
+    box = ShapeModel(P, N)
+    n0 = np.array([1.0, 0.0, 0.0])
+    face = np.flatnonzero((box.N @ n0 > 0.99))
+    c = box.P[face]
+    mid = face[np.max(np.abs(c[:, 1:] - c[:, 1:].mean(0)), axis=1) < 0.015]
+    cov = np.diag(np.array([0.05, 0.049, 0.048, 0.012, 0.011, 0.010]) ** 2)
+    U, rho = unobserved_directions(box, mid, cov, n_probe=6)
+    # the unobserved set is exactly {turn about x, slide along y, slide along z}
+    expect = np.zeros((6, 3))
+    expect[0, 0] = expect[4, 1] = expect[5, 2] = 1.0
+    assert U.shape == (6, 3)
+    assert np.allclose(np.abs(U.T @ expect).sum(axis=0), 1.0, atol=0.02)

@@ -1,0 +1,53 @@
+"""The module contract's mixin: parameters stored as given, checked set_params, reset, presets."""
+
+import numpy as np
+import pytest
+
+from polar_sim.params import Parameterised
+
+
+class Toy(Parameterised):
+    PUBLISHED = {"alpha": 0.5, "mode": "code"}
+
+    def __init__(self, K=None, *, alpha=1.0, mode="fixed"):
+        self.K = K
+        self.alpha = alpha
+        self.mode = mode
+
+    def _check_params(self):
+        if not (isinstance(self.alpha, float) and self.alpha > 0):
+            raise ValueError(f"alpha: expected a positive float, got {self.alpha!r}")
+        if self.mode not in ("fixed", "code"):
+            raise ValueError(f"mode: expected 'fixed' or 'code', got {self.mode!r}")
+        return {"alpha": self.alpha, "mode": self.mode}
+
+    def update(self, x):
+        self._check_params()
+        self.total_ = getattr(self, "total_", 0.0) + self.alpha * x
+        return self
+
+
+# get_params returns what the constructor stored; set_params changes it only when valid.
+def test_get_and_set_params():
+    t = Toy(np.eye(3), alpha=2.0)
+    assert set(t.get_params()) == {"K", "alpha", "mode"} and t.get_params()["alpha"] == 2.0
+    t.set_params(alpha=3.0)
+    assert t.alpha == 3.0
+    with pytest.raises(ValueError, match="alpha"):
+        t.set_params(alpha=-1.0, mode="code")
+    assert t.alpha == 3.0 and t.mode == "fixed"          # nothing changed
+    with pytest.raises(ValueError, match="beta: unknown parameter .* valid: K, alpha, mode"):
+        t.set_params(beta=1)
+
+
+# reset removes the learned state only; published() builds the preset with overrides.
+def test_reset_and_published():
+    t = Toy().update(2.0)
+    assert t.total_ == 2.0
+    t.reset()
+    assert not hasattr(t, "total_") and t.alpha == 1.0
+    p = Toy.published(np.eye(3), alpha=0.25)
+    assert p.mode == "code" and p.alpha == 0.25 and p.K.shape == (3, 3)
+    assert "mode='code'" in repr(p) and "K=" not in repr(Toy())
+    with pytest.raises(ValueError, match="gamma"):
+        Toy.published(gamma=1)
