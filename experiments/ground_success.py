@@ -1,166 +1,150 @@
 """ground_success: RANSAC success rate ps against iterations, weighted vs uniform sampling (spec §8.2–8.3).
 
-Protocol (spec §8.2, dissertation Fig. 4.7): one online w6 pass of ``GroundVO`` over each route gives,
-per frame, the RANSAC candidates (level-frame u, v and d̄), the learned P(ground) that weights them,
-and their true ground label (the route's ground mask at the candidate's middle-frame pixel). Every
-condition (model, lambda, sampling, iterations) then re-fits RANSAC on exactly these candidates, one
-repetition per seed; uniform and weighted draws of one seed share their random numbers. ps is the
-share of true-ground candidates that RANSAC returns as inliers, pooled over the frames of one
-repetition (with precision and F1). The boxplots are over repetitions, and ps(N) = p_max − (p_max −
-p_0)·p^N is fitted over all (N, ps) pairs (spec §8.3).
+Protocol (dissertation Fig. 4.7): one online w6 pass of ``GroundVO`` per route gives, per frame, the
+RANSAC candidates (level-frame u, v and d̄), the learned P(ground) that weights them and their true
+ground label at the middle frame. Every condition (model and lambda, sampling, iterations N) re-fits
+RANSAC on exactly these candidates, one repetition per seed; the uniform and weighted draws of a
+seed share their random numbers. ps is the share of true-ground candidates that RANSAC returns as
+inliers, pooled over the frames of a repetition (with precision and F1). One row per (config,
+sampling, N, seed); ps(N) = p_max − (p_max − p_0)·p^N is fitted over all rows of a curve.
 
-Full size: 100 equally spaced frames (after a 3 s warm-up) of each of the ten routes, 30 repetitions;
-2-parameter model {1, 2, 4, 8, 16} iterations, 6-parameter model {5, 11, 25, 55, 125} with lambda in
-{1, 0.1, 0.01}. Quick size: every frame after the warm-up of the first 120 frames of terrain_00, the
-2-parameter model and the 6-parameter model with lambda 0.1, 10 repetitions.
+Data: ``dev10`` (100 equally spaced frames of each of the ten dev routes, seeds 0-29) on the dev split,
+``test12`` (the twelve held-out routes, seeds 10,000-10,029) on the test split; the quick size takes
+every frame after the warm-up of the split's 120-frame quick route, 10 seeds and 4 iteration counts.
 """
 
 import numpy as np
 
 from polar_sim.experiments import _ground_common as G
-from polar_sim.runner import Check, Experiment
-from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_table
+from polar_sim.runner import Check, Experiment, Finding
+from polar_sim.runner.report import savefig
 
-ALL_N = sorted(set(G.ITERATIONS["2param"]) | set(G.ITERATIONS["6param"]))
+
+def data_of(params, ctx):
+    return G.DATASETS[f"quick_{ctx.split}" if params["data"] == "quick" else params["data"]]
 
 
 def trial(params, seed, ctx):
-    G.single_thread()
     from polar_sim.metrics.ground import ground_success
 
-    routes, frames, n_pick = G.DATASETS[params["data"]]
-    data = G.candidate_set(routes, frames, n_pick)
-    model, lam = G.CONFIGS[params["config"]]
-    out = {"n_frames": len(data), "n_candidates": int(sum(len(d["u"]) for d in data)),
-           "ground_share": float(np.mean(np.concatenate([d["label"] for d in data])))}
-    for n in G.ITERATIONS[model]:
-        labels, inliers, _ = G.refit(data, model=model, sampling=params["sampling"], n_iter=n, lam=lam, seed=seed)
-        s = ground_success(labels, inliers)
-        out[f"ps_{n}"], out[f"precision_{n}"], out[f"f1_{n}"] = s.ps, s.precision, s.f1
-    return out
+    data = G.candidate_set(*data_of(params, ctx))
+    labels, inliers, _ = G.refit(data, config=params["config"], sampling=params["sampling"], n_iter=params["n_iter"],
+                                 seed=seed)
+    s = ground_success(labels, inliers)
+    return {"n_frames": len(data), "n_candidates": int(sum(len(d["u"]) for d in data)),
+            "ground_share": float(np.mean(np.concatenate([d["label"] for d in data]))),
+            "ps": s.ps, "precision": s.precision, "f1": s.f1}
 
 
-def _values(table, config, sampling, n):
-    return np.array([r[f"ps_{n}"] for r in table if r["config"] == config and r["sampling"] == sampling
-                     and isinstance(r.get(f"ps_{n}"), float)], dtype=float)
-
-
-def _paired(table, config, n):
-    """ps(weighted) − ps(uniform) per seed, for the seeds that have both."""
-    u = {r["seed"]: r[f"ps_{n}"] for r in table if r["config"] == config and r["sampling"] == "uniform"}
-    w = {r["seed"]: r[f"ps_{n}"] for r in table if r["config"] == config and r["sampling"] == "weighted"}
-    return np.array([w[s] - u[s] for s in sorted(set(u) & set(w))], dtype=float)
-
-
-def _configs(table):
-    return [c for c in G.CONFIGS if any(r["config"] == c for r in table)]
+def _by(table, config, sampling, n):
+    return {r["seed"]: r for r in table if r["config"] == config and r["sampling"] == sampling and r["n_iter"] == n}
 
 
 def _rows(table):
     from scipy.stats import wilcoxon
 
     rows = []
-    for cfg in _configs(table):
-        model = G.CONFIGS[cfg][0]
-        for n in G.ITERATIONS[model]:
-            u, w = _values(table, cfg, "uniform", n), _values(table, cfg, "weighted", n)
-            if not len(u) or not len(w):
+    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+        for n in sorted({r["n_iter"] for r in table if r["config"] == cfg}):
+            u, w = _by(table, cfg, "uniform", n), _by(table, cfg, "weighted", n)
+            both = sorted(set(u) & set(w))
+            if not both:
                 continue
-            d = _paired(table, cfg, n)
+            pu, pw = np.array([u[s]["ps"] for s in both]), np.array([w[s]["ps"] for s in both])
+            d = pw - pu
             p = float(wilcoxon(d).pvalue) if len(d) >= 6 and np.any(d != 0) else float("nan")
-            prec = {s: np.mean([r[f"precision_{n}"] for r in table if r["config"] == cfg and r["sampling"] == s])
-                    for s in ("uniform", "weighted")}
-            rows.append(dict(config=cfg, n_iter=n, ps_uniform=u.mean(), ps_uniform_std=u.std(),
-                             ps_weighted=w.mean(), ps_weighted_std=w.std(), diff=w.mean() - u.mean(),
-                             seeds_w_better=f"{int((d > 0).sum())}/{len(d)}", wilcoxon_p=p,
-                             precision_uniform=prec["uniform"], precision_weighted=prec["weighted"]))
+            rows.append(dict(config=cfg, n_iter=n, ps_uniform=pu.mean(), ps_uniform_std=pu.std(), ps_weighted=pw.mean(),
+                             ps_weighted_std=pw.std(), diff=d.mean(), seeds_w_better=f"{int((d > 0).sum())}/{len(d)}",
+                             wilcoxon_p=p, precision_uniform=np.mean([u[s]["precision"] for s in both]),
+                             precision_weighted=np.mean([w[s]["precision"] for s in both])))
     return rows
 
 
+def _fits(table):
+    from polar_sim.metrics.ground import fit_success_curve
+
+    out = {}
+    for cfg in G.CONFIGS:
+        for samp in ("uniform", "weighted"):
+            rs = [r for r in table if r["config"] == cfg and r["sampling"] == samp]
+            if len({r["n_iter"] for r in rs}) >= 3:
+                out[(cfg, samp)] = fit_success_curve([r["n_iter"] for r in rs], [r["ps"] for r in rs])
+    return out
+
+
 def summarize(table, ctx):
-    out_dir, quick = ctx.out_dir, ctx.quick
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from polar_sim.metrics.ground import fit_success_curve
-
-    rows = _rows(table)
-    cols = ["config", "n_iter", "ps_uniform", "ps_uniform_std", "ps_weighted", "ps_weighted_std", "diff",
-            "seeds_w_better", "wilcoxon_p", "precision_uniform", "precision_weighted"]
-    write_csv_table(rows, cols, out_dir / "ground_success_table.csv")
+    rows, fits = _rows(table), _fits(table)
     r0 = table[0]
-    lines = [f"Candidate set `{r0['data']}`: {r0['n_frames']} frames, {r0['n_candidates']} RANSAC candidates, "
-             f"{100 * r0['ground_share']:.1f} % of them on true ground; {len({r['seed'] for r in table})} "
-             "repetitions (seeds). ps = recall of true-ground candidates among the RANSAC inliers (spec §8.2), "
-             "mean ± std over repetitions; `seeds_w_better`: repetitions in which weighted beat uniform "
-             "(paired: same random numbers); `wilcoxon_p`: two-sided signed-rank test of the paired "
-             "differences.", "", markdown_table(rows, cols), ""]
-
-    fits = []
-    cfgs = _configs(table)
-    fig, axes = plt.subplots(1, len(cfgs), figsize=(4.2 * len(cfgs), 3.6), squeeze=False)
+    lines = [f"Split `{ctx.split}`: {r0['n_frames']} frames, {r0['n_candidates']} RANSAC candidates "
+             f"({100 * r0['ground_share']:.1f} % on true ground), {len({r['seed'] for r in table})} repetitions. ps: "
+             "recall of the true-ground candidates among the inliers, mean ± std over repetitions; `seeds_w_better`: "
+             "paired repetitions in which weighted beat uniform; `wilcoxon_p`: signed-rank test of the pairs.", "",
+             G.table(rows, list(rows[0]) if rows else []), ""]
+    cfgs = sorted({c for c, _ in fits}, key=list(G.CONFIGS).index)
+    fig, axes = plt.subplots(1, max(len(cfgs), 1), figsize=(4.2 * max(len(cfgs), 1), 3.6), squeeze=False)
     for ax, cfg in zip(axes[0], cfgs):
-        model, lam = G.CONFIGS[cfg]
-        ns = G.ITERATIONS[model]
-        pos = np.log(ns)  # boxes and curves on a log-N axis
-        half = 0.16 * float(np.min(np.diff(pos)))
+        ns = sorted({r["n_iter"] for r in table if r["config"] == cfg})
+        pos = np.log(ns)
+        half = 0.16 * float(np.min(np.diff(pos))) if len(pos) > 1 else 0.2
         for k, (samp, col) in enumerate((("uniform", "tab:blue"), ("weighted", "tab:red"))):
-            vals = [_values(table, cfg, samp, n) for n in ns]
+            vals = [[r["ps"] for r in _by(table, cfg, samp, n).values()] for n in ns]
             bp = ax.boxplot(vals, positions=pos + (2 * k - 1) * half, widths=1.6 * half, patch_artist=True,
-                            showfliers=True, flierprops=dict(markersize=2), manage_ticks=False)
+                            flierprops=dict(markersize=2), manage_ticks=False)
             for b in bp["boxes"]:
                 b.set(facecolor=col, alpha=0.35, edgecolor=col)
-            for med in bp["medians"]:
-                med.set(color=col)
-            allN = np.concatenate([[n] * len(v) for n, v in zip(ns, vals)])
-            allp = np.concatenate(vals)
-            try:
-                fc = fit_success_curve(allN, allp)
-            except ValueError:
-                continue
-            fits.append(dict(config=cfg, sampling=samp, p_max=fc.p_max, p_0=fc.p_0, p=fc.p, n95=fc.n95))
+            fc = fits[(cfg, samp)]
             nn = np.geomspace(ns[0] * 0.8, ns[-1] * 1.25, 200)
-            ax.plot(np.log(nn), fc(nn), color=col, lw=1.2, label=f"{samp}: p_max {fc.p_max:.3f}, p {fc.p:.3f}")
+            ax.plot(np.log(nn), fc(nn), color=col, lw=1.2, label=f"{samp}: p_max {fc.p_max:.3f}, n95 {fc.n95:.1f}")
         ax.set_xticks(pos, [str(n) for n in ns])
-        ax.set_xlabel("RANSAC iterations N")
-        ax.set_ylabel("ps")
-        ax.set_title(f"{'2-parameter' if model == '2param' else '6-parameter, λ = ' + fmt(lam)}")
+        ax.set(xlabel="RANSAC iterations N", ylabel="ps (recall of true ground)", title=G.model_label(cfg))
         ax.legend(fontsize=7, loc="lower right")
         ax.grid(alpha=0.3)
-    fig.suptitle("RANSAC success rate ps: uniform (blue) vs weighted (red) sampling; curves: fitted "
-                 "ps(N) = p_max − (p_max − p_0)·p^N", fontsize=9)
-    fig.tight_layout()
-    lines += [savefig(fig, out_dir, "ground_success_ps"), ""]
-    fcols = ["config", "sampling", "p_max", "p_0", "p", "n95"]
-    write_csv_table(fits, fcols, out_dir / "ground_success_fits.csv")
-    lines += ["Fitted ps(N) = p_max − (p_max − p_0)·p^N over all repetitions (spec §8.3); n95: iterations to "
-              "reach 95 % of p_max.", "", markdown_table(fits, fcols), "",
-              "Tables: `ground_success_table.csv`, `ground_success_fits.csv`."]
+    fig.suptitle(f"RANSAC success rate ps ({ctx.split} split, simulated routes): uniform (blue) vs weighted (red); "
+                 "curves: fitted ps(N) = p_max − (p_max − p_0)·p^N", fontsize=9)
+    fit_rows = [dict(config=c, sampling=s, p_max=f.p_max, p_0=f.p_0, p=f.p, n95=f.n95) for (c, s), f in fits.items()]
+    lines += [savefig(fig, ctx.out_dir, "ground_success_ps"), "", "Fitted curves (n95: iterations to 95 % of p_max):",
+              "", G.table(fit_rows, ["config", "sampling", "p_max", "p_0", "p", "n95"])]
     return "\n".join(lines)
 
 
 def checks(table, ctx):
-    quick = ctx.quick
-    rows = _rows(table)
     out = []
-    for cfg in _configs(table):
-        rs = [r for r in rows if r["config"] == cfg]
-        ok = bool(rs) and all(r["ps_weighted"] > r["ps_uniform"] for r in rs)
-        detail = "; ".join(f"N={r['n_iter']}: {r['ps_weighted']:.4f} vs {r['ps_uniform']:.4f}" for r in rs)
-        out.append(Check(f"weighted beats uniform in mean ps at every iteration count ({cfg})", ok, detail))
+    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+        rs = [r for r in _rows(table) if r["config"] == cfg]
+        out.append(Check(f"weighted beats uniform in mean ps at every N ({cfg}, {ctx.split})",
+                         bool(rs) and all(r["ps_weighted"] > r["ps_uniform"] for r in rs),
+                         "; ".join(f"N={r['n_iter']}: {r['ps_weighted']:.4f} vs {r['ps_uniform']:.4f}" for r in rs)))
     return out
+
+
+def findings(table, ctx):
+    rows, fits = _rows(table), _fits(table)
+    won = [r for r in rows if r["ps_weighted"] > r["ps_uniform"]]
+    pairs = [int(r["seeds_w_better"].split("/")[0]) == int(r["seeds_w_better"].split("/")[1]) for r in rows]
+    n95 = [(c, fits[(c, "weighted")].n95, fits[(c, "uniform")].n95) for c in G.CONFIGS
+           if (c, "weighted") in fits and (c, "uniform") in fits]
+    note = f"{ctx.split} split, simulated routes; our candidates come from a KLT front end, not libviso2"
+    return [Finding("Ch. 4, Fig. 4.7", "weighted RANSAC reaches a higher ps than uniform at every N",
+                    f"higher mean ps in {len(won)}/{len(rows)} (config, N) cells; every paired repetition in "
+                    f"{sum(pairs)}/{len(rows)}", "held" if len(won) == len(rows) else "partly held" if won else "not held", note),
+            Finding("Ch. 4, Fig. 4.7", "weighted sampling needs fewer iterations to reach 95 % of p_max",
+                    "; ".join(f"{c}: {w:.1f} vs {u:.1f}" for c, w, u in n95),
+                    "held" if all(w < u for _, w, u in n95) else "partly held" if any(w < u for _, w, u in n95)
+                    else "not held", note)]
 
 
 EXPERIMENT = Experiment(
     name="ground_success",
     description="RANSAC ground success rate ps vs iterations: weighted vs uniform sampling, 2- and 6-parameter "
                 "models (spec §8.2-8.3)",
-    grid={"data": ["routes10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"]},
-    splits={"dev": {"seeds": range(30)}},
-    sizes={"quick": {"n_seeds": 10, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "sampling": ["uniform", "weighted"]}}, "full": {}},
-    trial=trial,
-    summarize=summarize,
-    checks=checks,
+    grid={"data": ["dev10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(G.ITERATIONS)},
+    splits={"dev": {"seeds": range(30)}, "test": {"seeds": range(10_000, 10_030), "grid": {"data": ["test12"]}}},
+    sizes={"quick": {"n_seeds": 10, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "n_iter": [1, 4, 16, 55]}},
+           "full": {}},
+    trial=trial, summarize=summarize, checks=checks, findings=findings,
 )

@@ -100,6 +100,7 @@ class RoverDriveEnv(PolarMujocoEnv):
     | ``max_accel`` | 3.0 | m/s^2 toward the speed set-point; None: no limit |
     | ``max_cross_track`` | 6.0 | m from the route beyond which the episode ends |
     | ``camera_size`` | (621, 188) | image width, height in pixels (the vertical field of view is fixed) |
+    | ``appearance`` | None | the scene's ``appearance`` option (:mod:`polar_sim.sim.rover_appearance`); ``reset(options={"appearance": ...})`` overrides it for one episode (``AppearanceRandomization`` draws one per episode) |
     | ``supersample`` | True | render at twice the size (1242x376) and reduce 2x by a Gaussian pyramid level, as KITTI's reduced images and the route recordings are made; False renders at ``camera_size`` directly: 1.7x faster steps, an aliased image and a less robust VO |
 
     ## Truth in ``info``
@@ -117,7 +118,7 @@ class RoverDriveEnv(PolarMujocoEnv):
 
     def __init__(self, *, render_mode=None, render_size=(640, 360), route_length=300.0, scene="rover_terrain",
                  max_speed=10.0, max_yaw_rate=1.0, max_accel=3.0, max_cross_track=6.0, camera_size=(621, 188),
-                 supersample=True, **unknown):
+                 supersample=True, appearance=None, **unknown):
         check_kwargs(type(self), unknown)
         super().__init__(render_mode=render_mode, render_size=render_size)
         if scene not in SCENES:
@@ -136,6 +137,10 @@ class RoverDriveEnv(PolarMujocoEnv):
             raise ValueError(f"camera_size: expected (width, height) in 32..1280 px, got {camera_size!r}")
         self._camera_size = size
         self._supersample = bool(supersample)
+        from polar_sim.sim.rover_appearance import resolve_appearance
+
+        resolve_appearance(appearance, 0)  # a bad appearance raises now, not at the first reset
+        self._appearance = self._episode_appearance = appearance
         self.task = None
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = spaces.Dict(self._obs_spaces())
@@ -150,7 +155,16 @@ class RoverDriveEnv(PolarMujocoEnv):
         from polar_sim.sim.rover_sequences import KITTI_FOVY_DEG
 
         self._layout_seed = layout_seed
-        return World(self._scene, seed=layout_seed, camera_fovy=KITTI_FOVY_DEG)
+        look = {} if self._episode_appearance is None else {"appearance": self._episode_appearance}
+        return World(self._scene, seed=layout_seed, camera_fovy=KITTI_FOVY_DEG, **look)
+
+    def reset(self, *, seed=None, options=None):
+        from polar_sim.sim.rover_appearance import resolve_appearance
+
+        look = (options or {}).get("appearance", self._appearance)
+        resolve_appearance(look, 0)  # checked before the old world is closed
+        self._episode_appearance = look
+        return super().reset(seed=seed, options=options)
 
     def _reset_scene(self):
         w = self._world

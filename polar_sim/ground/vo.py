@@ -19,10 +19,12 @@ import numpy as np
 from polar_sim._validation import as_image, as_int, as_intrinsics, as_positive_float, as_rng, check_choice
 from polar_sim.ground import frontend
 from polar_sim.ground._checks import as_time, as_unit_interval
-from polar_sim.ground.classifier import GroundColourModel
+from polar_sim.ground.calibration import PlattCalibrator
+from polar_sim.ground.classifier import GroundColourModel, window_index
 from polar_sim.ground.depth import fuse, propagate
 from polar_sim.ground.filters import KF1D
 from polar_sim.ground.image import grey, hsv216, reduce2x
+from polar_sim.ground.integration import motion_step
 from polar_sim.ground.models import GROUND_MODELS, fit_ground
 from polar_sim.ground.motion import estimate_motion
 
@@ -184,6 +186,21 @@ class GroundVO:
         camera poses.
     integration : {"planar", "3d"}, default="planar"
         Planar unicycle integration, or 3-D with the measured pitch/roll rates (non-flat terrain).
+    calibration : {"platt", "none"}, optional
+        Calibration of the output ``ground_prob`` (default "platt"; "none" under "code"): the log-odds
+        of the posterior, averaged over ``calib_window`` px, mapped by σ(a z + b) with (a, b) learned
+        online from the module's own labels (:mod:`polar_sim.ground.calibration`). RANSAC keeps
+        weighting its draws by the uncalibrated single-pixel posterior of the spec.
+    calib_window : int, default=7
+        Side (processed px, odd) of the window the log-odds are averaged over before calibration.
+    train_depth : float, optional
+        Ground inliers farther than this (m, flat-ground depth h / v in the level frame) do not train
+        the ground colour (default 30; "off" and under "code": no limit): near the horizon any point
+        fits the ground model within the RANSAC noise, sky edges and far obstacles included.
+    decay_samples : float, optional
+        Evidence-weighted histogram decay (default 450 window pixels, 50 points; "off" and under
+        "code": the spec's decay by α per update): an update with fewer samples forgets less
+        (:class:`~polar_sim.ground.classifier.GroundColourModel`).
     """
 
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", compat="fixed", seed=0,
@@ -193,7 +210,7 @@ class GroundVO:
                  speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15, speed_r=3.0, yaw_prior=0.0,
                  yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None, depth_r=None, depth_p_reset=None,
                  alpha=0.7, ground_prior=0.2, ng_from_outliers=None, horizon_row=None, camera_pitch=0.0,
-                 integration="planar"):
+                 integration="planar", calibration=None, calib_window=7, train_depth=None, decay_samples=None):
         self.K = K
         self.camera_height = camera_height
         self.model = model
@@ -234,6 +251,10 @@ class GroundVO:
         self.horizon_row = horizon_row
         self.camera_pitch = camera_pitch
         self.integration = integration
+        self.calibration = calibration
+        self.calib_window = calib_window
+        self.train_depth = train_depth
+        self.decay_samples = decay_samples
         # Fail early on the arguments the issue names; everything else is checked in _config().
         self._config()
 
@@ -297,6 +318,22 @@ class GroundVO:
             raise ValueError(f"camera_pitch: expected a finite angle in (-pi/2, pi/2) rad, got {pitch!r}")
         c["pitch"] = float(pitch)
         c["integration"] = check_choice(self.integration, ("planar", "3d"), "integration")
+        c["calibration"] = ("none" if code else "platt") if self.calibration is None else check_choice(
+            self.calibration, ("platt", "none"), "calibration")
+        c["calib_window"] = as_int(self.calib_window, "calib_window", minimum=1)
+        # None picks the default of the mode; under "code" the published behaviour (no limit, per-update decay).
+        # None: the mode's default; "off": the spec's behaviour (no depth limit; decay by alpha per update).
+        for name, default in (("train_depth", 30.0), ("decay_samples", 450.0)):
+            v = getattr(self, name)
+            if v is None:
+                c[name] = None if code else default
+            elif isinstance(v, str):
+                check_choice(v, ("off",), name)
+                c[name] = None
+            else:
+                c[name] = as_positive_float(v, name)
+        if c["calib_window"] % 2 == 0:
+            raise ValueError(f"calib_window: expected an odd window side, got {self.calib_window!r}")
         return c
 
     def _build(self, shape):
@@ -322,7 +359,8 @@ class GroundVO:
                                   c["speed_q"], c["speed_r"], adaptive="code" if code else "innovation")
         self.yaw_filter_ = KF1D(c["yaw_prior"], c["yaw_prior_var"], c["yaw_q"], c["yaw_r"])
         self.classifier_ = GroundColourModel(alpha=c["alpha"], prior=c["ground_prior"],
-                                             pseudo_ground=0.5 if code else 1.0, pseudo_nonground=1.0)
+                                             pseudo_ground=0.5 if code else 1.0, pseudo_nonground=1.0,
+                                             decay_samples=c["decay_samples"])
         self.rng_ = as_rng(self.seed, "seed")
         # Tracks (processed px): positions at frames k-2, k-1, k (NaN = not tracked then) and state.
         self.tracks_ = _empty_tracks()
@@ -332,6 +370,8 @@ class GroundVO:
         self.prev_grey_ = None
         self.prev_labels_ = None
         self.prev_prob_ = None
+        self.prev_score_ = None
+        self.calibrator_ = PlattCalibrator()
         self.rates_ = np.zeros(3)
 
     def reset(self):
@@ -502,6 +542,12 @@ class GroundVO:
             prob[:1, :] = prob[:, :1] = 0.5
             prob[-2:, :] = prob[:, -2:] = 0.5
         self.prev_prob_ = prob
+        if c["calibration"] == "platt":
+            score = self.classifier_.log_odds_table()[labels]
+            if c["calib_window"] > 1:
+                score = cv2.blur(score, (c["calib_window"], c["calib_window"]), borderType=cv2.BORDER_REPLICATE)
+            self.prev_score_ = score
+            prob = self.calibrator_.transform(score)
 
         # Replenish features in free cells.
         existing = trk["xy"][:, 2] if len(trk["xy"]) else np.zeros((0, 2))
@@ -611,6 +657,11 @@ class GroundVO:
             inl_tracks = idx[ci[fit.inliers]]
             trk["gnd"][inl_tracks] += 1
             g_xy = x1[ci[fit.inliers]]
+            if c["train_depth"] is not None:
+                # Far inliers are no evidence of ground: within the RANSAC noise a point at the horizon fits
+                # the ground model whatever it is (sky edges, far obstacles). Learn ground only nearer than
+                # train_depth (metres, flat-ground depth h / v of the level frame).
+                g_xy = g_xy[v[ci[fit.inliers]] * c["train_depth"] > c["h"]]
             if code:
                 ng = (trk["gnd"] < 0) & trk["has"]
                 ng_xy = trk["xy"][ng, 1]
@@ -623,6 +674,12 @@ class GroundVO:
                     ng_sel |= clear
                 ng_xy = x1[ng_sel]
                 lab = self.prev_labels_
+            if c["calibration"] == "platt" and self.prev_score_ is not None:
+                # Out-of-sample self-labels: the map of image k-1 was made before learning from them.
+                sh = self.prev_score_.shape
+                gi, ni = window_index(sh, g_xy, 1), window_index(sh, ng_xy, 1)
+                sc = self.prev_score_.ravel()
+                self.calibrator_.update(np.r_[sc[gi], sc[ni]], np.r_[np.ones(len(gi), bool), np.zeros(len(ni), bool)])
             self.classifier_.update(lab, g_xy, ng_xy)
             status = "ok"
         else:
@@ -658,29 +715,10 @@ class GroundVO:
 
     def _step_pose(self, T, dt):
         """Compose one integration step of length dt with the filtered speed and yaw rate."""
-        V = self.speed_filter_.x
-        w = self.yaw_filter_.x
         c = self.cfg_
-        step = np.eye(4)
-        if c["integration"] == "3d":
-            from polar_sim.geometry import so3_exp
-
-            rates = self.rates_.copy()
-            rates[1] = w
-            step[:3, :3] = so3_exp(rates * dt)
-            step[:3, 3] = so3_exp(rates * dt / 2) @ np.array([0.0, 0.0, V * dt])
-            return T @ self._to_camera(step)
-        a = w * dt
-        ca, sa = np.cos(a), np.sin(a)
-        step[:3, :3] = [[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]]
-        if c["compat"] == "code":
-            # Semi-implicit Euler: turn, then move along the new heading.
-            step[:3, 3] = [V * dt * sa, 0.0, V * dt * ca]
-        elif abs(a) < 1e-9:
-            step[:3, 3] = [V * dt * a / 2, 0.0, V * dt]
-        else:
-            # Exact arc of a unicycle with constant V and ω over dt.
-            step[:3, 3] = [V / w * (1.0 - ca), 0.0, V / w * sa]
+        rates = self.rates_.copy() if c["integration"] == "3d" else np.zeros(3)
+        rates[1] = self.yaw_filter_.x
+        step = motion_step(self.speed_filter_.x, rates, dt, c["integration"], semi_implicit=c["compat"] == "code")
         return T @ self._to_camera(step)
 
     def _to_camera(self, step):

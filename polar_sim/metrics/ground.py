@@ -19,6 +19,10 @@ __all__ = [
     "laplace_scale",
     "classifier_iou",
     "classifier_auc",
+    "labels_at",
+    "oracle_step_speeds",
+    "reliability_counts",
+    "pooled_reliability",
 ]
 
 
@@ -185,3 +189,69 @@ def classifier_auc(prob, gt_mask, *, valid=None):
         return float("nan")
     ranks = rankdata(p)
     return float((ranks[g].sum() - n_g * (n_g + 1) / 2.0) / (n_g * n_ng))
+
+
+def labels_at(mask, xy):
+    """The boolean ``mask`` (H, W) at pixel positions ``xy`` (m, 2) (column, row), rounded to the
+    nearest pixel and clamped to the image: e.g. the true ground label of RANSAC candidates."""
+    m = np.asarray(mask)
+    if m.ndim != 2 or m.dtype != bool:
+        raise ValueError(f"mask: expected a 2-D boolean mask, got {m.dtype} {m.shape}")
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if not np.isfinite(p).all():
+        raise ValueError("xy: contains NaN or inf")
+    if len(p) == 0:
+        return np.zeros(0, dtype=bool)
+    H, W = m.shape
+    c = np.clip(np.rint(p[:, 0]).astype(np.intp), 0, W - 1)
+    r = np.clip(np.rint(p[:, 1]).astype(np.intp), 0, H - 1)
+    return m[r, c]
+
+
+def oracle_step_speeds(times, step_lengths):
+    """Per-image speeds that make every integration step exactly as long as the true step.
+
+    With the B27 convention of :func:`polar_sim.ground.integration.integrate` the step k-1 -> k uses
+    ``speeds[k]``, so ``speeds[k] = step_lengths[k] / (t_k - t_{k-1})`` (m/s); the step 0 -> 1 reuses
+    ``speeds[2]`` there, the one compromise. ``times`` (n,) s, ``step_lengths`` (n,) m (entry 0 unused).
+    """
+    t = np.asarray(times, dtype=np.float64)
+    s = np.asarray(step_lengths, dtype=np.float64)
+    if t.ndim != 1 or s.shape != t.shape:
+        raise ValueError(f"times, step_lengths: expected equal 1-D shapes, got {t.shape} and {s.shape}")
+    dt = np.r_[1.0, np.diff(t)]
+    if (dt[1:] <= 0).any():
+        raise ValueError("times: must increase strictly")
+    return s / dt
+
+
+def reliability_counts(prob, labels, *, n_bins=15, valid=None):
+    """Per-bin sufficient statistics of a reliability diagram: (count, sum of p, sum of labels), each
+    (n_bins,), over equal-width bins of [0, 1] (p = 1 in the last bin). Add them over frames and
+    pass the sums to :func:`pooled_reliability`; same bins as ``metrics.calibration.reliability``."""
+    from polar_sim.metrics.calibration import _inputs
+
+    p, y = _inputs(prob, labels, valid)
+    idx = np.minimum((p * n_bins).astype(np.int64), n_bins - 1)
+    return (np.bincount(idx, minlength=n_bins).astype(np.int64), np.bincount(idx, weights=p, minlength=n_bins),
+            np.bincount(idx, weights=y.astype(np.float64), minlength=n_bins))
+
+
+def pooled_reliability(count, prob_sum, label_sum):
+    """The :class:`polar_sim.metrics.calibration.Reliability` of summed :func:`reliability_counts`."""
+    from polar_sim.metrics.calibration import Reliability
+
+    c = np.asarray(count, dtype=np.int64)
+    ps, ys = np.asarray(prob_sum, dtype=np.float64), np.asarray(label_sum, dtype=np.float64)
+    if c.ndim != 1 or ps.shape != c.shape or ys.shape != c.shape or (c < 0).any():
+        raise ValueError(f"count, prob_sum, label_sum: expected three (n_bins,) arrays, counts >= 0; got {c.shape}, "
+                         f"{ps.shape}, {ys.shape}")
+    n = int(c.sum())
+    if n == 0:
+        raise ValueError("count: no samples")
+    nz = c > 0
+    conf = np.where(nz, ps / np.maximum(c, 1), np.nan)
+    freq = np.where(nz, ys / np.maximum(c, 1), np.nan)
+    gap = np.abs(freq - conf)
+    return Reliability(np.linspace(0.0, 1.0, len(c) + 1), c, conf, freq, float(np.sum(c[nz] * gap[nz]) / n),
+                       float(gap[nz].max()), n)

@@ -171,6 +171,44 @@ register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G o
 
 # -- vo (the ground experiments) --
 
+
+def _groundvo_factory(model, sampling):
+    def factory(K, camera_height, *, seed=0, **params):
+        from polar_sim.ground import GroundVO
+
+        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **params)
+
+    factory.__name__ = f"groundvo_{model}_{sampling}"
+    return factory
+
+
+def _held_scale_vo(K, camera_height, *, seed=0, speed_truth, **params):
+    from polar_sim.ground.held_scale import HeldScaleVO
+
+    params.setdefault("model", "6param")
+    params.setdefault("sampling", "uniform")
+    return HeldScaleVO(K, camera_height, speed_truth=speed_truth, seed=seed, **params)
+
+
+register_method("vo", "groundvo", _groundvo_factory("6param", "weighted"),
+                description="GroundVO with its defaults (6-parameter ground model, weighted RANSAC)")
+for _name, (_model, _sampling) in {"u2": ("2param", "uniform"), "w2": ("2param", "weighted"),
+                                   "u6": ("6param", "uniform"), "w6": ("6param", "weighted")}.items():
+    register_method("vo", _name, _groundvo_factory(_model, _sampling),
+                    description=f"GroundVO, {_model} ground model, {_sampling} RANSAC sampling")
+def _w6_nocal(K, camera_height, *, seed=0, **params):
+    from polar_sim.ground import GroundVO
+
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calibration="none",
+                    train_depth="off", decay_samples="off", **params)
+
+
+register_method("vo", "w6_nocal", _w6_nocal,
+                description="w6 as before issue 13: the spec's classifier training and no calibration of ground_prob")
+register_method("vo", "mono", _held_scale_vo,
+                description="monocular baseline (VISO2-M analogue): GroundVO's estimator with the scale taken from "
+                            "the true speed once and then held through the structure; needs speed_truth=")
+
 # -- tracker (the tracking experiments) --
 #: Built-in trackers: ObjectTracker configurations (keyword arguments over its defaults).
 TRACKERS = {

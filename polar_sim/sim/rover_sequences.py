@@ -5,15 +5,19 @@ seeded, curvature-limited speed profile, and records at 10 Hz: the camera image 
 1242x376 with KITTI's focal length and reduced 2x by a Gaussian pyramid (621x188, as the ground
 chapter processes KITTI), the true ground mask, the camera pose and twist, the central-difference
 speed, the camera height above the terrain along the camera's down axis, and the coefficients of
-the second-order ground surface seen by the camera. Recordings are cached as ``.npz`` (PNG
-images) and regenerate bit for bit from the route's seed.
+the second-order ground surface seen by the camera.
+
+Routes come in two splits (the held-out protocol): :data:`ROUTES` (``dev``, the ten routes every
+parameter was chosen on, default appearance, plus four routes of the dev appearance families) and
+:data:`TEST_ROUTES` (``test``, seeds >= 10,000, every ground family including three never used while
+tuning). :func:`load_route` returns a lazy reader from the one recording cache
+(:mod:`polar_sim.sim.sequences`), recording the route first if it is absent; recordings are
+deterministic in the route's spec.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
-from pathlib import Path
 
 import cv2
 import mujoco
@@ -21,11 +25,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from polar_sim.control import PurePursuit
+from polar_sim.sim import sequences
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.truth import LABELS
 from polar_sim.sim.world import World
 
-__all__ = ["ROUTES", "RouteSpec", "record_route", "load_route", "cache_dir", "KITTI_FOVY_DEG", "reduce2x"]
+__all__ = ["ROUTES", "TEST_ROUTES", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "RouteSpec", "route_spec",
+           "record_route", "load_route", "route_truth", "route_layout", "route_zones", "KITTI_FOVY_DEG", "reduce2x", "RECORDER_VERSION"]
 
 #: Vertical field of view that gives KITTI's f = 718.9 px at 376 rows.
 KITTI_FOVY_DEG = float(np.degrees(2 * np.arctan(188.0 / 718.856)))
@@ -34,17 +40,21 @@ FULL_W, FULL_H = 1242, 376
 
 @dataclasses.dataclass(frozen=True)
 class RouteSpec:
-    """A route: the scene and its seed, laps of the closed route, and the speed range (m/s)."""
+    """A route: the scene and its seed, laps of the closed route, the speed range (m/s) and the
+    scene's ``appearance`` option (None: the default look; a family name or "random":
+    :mod:`polar_sim.sim.rover_appearance`)."""
 
     scene: str
     seed: int
     laps: float
     v_min: float
     v_max: float
+    appearance: str | None = None
 
 
-#: Ten routes of 500-2000 m at 5-12 m/s: six over hills, four on flat ground. (One lap of the closed
-#: route is 475-490 m, so the single-lap routes drive 1.1 laps to reach 500 m.)
+#: The ``dev`` split. Ten routes of 500-2000 m at 5-12 m/s: six over hills, four on flat ground, the
+#: default appearance (one lap of the closed route is 475-490 m, so the single-lap routes drive 1.1
+#: laps to reach 500 m). Then one route of each dev appearance family (four zones of the family).
 ROUTES = {
     "terrain_00": RouteSpec("rover_terrain", 0, 1.1, 5.0, 9.0),
     "terrain_01": RouteSpec("rover_terrain", 1, 2.0, 6.0, 11.0),
@@ -56,12 +66,50 @@ ROUTES = {
     "flat_01": RouteSpec("rover_flat", 11, 2.0, 7.0, 12.0),
     "flat_02": RouteSpec("rover_flat", 12, 1.5, 5.0, 10.0),
     "flat_03": RouteSpec("rover_flat", 13, 3.0, 8.0, 12.0),
+    "dev_speckle": RouteSpec("rover_flat", 20, 1.1, 5.0, 9.0, "speckle"),
+    "dev_gravel": RouteSpec("rover_terrain", 21, 1.1, 6.0, 10.0, "gravel"),
+    "dev_grass": RouteSpec("rover_flat", 22, 1.1, 5.0, 10.0, "grass"),
+    "dev_blotches": RouteSpec("rover_terrain", 23, 1.1, 6.0, 11.0, "blotches"),
 }
 
+#: Appearance families tuned on (dev) and those seen only in the test split.
+DEV_FAMILIES = ("speckle", "gravel", "grass", "blotches")
+TEST_ONLY_FAMILIES = ("uniform", "stripes", "checker")
 
-def cache_dir() -> Path:
-    """Where recorded routes are cached: ``$POLAR_SIM_CACHE`` or ``~/.cache/polar_sim``."""
-    return Path(os.environ.get("POLAR_SIM_CACHE", Path.home() / ".cache" / "polar_sim")) / "routes"
+#: The ``test`` split: seeds >= 10,000; one route of every family (the three test-only families
+#: never used while tuning), three of "random" appearances (every zone its own family, random sky and
+#: light) and two of the default appearance, alternating hills and flat ground, 1.1 laps each.
+TEST_ROUTES = {
+    "test_speckle": RouteSpec("rover_terrain", 10_000, 1.1, 5.0, 10.0, "speckle"),
+    "test_gravel": RouteSpec("rover_flat", 10_001, 1.1, 6.0, 11.0, "gravel"),
+    "test_grass": RouteSpec("rover_terrain", 10_002, 1.1, 5.0, 9.0, "grass"),
+    "test_uniform": RouteSpec("rover_flat", 10_003, 1.1, 5.0, 10.0, "uniform"),
+    "test_stripes": RouteSpec("rover_terrain", 10_004, 1.1, 6.0, 11.0, "stripes"),
+    "test_checker": RouteSpec("rover_flat", 10_005, 1.1, 5.0, 10.0, "checker"),
+    "test_blotches": RouteSpec("rover_terrain", 10_006, 1.1, 6.0, 12.0, "blotches"),
+    "test_random_0": RouteSpec("rover_terrain", 10_007, 1.1, 5.0, 10.0, "random"),
+    "test_random_1": RouteSpec("rover_flat", 10_008, 1.1, 6.0, 12.0, "random"),
+    "test_random_2": RouteSpec("rover_terrain", 10_009, 1.1, 5.0, 9.0, "random"),
+    "test_default_0": RouteSpec("rover_terrain", 10_010, 1.1, 6.0, 11.0),
+    "test_default_1": RouteSpec("rover_flat", 10_011, 1.1, 5.0, 10.0),
+}
+
+#: Route names per split; the first ten dev routes are the ones every result before the held-out
+#: protocol was measured on.
+SPLITS = {"dev": tuple(ROUTES), "test": tuple(TEST_ROUTES)}
+
+#: Bumped whenever the recorder's output changes (the cache key holds it, so a stale recording is
+#: never replayed).
+RECORDER_VERSION = 3
+
+
+def route_spec(name) -> RouteSpec:
+    """The :class:`RouteSpec` of a dev or test route; an unknown name raises ``ValueError``."""
+    if isinstance(name, str) and name in ROUTES:
+        return ROUTES[name]
+    if isinstance(name, str) and name in TEST_ROUTES:
+        return TEST_ROUTES[name]
+    raise ValueError(f"name: unknown route {name!r}; valid: {', '.join(ROUTES)}, {', '.join(TEST_ROUTES)}")
 
 
 def reduce2x(img):
@@ -113,13 +161,16 @@ def record_route(name, *, max_frames=None, progress=True):
     (4, 4), ``t`` (s), ``v_cam``/``w_cam`` (3,) camera linear (m/s) and angular (rad/s) velocity
     in the camera frame (OpenCV axes: z forward, y down; yaw rate is ``w_cam[1]``, > 0 turning
     right), ``speed`` (m/s), ``h_y`` (m), ``surface_coeffs`` (6,), ``static`` (bool).
-    Meta: ``K`` of the reduced image, ``dt``, ``camera_height``, ``route``, ``length_m``.
+    Meta: ``K`` of the reduced image, ``dt``, ``camera_height``, ``route``, ``length_m``,
+    ``appearance`` (the resolved spec, None for the default look), ``zones`` (zone families).
     """
-    if name not in ROUTES:
-        raise ValueError(f"name: unknown route {name!r}; valid: {', '.join(ROUTES)}")
-    spec = ROUTES[name]
+    spec = route_spec(name)
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
+                                   or max_frames < 1):
+        raise ValueError(f"max_frames: expected a positive int or None, got {max_frames!r}")
     rng = np.random.default_rng(np.random.SeedSequence([spec.seed, 7100]))
-    w = World(spec.scene, seed=spec.seed, camera_fovy=KITTI_FOVY_DEG)
+    look = {} if spec.appearance is None else {"appearance": spec.appearance}
+    w = World(spec.scene, seed=spec.seed, camera_fovy=KITTI_FOVY_DEG, **look)
     try:
         route = w.meta["route"]
         follower = PurePursuit(route, lookahead=8.0, closed=True)
@@ -147,7 +198,9 @@ def record_route(name, *, max_frames=None, progress=True):
                                       "K": K.tolist(), "dt": dt, "camera_height": cfg.camera_height,
                                       "fovy_deg": KITTI_FOVY_DEG, "full_size": [FULL_W, FULL_H],
                                       "length_m": length, "laps": spec.laps,
-                                      "speed_range": [spec.v_min, spec.v_max]})
+                                      "speed_range": [spec.v_min, spec.v_max],
+                                      "appearance": w.meta["appearance"],
+                                      "zones": [str(z) for z in w.meta["zones"]]})
             T = f.T_world_cam
             tw = w.truth()["robot_twist"]  # body frame (v, omega); camera sits on the body's z axis
             Rb = w.truth()["robot_pose"][:3, :3]
@@ -176,18 +229,73 @@ def record_route(name, *, max_frames=None, progress=True):
     return rec
 
 
-def load_route(name, *, max_frames=None, cache=None, progress=True):
-    """The recording of route ``name`` from the cache, recording (and caching) it if absent.
+def load_route(name, *, max_frames=None, progress=False):
+    """The recording of route ``name`` (its first ``max_frames`` frames if given) as a lazy
+    :class:`~polar_sim.sim.recording.RecordingReader` from the recording cache
+    (:func:`polar_sim.sim.sequences.cached`, kind ``"rover_route"``), recorded first if absent."""
+    spec = route_spec(name)
+    key = {"route": name, **dataclasses.asdict(spec), "max_frames": int(max_frames or 0)}
+    return sequences.cached("rover_route", key, lambda: record_route(name, max_frames=max_frames, progress=progress),
+                            version=RECORDER_VERSION)
 
-    ``max_frames`` shortens the route (cached separately). ``cache`` overrides :func:`cache_dir`.
+
+def route_truth(rec):
+    """Scoring truth of a route recording (a Recording or its lazy reader), small arrays only.
+
+    A dict with ``gt`` (n, 4, 4) camera k in camera 0's frame (KITTI poses), ``t`` (n,), ``speed``
+    (n,) instantaneous camera speed, ``speed_cd`` (n,) central-difference speed
+    |p_{k+1} - p_{k-1}| / (t_{k+1} - t_{k-1}) (one-sided at the ends), ``step`` (n,) length of the step
+    k-1 -> k (0 for k = 0), ``yaw_rate`` (n,) ``w_cam[1]``, ``K``, ``h`` (m), ``dt`` (s), ``length_m``
+    (path length) and ``meta``.
     """
-    root = Path(cache) if cache is not None else cache_dir()
-    suffix = f"_{max_frames}f" if max_frames else ""
-    # v2: terrain_00, terrain_04 and flat_00 were one lap (477-487 m) in v1; the version in the name keeps
-    # a stale recording from being replayed.
-    path = root / f"{name}{suffix}_v2.npz"
-    if path.is_file():
-        return Recording.load(path)
-    rec = record_route(name, max_frames=max_frames, progress=progress)
-    rec.save(path)
-    return rec
+    T = rec.stack("T_world_cam")
+    gt = np.linalg.inv(T[0]) @ T
+    p = T[:, :3, 3]
+    t = rec.stack("t").astype(np.float64)
+    step = np.r_[0.0, np.linalg.norm(np.diff(p, axis=0), axis=1)]
+    n = len(p)
+    lo, hi = np.maximum(np.arange(n) - 1, 0), np.minimum(np.arange(n) + 1, n - 1)
+    speed_cd = np.linalg.norm(p[hi] - p[lo], axis=1) / np.maximum(t[hi] - t[lo], 1e-9)
+    return dict(gt=gt, t=t, speed=rec.stack("speed").astype(np.float64), speed_cd=speed_cd, step=step,
+                yaw_rate=rec.stack("w_cam")[:, 1].astype(np.float64), K=np.array(rec.meta["K"]),
+                h=float(rec.meta["camera_height"]), dt=float(rec.meta["dt"]), length_m=float(step.sum()),
+                meta=dict(rec.meta))
+
+
+def route_layout(name):
+    """The scene layout of a route (built from its seed, no rendering): ``route`` (m, 2) closed-route
+    waypoints 1 m apart, ``zone_of_route`` (m,) zone index per waypoint and ``zones`` (the ground type
+    or family of each zone)."""
+    spec = route_spec(name)
+    look = {} if spec.appearance is None else {"appearance": spec.appearance}
+    with World(spec.scene, seed=spec.seed, camera_fovy=KITTI_FOVY_DEG, **look) as w:
+        return {"route": np.array(w.meta["route"]), "zone_of_route": np.array(w.meta["zone_of_route"]),
+                "zones": [str(z) for z in w.meta["zones"]]}
+
+
+def route_zones(rec, margin_m=40.0):
+    """Per-frame zone geometry of a recorded route (a Recording or reader of :func:`load_route`).
+
+    Returns a dict: ``progress`` (n,) arc length driven along the route (m, monotone over laps),
+    ``zone`` (n,) index of the zone under the camera, ``names`` (zone families), ``boundaries``
+    (arc lengths where the zone changes, unwrapped over the laps driven, within ``margin_m`` of the
+    drive) and ``boundary_zones`` ((from, to) per boundary), ``lap_m``.
+    """
+    lay = route_layout(rec.meta["route"])
+    route, zor = lay["route"], lay["zone_of_route"]
+    pp = PurePursuit(route, lookahead=8.0, closed=True)
+    L = pp.length
+    seg = np.linalg.norm(np.diff(np.vstack([route, route[:1]]), axis=0), axis=1)
+    s_wp = np.r_[0.0, np.cumsum(seg)[:-1]]  # arc length of every waypoint
+    T = rec.stack("T_world_cam")
+    prog = np.array([pp.progress((p[0], p[1], 0.0)) for p in T[:, :3, 3]])
+    zone = zor[np.clip(np.searchsorted(s_wp, prog % L, side="right") - 1, 0, len(zor) - 1)]
+    change = np.flatnonzero(np.diff(np.r_[zor, zor[:1]]) != 0) + 1  # first waypoint of the next zone
+    b_s, b_z = [], []
+    for lap in range(int(prog[-1] // L) + 2):
+        for i in change:
+            s_b = lap * L + (s_wp[i] if i < len(s_wp) else L)
+            if prog[0] - margin_m < s_b < prog[-1] + margin_m:
+                b_s.append(float(s_b))
+                b_z.append((int(zor[i - 1]), int(zor[i % len(zor)])))
+    return dict(progress=prog, zone=zone, names=lay["zones"], boundaries=np.array(b_s), boundary_zones=b_z, lap_m=L)

@@ -58,3 +58,43 @@ def test_classifier_iou_and_auc_hand_cases():
     assert classifier_iou(np.array([[0.9, 0.4, 0.8, 0.1]]), gt, valid=valid) == 0.5
     with pytest.raises(ValueError, match="gt_mask"):
         classifier_iou(np.zeros((2, 2)), np.zeros((2, 3), bool))
+
+
+# labels_at reads the mask at rounded, clamped pixel positions (column, row).
+def test_labels_at_hand_case():
+    from polar_sim.metrics.ground import labels_at
+
+    m = np.zeros((4, 5), bool)
+    m[1, 3] = m[3, 0] = True
+    np.testing.assert_array_equal(labels_at(m, [[3.2, 0.6], [-2.0, 9.0], [1.0, 1.0]]), [True, True, False])
+    assert labels_at(m, np.zeros((0, 2))).shape == (0,)
+    with pytest.raises(ValueError, match="mask"):
+        labels_at(m.astype(int), [[0, 0]])
+
+
+# Oracle speeds times the frame periods are the true step lengths.
+def test_oracle_step_speeds():
+    from polar_sim.metrics.ground import oracle_step_speeds
+
+    t = np.array([0.0, 0.1, 0.3, 0.4])
+    s = np.array([0.0, 0.5, 2.0, 0.1])
+    v = oracle_step_speeds(t, s)
+    np.testing.assert_allclose(v[1:] * np.diff(t), s[1:])
+    with pytest.raises(ValueError, match="increase"):
+        oracle_step_speeds([0.0, 0.0], [0.0, 1.0])
+
+
+# Summed per-frame reliability counts give exactly the reliability of the pooled samples.
+def test_pooled_reliability_equals_reliability_of_the_pool():
+    from polar_sim.metrics.calibration import reliability
+    from polar_sim.metrics.ground import pooled_reliability, reliability_counts
+
+    rng = np.random.default_rng(0)
+    ps = [rng.random((6, 7)) for _ in range(4)]
+    ys = [rng.random((6, 7)) < p for p in ps]
+    summed = [sum(x) for x in zip(*[reliability_counts(p, y) for p, y in zip(ps, ys)])]
+    a, b = pooled_reliability(*summed), reliability(np.stack(ps), np.stack(ys))
+    assert a.n == b.n and np.isclose(a.ece, b.ece) and np.isclose(a.mce, b.mce)
+    np.testing.assert_array_equal(a.count, b.count)
+    with pytest.raises(ValueError, match="no samples"):
+        pooled_reliability(np.zeros(15, int), np.zeros(15), np.zeros(15))

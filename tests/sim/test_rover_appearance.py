@@ -134,3 +134,32 @@ def test_bad_appearance_specs_raise():
             World("rover_flat", appearance=spec)
     with pytest.raises(ValueError, match="appearance"):
         World("rover_flat", appearance=3)
+
+
+# The gymnasium wrapper draws a new appearance per episode, repeatably under a seed, from the allowed
+# families only; the camera image changes with it; a bad family raises.
+def test_appearance_randomization_wrapper():
+    import gymnasium as gym
+
+    from polar_sim.envs.wrappers import AppearanceRandomization
+
+    env = AppearanceRandomization(gym.make("polar_sim/RoverDrive-v0", camera_size=(160, 48), supersample=False),
+                                  families=["checker", "stripes"])
+    try:
+        o1, i1 = env.reset(seed=4)
+        o2, i2 = env.reset()
+        o1b, i1b = env.reset(seed=4)
+        assert i1["appearance"] == i1b["appearance"] and np.array_equal(o1["rgb"], o1b["rgb"])
+        assert i1["appearance"] != i2["appearance"]
+        for info in (i1, i2):
+            fams = {z["family"] for z in info["appearance"]["ground"]}
+            assert len(fams) == 1 and fams <= {"checker", "stripes"}
+        _, _, _, _, info = env.step(np.zeros(2, np.float32))
+        assert info["appearance"] == i1["appearance"]
+        # An explicit appearance in the reset options wins.
+        o3, i3 = env.reset(seed=4, options={"appearance": "grass"})
+        assert i3["appearance"] == "grass" and not np.array_equal(o3["rgb"], o1["rgb"])
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="families"):
+        AppearanceRandomization(gym.make("polar_sim/RoverDrive-v0"), families=["moss"])

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from polar_sim.sim.rover_sequences import ROUTES, load_route, record_route, reduce2x
+from polar_sim.sim.rover_sequences import (DEV_FAMILIES, ROUTES, SPLITS, TEST_ONLY_FAMILIES, TEST_ROUTES, load_route,
+                                           record_route, reduce2x)
 
 
 @pytest.fixture(scope="module")
@@ -16,6 +17,17 @@ def test_route_table():
     assert len(ROUTES) >= 10
     assert {r.scene for r in ROUTES.values()} == {"rover_terrain", "rover_flat"}
     assert all(5.0 <= r.v_min < r.v_max <= 12.0 for r in ROUTES.values())
+
+
+# The held-out protocol: test seeds are >= 10,000 and disjoint from dev; every family appears in the
+# test split, the test-only families never in dev; dev uses only the dev families.
+def test_splits():
+    assert set(SPLITS["dev"]) == set(ROUTES) and set(SPLITS["test"]) == set(TEST_ROUTES)
+    assert all(r.seed >= 10_000 for r in TEST_ROUTES.values()) and all(r.seed < 10_000 for r in ROUTES.values())
+    dev_looks = {r.appearance for r in ROUTES.values()} - {None}
+    assert dev_looks == set(DEV_FAMILIES) and not dev_looks & set(TEST_ONLY_FAMILIES)
+    assert {r.appearance for r in TEST_ROUTES.values()} >= set(DEV_FAMILIES) | set(TEST_ONLY_FAMILIES)
+    assert len(TEST_ONLY_FAMILIES) >= 2
 
 
 # Frames are the 2x-reduced KITTI-like image with K halved about pixel centres.
@@ -54,12 +66,26 @@ def test_speed_matches_poses(flat):
 
 
 # The same route records bit for bit; the cache returns what was recorded; bad names raise.
-def test_determinism_and_cache(flat, tmp_path):
-    again = load_route("flat_00", max_frames=25, cache=tmp_path, progress=False)
-    for a, b in zip(flat, again):
-        for k in a:
+def test_determinism_and_cache(flat, tmp_path, monkeypatch):
+    monkeypatch.setenv("POLAR_SIM_CACHE", str(tmp_path))
+    again = load_route("flat_00", max_frames=25)
+    assert len(again) == 25 and again.path.is_relative_to(tmp_path)
+    for (_, a), b in zip(again.frames(), flat):
+        for k in b:
             np.testing.assert_array_equal(a[k], b[k])
-    cached = load_route("flat_00", max_frames=25, cache=tmp_path, progress=False)
+    cached = load_route("flat_00", max_frames=25)
+    assert cached.path == again.path
     np.testing.assert_array_equal(cached[24]["rgb"], flat[24]["rgb"])
     with pytest.raises(ValueError, match="valid"):
         record_route("moon_00")
+    with pytest.raises(ValueError, match="max_frames"):
+        record_route("flat_00", max_frames=0)
+
+
+# A test route records its appearance: the resolved spec and the zone families are in the meta, and the
+# ground mask still covers the lower image.
+def test_test_route_with_an_appearance():
+    rec = record_route("test_checker", max_frames=3, progress=False)
+    assert rec.meta["zones"] == ["checker"] * 4 and rec.meta["appearance"]["ground"][0]["family"] == "checker"
+    m = rec[2]["ground_mask"]
+    assert m[-20:].mean() > 0.95 and m[:40].mean() < 0.05
