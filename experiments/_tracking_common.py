@@ -313,7 +313,7 @@ def rate_rows(table, key, order):
             "hand_as_target": sum(r["hand_tgt_px_touch"] for r in rs) / hn if hn else float("nan"),
             "occl_frames": int(sum(r["occl_frames"] for r in rs)),
             "occl_add_ok": pooled(rs, "occl_add_ok", "occl_frames"), "occl_iou_ok": pooled(rs, "occl_iou_ok", "occl_frames"),
-            "drift_deg_max": float(np.nanmax([r["drift_deg"] for r in rs] + [np.nan])), "lost": int(sum(r["lost"] for r in rs)),
+            "drift_deg_max": float(np.nanmax([np.nan if r["drift_deg"] is None else r["drift_deg"] for r in rs] + [np.nan])), "lost": int(sum(r["lost"] for r in rs)),
             "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rs])),
         })
     return rows
