@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
-from polar_sim._validation import as_intrinsics, as_points, as_pose, as_positive_float
+from polar_sim._validation import as_float_array, as_intrinsics, as_points, as_pose, as_positive_float
 
 __all__ = [
     "object_diameter",
@@ -58,7 +58,7 @@ BOP_MSPD_PIXELS = np.arange(5, 51, 5).astype(float)
 
 def _as_poses(T, name):
     """(n, 4, 4) stack of checked poses and whether the input was a single pose."""
-    a = np.asarray(T, dtype=np.float64)
+    a = as_float_array(T, name)  # refuses strings, bools, complex and object arrays by name
     if a.ndim == 2:
         return as_pose(a, name)[None], True
     if a.ndim != 3 or a.shape[1:] != (4, 4):

@@ -214,8 +214,13 @@ def bad_inputs(kind, valid, arg, rng, *, tmp=None):
             out += [BadInput(arg, "channels:4", np.concatenate([v, v[..., :1]], -1), "refuse"),
                     BadInput(arg, "channels:gray", v[..., 0], "refuse")]
         return out
-    if kind == "pose":
-        return c + _array_families(arg, valid, rng, huge="refuse", empty="refuse") + _pose_families(arg, valid, rng)
+    if kind in ("pose", "pose_or_stack"):
+        # 1e300 at a random entry: in the rotation block it must be refused, in the translation
+        # it is a valid (if absurd) pose, like "pose:1e300"; either answer is fine, a crash is not.
+        out = c + _array_families(arg, valid, rng, huge="either", empty="refuse") + _pose_families(arg, valid, rng)
+        if kind == "pose_or_stack":   # a (1, 4, 4) stack is a documented input of the stack metrics
+            out = [dataclasses.replace(b, expect="either") if b.label == "shape:extra-dim" else b for b in out]
+        return out
     if kind == "poses":
         v = np.asarray(valid)
         out = c + _array_families(arg, v, rng, huge="either", empty="refuse")
