@@ -3,8 +3,10 @@
     python benchmarks/bench_tracking.py [--quick] [--objects mug,box] [--variants h,ww,...]
     python benchmarks/bench_tracking.py --tabletop touch,push --seeds 1,2 --frames 200   # simulator
     python benchmarks/bench_tracking.py --sequences test --seed 10000    # the recorded randomised sequences
+    python benchmarks/bench_tracking.py --sequences dev+test --frames 150  # both splits side by side
 
-``--sequences`` (a split name, "dev" or "test", or a comma list of sequence names) times the tracker
+``--sequences`` (a split name, "dev" or "test", or a comma list of sequence names; parts joined by
+"+" run side by side in one process, each split at its own seed) times the tracker
 on the cached 640x480 recordings of :mod:`polar_sim.sim.tabletop_sequences` (recorded first if
 missing, not timed) and asks where the cost comes from: per sequence the CPU time per frame, the
 object's image size (amodal pixels) and the ROI; pooled over all frames, a linear fit of CPU time on
@@ -176,17 +178,19 @@ def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
     With ``model="parts"`` also the mask's recall per part of the object (item 4)."""
     from scipy.stats import spearmanr
 
-    from polar_sim.sim.tabletop_sequences import cached_sequence, list_sequences
+    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
 
-    if names in ("dev", "test", "dev_appearance"):
-        names = list_sequences(names)
-    else:
-        names = names.split(",")
+    runs = []   # (name, seed, split): splits joined by "+" run side by side, each at its own seed
+    for part in names.split("+"):
+        if part in ("dev", "test", "dev_appearance"):
+            runs += [(n, SPLIT_SEEDS[part][0], part) for n in list_sequences(part)]
+        else:
+            runs += [(n, seed, "given") for n in part.split(",")]
     print("| sequence | appearance | variant | frames | CPU ms median | p95 | frames/s | object px median | ROI px median |"
           " mask recall per part (part: recall, pixels) |")
     print("|---|---|---|---|---|---|---|---|---|")
-    pooled = {v: {"cpu": [], "tgt": [], "roi": [], "st": [], "fam": []} for v in variants}
-    for name in names:
+    pooled = {v: {"cpu": [], "tgt": [], "roi": [], "st": [], "fam": [], "split": []} for v in variants}
+    for name, seed, split in runs:
         rec = cached_sequence(name, seed)
         n = len(rec) if max_frames is None else min(len(rec), max_frames)
         frames = [f for _, f in rec.frames(0, n, keys=("rgb", "depth", "mask_full", "mask_visible", "depth_clean"))]
@@ -215,13 +219,14 @@ def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
             for k, x in (("cpu", c), ("tgt", tgt[1:]), ("roi", R), ("st", np.array(st)[1:])):
                 pooled[v][k].append(x)
             pooled[v]["fam"] += [fam] * len(c)
+            pooled[v]["split"] += [split] * len(c)
             print(f"| {name} | {fam} | {v} | {len(c)} | {np.median(c):.1f} | {np.percentile(c, 95):.1f} | "
                   f"{1000 / np.median(c):.0f} | {np.median(tgt):.0f} | {np.median(R):.0f} | "
                   + ", ".join(f"{k}: {sum(a for a, _ in x) / max(sum(b for _, b in x), 1):.2f} ({sum(b for _, b in x)})"
                               for k, x in sorted(parts.items())) + " |", flush=True)
     for v, d in pooled.items():
         c, t, R, st = (np.concatenate(d[k]) for k in ("cpu", "tgt", "roi", "st"))
-        fam = np.array(d["fam"])
+        fam, spl = np.array(d["fam"]), np.array(d["split"])
         b, a0 = np.polyfit(t / 1e4, c, 1)
         r2 = 1 - np.var(c - (a0 + b * t / 1e4)) / np.var(c)
         print(f"\n{v}: {len(c)} frames, CPU ms median {np.median(c):.1f} ({1000 / np.median(c):.0f} frames/s), p95 "
@@ -235,12 +240,16 @@ def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
                 continue
             print(f"| {k + 1} | {m.sum()} | {np.median(t[m]):.0f} | {np.median(c[m]):.1f} | "
                   + " | ".join(f"{x:.2f}" for x in np.median(st[m], axis=0)) + " |")
-        print("\n| appearance family | frames | CPU ms median | object px median | CPU ms per 10,000 object px |")
-        print("|---|---|---|---|---|")
-        for f in sorted(set(fam)):
-            m = fam == f
-            print(f"| {f} | {m.sum()} | {np.median(c[m]):.1f} | {np.median(t[m]):.0f} | "
-                  f"{np.median(c[m] / np.maximum(t[m], 1) * 1e4):.2f} |")
+        # the scene at equal object size: the residual of the size fit per family and per split
+        res = c - (a0 + b * t / 1e4)
+        for key, lab in ((fam, "appearance family"), (spl, "split")):
+            print(f"\n| {lab} | frames | CPU ms median | object px median | CPU ms per 10,000 object px | "
+                  "median residual of the size fit, ms |")
+            print("|---|---|---|---|---|---|")
+            for f in sorted(set(key)):
+                m = key == f
+                print(f"| {f} | {m.sum()} | {np.median(c[m]):.1f} | {np.median(t[m]):.0f} | "
+                      f"{np.median(c[m] / np.maximum(t[m], 1) * 1e4):.2f} | {np.median(res[m]):+.1f} |")
 
 
 def main(argv=None):
@@ -256,8 +265,9 @@ def main(argv=None):
                     help="comma list of tabletop scripts: spot check on the simulator instead (needs MuJoCo)")
     ap.add_argument("--seeds", default="1,2", help="tabletop seeds (with --tabletop)")
     ap.add_argument("--sequences", default=None,
-                    help="a split (dev, test, dev_appearance) or comma list of recorded sequences (item 7)")
-    ap.add_argument("--seed", type=int, default=10000, help="seed of the recorded sequences (with --sequences)")
+                    help="a split (dev, test, dev_appearance) or comma list of recorded sequences, parts joined by + "
+                         "(dev+test: both splits side by side, each at its seed; item 7)")
+    ap.add_argument("--seed", type=int, default=10000, help="seed of sequences given by name (with --sequences; a split uses its own)")
     ap.add_argument("--model", default="uniform", choices=("uniform", "parts"),
                     help="model points: area-uniform, or 1000 per part (with --sequences; prints recall per part)")
     ap.add_argument("--repeats", type=int, default=None,

@@ -18,6 +18,7 @@ import numpy as np
 
 from polar_sim._validation import as_intrinsics, as_pose, as_positive_float, check_choice
 from polar_sim.geometry import inv_pose, make_pose, se3_exp, se3_log
+from polar_sim.params import Parameterised
 from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
 from polar_sim.tracking._kernels import roi_distances
 from polar_sim.tracking.appearance import make_appearance
@@ -125,7 +126,7 @@ def _rot_angle(R):
     return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-class ObjectTracker:
+class ObjectTracker(Parameterised):
     """Model-based RGB-D object tracker with an appearance model learned online from its own labels.
 
     Parameters
@@ -217,6 +218,15 @@ class ObjectTracker:
         Seed of the sampling Generator (point selection, training samples, mini-batches).
     debug_maps : bool, default=False
         Also return the attention, appearance and silhouette maps.
+
+    Notes
+    -----
+    The module contract (:class:`polar_sim.params.Parameterised`): the constructor stores the
+    parameters above as given and checks them (``_check_params``, the one place, also used by
+    ``set_params`` and the first frame); ``get_params()``/``set_params()``; the state is created
+    by the first :meth:`process` in attributes ending in ``_`` (``model_``, ``filter_``,
+    ``appearance_model_``, ``calibration_``, ``rng_``, ``pose_``, ``n_frames_``, ...) and
+    :meth:`reset` removes it.
     """
 
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
@@ -262,17 +272,17 @@ class ObjectTracker:
         self.calibrate = calibrate
         self.random_state = random_state
         self.debug_maps = debug_maps
+        # fail early: the same checks as every later use (no state is built here)
         self._check_params()
-        P = as_model_points(model_points)
-        N = estimate_normals(P) if model_normals is None else as_normals(model_normals, len(P))
-        self._K = as_intrinsics(K, "K")
-        self._T0 = as_pose(initial_pose, "initial_pose")
-        self._model = ShapeModel(P, N)
-        self._C = make_pose(None, self._model.centroid)  # T_obj_cen
-        self._Cinv = make_pose(None, -self._model.centroid)
-        self.reset()
 
     def _check_params(self):
+        """Check every parameter (the one place); returns the clean arrays.
+
+        Returns
+        -------
+        dict with ``P`` (M, 3) model points, ``N`` (M, 3) normals or None, ``K`` (3, 3) and
+        ``T0`` (4, 4). Raises ``ValueError``/``TypeError`` naming the parameter.
+        """
         if not isinstance(self.appearance, str):
             raise TypeError(f"appearance: expected a string, got {type(self.appearance).__name__}")
         check_choice(self.appearance.lower(), APPEARANCE_VARIANTS, "appearance")
@@ -304,25 +314,35 @@ class ObjectTracker:
         mj = np.asarray(self.max_jump, dtype=float)
         if mj.shape != (2,) or not np.all(np.isfinite(mj)) or np.any(mj <= 0):
             raise ValueError(f"max_jump: expected (rotation rad, translation m) > 0, got {self.max_jump!r}")
+        P = as_model_points(self.model_points)
+        N = None if self.model_normals is None else as_normals(self.model_normals, len(P))
+        return {"P": P, "N": N, "K": as_intrinsics(self.K, "K"), "T0": as_pose(self.initial_pose, "initial_pose")}
+
+    def _build(self):
+        """The state of a tracker that has seen no frame (on the first :meth:`process`)."""
+        c = self._check_params()
+        P = c["P"]
+        m = ShapeModel(P, estimate_normals(P) if c["N"] is None else c["N"])
+        self.K_ = c["K"]
+        self.model_ = m
+        self.T_obj_cen_ = make_pose(None, m.centroid)
+        self.T_cen_obj_ = make_pose(None, -m.centroid)
+        cap = (0.3, max(0.02, 0.3 * m.diameter))
+        self.filter_ = MotionFilter(c["T0"] @ self.T_obj_cen_, mode=self.motion, sigma_cap=cap)
+        kw = dict(decay=self.decay, lr=self.lr, epochs=self.epochs, replay=self.replay)
+        self.appearance_model_ = make_appearance(self.appearance, **kw)
+        self.rng_ = np.random.default_rng(self.random_state)
+        self.calibration_ = OnlineCalibration() if self.calibrate else None
+        self.n_unobserved_ = 0
+        self.image_shape_ = None
+        self.t_prev_ = None
+        self.rejections_ = 0
+        self.n_frames_ = 0
 
     def reset(self):
-        """Forget everything learned: back to the initial pose, zero velocity, untrained appearance."""
-        m = self._model
-        cap = (0.3, max(0.02, 0.3 * m.diameter))
-        self._filter = MotionFilter(self._T0 @ self._C, mode=self.motion, sigma_cap=cap)
-        kw = dict(decay=self.decay, lr=self.lr, epochs=self.epochs, replay=self.replay)
-        self._app = make_appearance(self.appearance, **kw)
-        self._rng = np.random.default_rng(self.random_state)
-        self._cal = OnlineCalibration() if self.calibrate else None
-        self._n_unobserved = 0
-        self._shape = None
-        self._t_prev = None
-        self._rejections = 0
-        self._frame = 0
-        for a in ("pose_", "n_frames_"):
-            if hasattr(self, a):
-                delattr(self, a)
-        return self
+        """Forget everything learned (the ``_``-suffixed attributes): the next :meth:`process`
+        starts again at ``initial_pose`` with zero velocity and an untrained appearance model."""
+        return super().reset()
 
     # ------------------------------------------------------------------------------------------
     def process(self, rgb, depth, t=None):
@@ -340,43 +360,46 @@ class ObjectTracker:
         TrackResult
         """
         t_start = time.perf_counter()
-        rgb, depth = as_rgbd(rgb, depth, shape=self._shape)
+        built = hasattr(self, "filter_")
+        t_prev = self.t_prev_ if built else None
+        rgb, depth = as_rgbd(rgb, depth, shape=self.image_shape_ if built else None)
         if t is not None:
             if isinstance(t, bool) or not isinstance(t, numbers.Real) or not np.isfinite(t):
                 raise ValueError(f"t: expected a finite time stamp in seconds, got {t!r}")
-            if self._t_prev is not None and t <= self._t_prev:
-                raise ValueError(f"t: time stamps must increase, got {t} after {self._t_prev}")
-        dt = 1.0 / self.fps if (t is None or self._t_prev is None) else float(t - self._t_prev)
+            if t_prev is not None and t <= t_prev:
+                raise ValueError(f"t: time stamps must increase, got {t} after {t_prev}")
+        dt = 1.0 / self.fps if (t is None or t_prev is None) else float(t - t_prev)
         # -- validated: from here on the state changes ------------------------------------------
-        self._shape = rgb.shape[:2]
-        self._t_prev = t if t is not None else self._t_prev
-        self._clock = _Clock()
-        self._clock.stages["validate"] = self._clock.t - t_start
+        if not built:
+            self._build()
+        self.image_shape_ = rgb.shape[:2]
+        self.t_prev_ = t if t is not None else self.t_prev_
+        self.clock_ = _Clock()
+        self.clock_.stages["validate"] = self.clock_.t - t_start
         out = self._step(rgb, depth, dt)
-        self._clock.lap("output")
-        out["stage_times"] = dict(self._clock.stages)
-        self._frame += 1
+        self.clock_.lap("output")
+        out["stage_times"] = dict(self.clock_.stages)
+        self.n_frames_ += 1
         self.pose_ = out["pose"]
-        self.n_frames_ = self._frame
         out["time_s"] = time.perf_counter() - t_start
         return TrackResult(**out)
 
     # ------------------------------------------------------------------------------------------
     def _step(self, rgb, depth, dt):
-        m, K = self._model, self._K
-        H, W = self._shape
+        m, K = self.model_, self.K_
+        H, W = self.image_shape_
         f = float(K[0, 0])
-        filt = self._filter
-        self._n_unobserved = 0
+        filt = self.filter_
+        self.n_unobserved_ = 0
         T_bar, P_bar = filt.predict(dt)
         sig_rot = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[:3, :3]).max(), 0.0)))
         sig_tr = float(np.sqrt(max(np.linalg.eigvalsh(P_bar[3:, 3:]).max(), 0.0)))
         sig_pos = sig_tr + 0.5 * m.diameter * sig_rot
         proj = project_model(m.P, m.N, T_bar[:3, :3], T_bar[:3, 3], K, (H, W), m.spacing)
-        lost_mode = self._rejections >= self.lost_after
+        lost_mode = self.rejections_ >= self.lost_after
         gamma = 0.0
-        if self._app is not None and not lost_mode:
-            gamma = min(1.0, self._app.n_updates / self.k_warm)
+        if self.appearance_model_ is not None and not lost_mode:
+            gamma = min(1.0, self.appearance_model_.n_updates / self.k_warm)
         if proj.vis.sum() < 3:
             return self._coast(T_bar, (0, 0, 0, 0), gamma)
 
@@ -393,18 +416,18 @@ class ObjectTracker:
         roi = (x0, y0, x1, y1)
         D = depth[y0:y1, x0:x1]
         valid = D > 0
-        self._clock.lap("predict_attention")
+        self.clock_.lap("predict_attention")
         # -- appearance ---------------------------------------------------------------------
         feats = None
         lI = None
-        if self._app is not None:
-            feats = self._app.prepare(np.ascontiguousarray(rgb[y0:y1, x0:x1]))
+        if self.appearance_model_ is not None:
+            feats = self.appearance_model_.prepare(np.ascontiguousarray(rgb[y0:y1, x0:x1]))
             if gamma > 0 or self.debug_maps:
-                lI = self._app.log_ratio(feats)
-        self._clock.lap("appearance")
+                lI = self.appearance_model_.log_ratio(feats)
+        self.clock_.lap("appearance")
         # -- prediction map (E-step) and registration (M-step) ----------------------------------
         Pmap, pi, S = self._prediction_map(D, roi, T_bar, proj, sig_pos, lI, gamma)
-        self._clock.lap("depth_likelihood")
+        self.clock_.lap("depth_likelihood")
         res, n_sel, n_cand = self._register(D, roi, Pmap, T_bar, proj.vis, sig_pos)
         if res is not None and res.ok and self.em_refine:
             # a registration far outside the predicted spread was made with a prior centred on the
@@ -419,7 +442,7 @@ class ObjectTracker:
                     res2, n_sel2, n_cand2 = self._register(D, roi, Pmap2, res.T, proj2.vis, sig2)
                     if res2 is not None and res2.ok:
                         res, n_sel, n_cand, Pmap, pi, S = res2, n_sel2, n_cand2, Pmap2, pi2, S2
-        self._clock.lap("registration")
+        self.clock_.lap("registration")
         # -- drift guard ----------------------------------------------------------------------
         measured = res is not None and res.ok and res.n_matched >= 6
         coverage = 0.0
@@ -430,7 +453,7 @@ class ObjectTracker:
             scale = n_cand / max(n_sel, 1)
             coverage = res.n_inliers * scale / expected
             e = se3_log(inv_pose(T_bar) @ res.T)
-            S_e = self._filter.P_bar[:6, :6] + np.diag(self._filter.floor)
+            S_e = self.filter_.P_bar[:6, :6] + np.diag(self.filter_.floor)
             d2 = float(e @ np.linalg.solve(S_e, e))
             measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
                         and d2 < self.max_mahalanobis and coverage >= self.min_coverage)
@@ -447,26 +470,26 @@ class ObjectTracker:
                 hold = (U, np.array([rho, rho, rho, 1.0, 1.0, 1.0]))
                 es = se3_log(inv_pose(T_bar) @ res.T) * hold[1]
                 T_hat = T_bar @ se3_exp((es - U @ (U.T @ es)) / hold[1])
-        self._n_unobserved = 0 if hold is None else hold[0].shape[1]
+        self.n_unobserved_ = 0 if hold is None else hold[0].shape[1]
         O, S_hat, r_hat = self._labels(D, roi, T_hat, vis=res.vis)
-        self._clock.lap("labels")
+        self.clock_.lap("labels")
         cal = self._calibrated(Pmap)  # the prediction, before this frame's labels are learned
-        if accepted and self._cal is not None:
+        if accepted and self.calibration_ is not None:
             z = _logit(Pmap[O >= 0])
-            self._cal.update(z, O[O >= 0] == 1)
-        if accepted and self._app is not None:
+            self.calibration_.update(z, O[O >= 0] == 1)
+        if accepted and self.appearance_model_ is not None:
             self._train(feats, O, S_hat, r_hat, D)
-        self._clock.lap("learning")
+        self.clock_.lap("learning")
         # a good fit updates the filter (a mostly hidden object only skips learning); a poor fit is
         # reported (spec 3.7) but not fused: the filter coasts (widened x4, velocity damped) and
         # the frame counts towards lost mode, in which the prediction is reported instead
         if good_fit:
             filt.update(T_hat, res.cov, dt, hold=hold)
-            self._rejections = 0
+            self.rejections_ = 0
         else:
             filt.coast(velocity_decay=self.lost_velocity_decay, inflate=4.0)
-            self._rejections += 1
-        lost = self._rejections >= self.lost_after
+            self.rejections_ += 1
+        lost = self.rejections_ >= self.lost_after
         if lost:
             T_hat = T_bar
             O[O == 1] = -1
@@ -476,7 +499,7 @@ class ObjectTracker:
     # ------------------------------------------------------------------------------------------
     def _prediction_map(self, D, roi, T, proj, sig_pos, lI, gamma):
         """Prediction map P (h, w), prior pi (h, w) and silhouette S (h, w) around pose T (spec 3.3-3.4)."""
-        m, f = self._model, float(self._K[0, 0])
+        m, f = self.model_, float(self.K_[0, 0])
         zb = proj.z_mean
         S = splat_silhouette(proj.uv[proj.vis], zb, f, m.local_spacing[proj.vis], roi)
         if self.spatial_prior:
@@ -506,7 +529,7 @@ class ObjectTracker:
 
         Returns the ICP result (None with fewer than 6 points), the points registered and the
         candidates before subsampling."""
-        m = self._model
+        m = self.model_
         valid = D > 0
         if self.registration == "plain":
             cand = np.flatnonzero(valid)
@@ -518,7 +541,7 @@ class ObjectTracker:
         if n_cand > self.n_registration:
             # weighted sampling without replacement (Efraimidis-Spirakis): the k largest
             # log(u) / w, one uniform draw per candidate, O(n)
-            keys = np.log(self._rng.random(n_cand)) / np.maximum(w_all, 1e-12)
+            keys = np.log(self.rng_.random(n_cand)) / np.maximum(w_all, 1e-12)
             pick = np.sort(np.argpartition(-keys, self.n_registration - 1)[: self.n_registration])
             cand, w0 = cand[pick], w_all[pick]
         else:
@@ -531,16 +554,16 @@ class ObjectTracker:
         gate_floor = min(max(3.0 * float(np.median(sd)), m.spacing), gate0)
         prior = None
         if self.pose_prior:
-            T_pred, P_pred = self._filter.T_bar, self._filter.P_bar[:6, :6]
+            T_pred, P_pred = self.filter_.T_bar, self.filter_.P_bar[:6, :6]
             prior = (T_pred, np.linalg.inv(P_pred + 1e-12 * np.eye(6)))
-        res = weighted_icp(X, w0, m, T_init, self._K, self._shape, sigma_d=sd,
+        res = weighted_icp(X, w0, m, T_init, self.K_, self.image_shape_, sigma_d=sd,
                            delta1=np.maximum(3 * sd, 0.006), gate0=gate0, gate_floor=gate_floor,
                            max_iterations=self.max_iterations, exact=self.correspondence == "kdtree",
                            vis_init=vis, prior=prior)
         return res, len(cand), n_cand
 
     def _distances(self, D, roi, T, vis, kappa=1.0):
-        m, K = self._model, self._K
+        m, K = self.model_, self.K_
         Ti = np.linalg.inv(T)
         out = np.empty(D.shape, np.float32)
         roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
@@ -549,7 +572,7 @@ class ObjectTracker:
         return out
 
     def _backproject(self, D, roi, flat):
-        K = self._K
+        K = self.K_
         w = D.shape[1]
         v, u = np.divmod(flat, w)
         z = D.ravel()[flat].astype(np.float64)
@@ -559,8 +582,8 @@ class ObjectTracker:
 
     def _labels(self, D, roi, T, vis=None):
         """Labels O (h, w) int8, silhouette (h, w) uint8 and distances (h, w) at pose T (spec 3.6)."""
-        m, K = self._model, self._K
-        pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self._shape, m.spacing, zbuffer=vis is None)
+        m, K = self.model_, self.K_
+        pr = project_model(m.P, m.N, T[:3, :3], T[:3, 3], K, self.image_shape_, m.spacing, zbuffer=vis is None)
         if vis is not None:
             pr.vis = vis
         S = splat_silhouette(pr.uv[pr.vis], pr.z_mean, K[0, 0], m.local_spacing[pr.vis], roi)
@@ -582,9 +605,9 @@ class ObjectTracker:
         return O, S, r
 
     def _train(self, feats, O, S, r, D):
-        rng = self._rng
+        rng = self.rng_
         h, w = O.shape
-        app = self._app
+        app = self.appearance_model_
         if app.name == "h":
             ys, xs = np.nonzero(O >= 0)
             lab = O[ys, xs]
@@ -615,9 +638,9 @@ class ObjectTracker:
 
     def _coast(self, T_bar, roi, gamma, *, D=None, Pmap=None, pi=None, lI=None, n_points=0, res=None):
         """No usable registration: keep the prediction, damp the velocity, label at the prediction."""
-        self._filter.coast(velocity_decay=self.lost_velocity_decay)
-        self._rejections += 1
-        cov = self._filter.pose_cov
+        self.filter_.coast(velocity_decay=self.lost_velocity_decay)
+        self.rejections_ += 1
+        cov = self.filter_.pose_cov
         if D is None:
             z = np.zeros((0, 0), np.float32)
             return self._emit(T_bar, (0, 0, 0, 0), np.zeros((0, 0), np.int8), z.astype(np.uint8), z,
@@ -629,13 +652,13 @@ class ObjectTracker:
                           True, False, cov, it, 0)
 
     def _calibrated(self, Pmap):
-        if self._cal is None or Pmap is None:
+        if self.calibration_ is None or Pmap is None:
             return Pmap
-        return self._cal(_logit(Pmap))
+        return self.calibration_(_logit(Pmap))
 
     def _emit(self, T_cen, roi, O, S, Pmap, pi, lI, valid, gamma, fitness, rmse, n_points, lost,
               accepted, cov, iterations, n_inliers, cal=None):
-        H, W = self._shape
+        H, W = self.image_shape_
         x0, y0, x1, y1 = roi
         labels = np.zeros((H, W), np.int8)
         mask = np.zeros((H, W), bool)
@@ -664,11 +687,11 @@ class ObjectTracker:
                     app[y0:y1, x0:x1] = 0.5 * (1.0 + np.tanh(0.5 * lI))
                 sil[y0:y1, x0:x1] = S > 0
             extra = dict(attention=att, appearance=app, silhouette=sil)
-        pose = T_cen @ self._Cinv
+        pose = T_cen @ self.T_cen_obj_
         return dict(pose=pose, mask=mask, prob=prob, labels=labels, fitness=float(fitness),
                     inlier_rmse=float(rmse), n_points=int(n_points), time_s=0.0, lost=bool(lost),
                     accepted=bool(accepted), covariance=np.array(cov, dtype=float),
-                    pose_filtered=self._filter.T @ self._Cinv,
-                    pose_predicted=self._filter.T_bar @ self._Cinv, roi=tuple(int(v) for v in roi),
+                    pose_filtered=self.filter_.T @ self.T_cen_obj_,
+                    pose_predicted=self.filter_.T_bar @ self.T_cen_obj_, roi=tuple(int(v) for v in roi),
                     gamma=float(gamma), iterations=int(iterations), n_inliers=int(n_inliers), prob_raw=prob_raw,
-                    n_unobserved=int(self._n_unobserved), **extra)
+                    n_unobserved=int(self.n_unobserved_), **extra)

@@ -1,0 +1,146 @@
+"""ObjectTracker follows the module contract (issue 17 item 1, polar_sim.params.Parameterised), and
+its results are bit for bit those of the code before the contract.
+
+The reference (``tracker_reference.json``) was recorded by ``python tests/tracking/test_tracker_contract.py``
+with the tracker as it was before the change (commit 49bebcb, constructor building the model and the
+filter): per frame the pose and covariance as exact float hex strings, SHA-1 digests of the
+mask, probability, raw probability and label maps, and the scalar outputs, for four configurations
+on synthetic RGB-D (float results of one platform: x86-64, the project's pinned numpy/numba/OpenCV).
+"""
+
+import hashlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from polar_sim.tracking import ObjectTracker
+from polar_sim.tracking.synthetic import make_sequence
+
+REFERENCE = Path(__file__).with_name("tracker_reference.json")
+FORMAT_VERSION = 1
+#: (name, sequence options, tracker parameters, frames): the default at 640x480 (more candidate
+#: points than n_registration, so the weighted subsampling runs), the colour model, and the
+#: silhouette prior with the alpha-beta filter and the raw probability.
+CASES = [
+    ("ww_640", dict(obj="mug", shape=(480, 640)), {}, 10),
+    ("h_320", dict(obj="mug", shape=(240, 320)), dict(appearance="h"), 12),
+    ("prior_ab_320", dict(obj="box", shape=(240, 320)), dict(spatial_prior=True, motion="alpha-beta",
+                                                              appearance="su", calibrate=False), 12),
+    ("kdtree_320", dict(obj="cylinder", shape=(240, 320), hand=False), dict(correspondence="kdtree",
+                                                                            appearance="wu"), 12),
+]
+
+
+def _digest(a):
+    a = np.ascontiguousarray(a)
+    return hashlib.sha1(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes()).hexdigest()
+
+
+def _hex(a):
+    return [float(v).hex() for v in np.asarray(a, float).ravel()]
+
+
+def _summary(r):
+    return {"pose": _hex(r.pose), "covariance": _hex(r.covariance), "pose_filtered": _hex(r.pose_filtered),
+            "mask": _digest(r.mask), "prob": _digest(r.prob), "prob_raw": _digest(r.prob_raw),
+            "labels": _digest(r.labels), "fitness": float(r.fitness).hex(), "inlier_rmse": float(r.inlier_rmse).hex(),
+            "n_points": r.n_points, "lost": r.lost, "accepted": r.accepted, "roi": list(r.roi),
+            "gamma": float(r.gamma).hex(), "iterations": r.iterations, "n_inliers": r.n_inliers,
+            "n_unobserved": r.n_unobserved}
+
+
+def _run(case):
+    _, seq_kw, params, n = case
+    seq = make_sequence(n, **seq_kw)
+    P, N = seq.model(3000)
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, random_state=2, **params)
+    out = []
+    for i in range(n):
+        f = seq.frame(i)
+        out.append(_summary(tr.process(f["rgb"], f["depth"], i / 30.0)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def reference():
+    ref = json.loads(REFERENCE.read_text())
+    assert ref["format_version"] == FORMAT_VERSION
+    return ref["cases"]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_results_match_the_recorded_run_of_the_previous_code(reference, case):
+    # every output of every frame is identical to the run recorded before the module contract
+    got, want = _run(case), reference[case[0]]
+    assert len(got) == len(want)
+    for i, (g, w) in enumerate(zip(got, want)):
+        assert g == w, (case[0], i, {k for k in g if g[k] != w[k]})
+
+
+@pytest.fixture(scope="module")
+def small():
+    seq = make_sequence(6, "mug", shape=(240, 320))
+    P, N = seq.model(3000)
+    return seq, P, N, [seq.frame(i) for i in range(6)]
+
+
+def test_constructor_only_stores_its_parameters(small):
+    # the instance holds exactly its documented parameters, as given (no copies, no derived state)
+    seq, P, N, _ = small
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, appearance="Su", tau_y=0.6)
+    assert set(vars(tr)) == set(ObjectTracker._param_names())
+    assert tr.model_points is P and tr.K is seq.K and tr.model_normals is N
+    p = tr.get_params()
+    assert p["appearance"] == "Su" and p["tau_y"] == 0.6 and p["motion"] == "ekf" and len(p) == 35
+
+
+def test_learned_state_appears_on_the_first_frame_and_reset_removes_it(small):
+    seq, P, N, frames = small
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N)
+    assert not [k for k in vars(tr) if k.endswith("_")]
+    ra = [tr.process(f["rgb"], f["depth"]) for f in frames]
+    learned = {k for k in vars(tr) if k.endswith("_")}
+    assert {"filter_", "appearance_model_", "rng_", "model_", "pose_", "n_frames_"} <= learned
+    assert not [k for k in vars(tr) if k.startswith("_")]     # no private state outside the contract
+    tr.reset()
+    assert set(vars(tr)) == set(ObjectTracker._param_names())
+    rb = [tr.process(f["rgb"], f["depth"]) for f in frames]
+    for x, y in zip(ra, rb):
+        assert np.array_equal(x.pose, y.pose) and np.array_equal(x.prob, y.prob) and np.array_equal(x.labels, y.labels)
+
+
+def test_set_params_checks_in_one_place_and_leaves_the_tracker_unchanged(small):
+    seq, P, N, frames = small
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N)
+    tr.process(frames[0]["rgb"], frames[0]["depth"])
+    before = (tr.get_params(), tr.pose_.copy(), tr.n_frames_)
+    for bad in (dict(tau_y=1.5), dict(appearance="xx"), dict(initial_pose=np.eye(4) * 2),
+                dict(model_points=np.zeros((0, 3))), dict(max_jump=(0.5, -1.0), tau_y=0.4)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            tr.set_params(**bad)
+        assert tr.get_params().keys() == before[0].keys()
+        assert all(tr.get_params()[k] is before[0][k] for k in before[0])
+        assert np.array_equal(tr.pose_, before[1]) and tr.n_frames_ == before[2]
+    with pytest.raises(ValueError, match="unknown parameter"):
+        tr.set_params(gain=2.0)
+    tr.set_params(tau_y=0.6).reset()
+    assert tr.tau_y == 0.6 and not hasattr(tr, "pose_")
+    # the constructor checks with the same function: a bad value fails there too, naming it
+    with pytest.raises(ValueError, match="lost_after"):
+        ObjectTracker(P, seq.K, seq.poses[0], lost_after=0)
+
+
+def _record():
+    """Write the reference from the code now installed (run once, before a refactor)."""
+    cases = {c[0]: _run(c) for c in CASES}
+    tmp = REFERENCE.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"format_version": FORMAT_VERSION, "cases": cases}, indent=0, sort_keys=True))
+    tmp.replace(REFERENCE)
+    print("wrote", REFERENCE, {k: len(v) for k, v in cases.items()}, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    _record()
