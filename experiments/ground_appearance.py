@@ -59,7 +59,7 @@ def trial(params, seed, ctx):
     s = settled & np.isfinite(iou)
     after = (t - t[0]) >= WARMUP_S
     trans = after & ~settled
-    return {"route": G.route_of(params, ctx), "families": ",".join(sorted(set(G.family_names(rec)))), "frames": n,
+    return {"route_used": G.route_of(params, ctx), "families": ",".join(sorted(set(G.family_names(rec)))), "frames": n,
             "n_settled": int(s.sum()), "iou_settled_mean": float(np.mean(iou[s])) if s.any() else float("nan"),
             "iou_settled_p10": float(np.percentile(iou[s], 10)) if s.any() else float("nan"),
             "share_settled_ge_target": float(np.mean(iou[s] >= TARGET_IOU)) if s.any() else float("nan"),

@@ -45,7 +45,7 @@ def trial(params, seed, ctx):
         kw["speed_truth"] = tr["speed_cd"]
     run = replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **kw), rec.frames(keys=("rgb", "t")))
     est, n = run["poses"], len(rec)
-    out = {"route": G.route_of(params, ctx), "length_m": tr["length_m"], "frames": n, **_scores(tr["gt"], est)}
+    out = {"route_used": G.route_of(params, ctx), "length_m": tr["length_m"], "frames": n, **_scores(tr["gt"], est)}
     arrays = {"gt": tr["gt"], "est": est}
     if np.isfinite(run["speed"]).all() and np.isfinite(run["yaw_rate"]).all():
         rates = np.where(np.isfinite(run["rates_raw"]), run["rates_raw"], 0.0)
@@ -127,7 +127,10 @@ def checks(table, ctx):
     cpu = p["w6"]["cpu_ms_median"]
     if ctx.quick:  # 54 m from rest: the ordering on scaled segments; the targets at full size
         t, tm = p["w6"]["t_pct_scaled"], p["mono"]["t_pct_scaled"]
-        return [Check("w6 beats the held-scale monocular baseline (quick: scaled segments)", t < tm, f"{t:.2f} % vs {tm:.2f} %")]
+        # Measured on the held-out quick route (test_random_0, seed 10,000): w6 7.63 % against the
+        # held-scale baseline's 1.31 %, recorded in RESULTS as a miss; not yet understood.
+        return [Check("w6 beats the held-scale monocular baseline (quick: scaled segments)", t < tm,
+                      f"{t:.2f} % vs {tm:.2f} %", known_miss=ctx.split == "test")]
     t, r = p["w6"]["t_pct"], p["w6"]["r_degm"]
     others = {m: p[m]["t_pct"] for m in OURS if m in p and m != "w6"}
     return [Check(f"w6 pooled translation error ≤ {TARGET_T_PCT} % ({ctx.split})", t <= TARGET_T_PCT, f"{t:.3f} %"),

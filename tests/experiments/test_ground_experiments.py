@@ -40,7 +40,8 @@ def test_ground_scale_quick(tmp_path):
     assert len(dv) == 10 and all(0.0 < v < 0.5 for v in dv)
 
 
-# w6 beats the held-scale monocular baseline on both splits; trajectories are per-trial arrays; the quick
+# w6 beats the held-scale monocular baseline on dev (on the held-out quick route it is a recorded
+# miss, which the run reports as "missed", never as a pass); trajectories are per-trial arrays; the quick
 # report has no empty (nan) columns: a 54 m route has no 100 m KITTI segment.
 @pytest.mark.slow
 @pytest.mark.parametrize("split", ["dev", "test"])
@@ -49,7 +50,7 @@ def test_ground_odometry_quick(tmp_path, split):
 
     res = _run("ground_odometry", tmp_path, split)
     row = next(r for r in res.table if r["method"] == "w6")
-    assert row["split"] == split and row["route"] == {"dev": "terrain_00", "test": "test_random_0"}[split]
+    assert row["split"] == split and row["route_used"] == {"dev": "terrain_00", "test": "test_random_0"}[split]
     w6 = next(p for p in (tmp_path / "trials").iterdir() if (p / "trajectories.npz").is_file() and
               "oracle" in np.load(p / "trajectories.npz").files)
     z = np.load(w6 / "trajectories.npz")

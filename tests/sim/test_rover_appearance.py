@@ -141,7 +141,7 @@ def test_bad_appearance_specs_raise():
 def test_appearance_randomization_wrapper():
     import gymnasium as gym
 
-    from polar_sim.envs.wrappers import AppearanceRandomization
+    from polar_sim.envs.appearance import AppearanceRandomization
 
     env = AppearanceRandomization(gym.make("polar_sim/RoverDrive-v0", camera_size=(160, 48), supersample=False),
                                   families=["checker", "stripes"])
