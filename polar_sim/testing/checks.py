@@ -3,9 +3,10 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import hashlib
 import os
-import pickle
 import subprocess
 import sys
 import tempfile
@@ -74,6 +75,17 @@ def _flatten(x, out=None):
             if k not in TIMING_FIELDS:
                 _flatten(getattr(x, k), out)
     return out
+
+
+def _digest(x):
+    """SHA-256 of a result's flattened arrays (dtype, shape, bytes; timing fields left out): what
+    a subprocess prints so that its result is compared bit for bit without pickling it."""
+    h = hashlib.sha256()
+    for a in _flatten(x):
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes() if a.dtype.kind not in "OUS" else repr(a.tolist()).encode())
+    return h.hexdigest()
 
 
 def _same(a, b):
@@ -244,16 +256,16 @@ def _module_contract_checks(name, case_builder):
             assert _same(getattr(a, c.query[0])(*c.query[1]), getattr(b, c.query[0])(*c.query[1])), "queries differ"
 
     def across_processes():
-        code = (f"import pickle,sys; from polar_sim.testing.checks import _module_outputs; "
-                f"sys.stdout.buffer.write(pickle.dumps(_module_outputs({name!r})))")
+        code = (f"from polar_sim.testing.checks import _digest, _module_outputs; "
+                f"print(_digest(_module_outputs({name!r})))")
         outs = []
         for _ in range(2):
-            r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=600,
+            r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
                                env=dict(os.environ, PYTHONHASHSEED="random"))
-            assert r.returncode == 0, r.stderr.decode()[-2000:]
-            outs.append(pickle.loads(r.stdout))
-        assert _same(outs[0], outs[1]), "two processes gave different outputs for the same seed and data"
-        assert _same(outs[0], _module_outputs(name)), "a subprocess and this process gave different outputs"
+            assert r.returncode == 0, r.stderr[-2000:]
+            outs.append(r.stdout.strip().splitlines()[-1])
+        assert outs[0] == outs[1], "two processes gave different outputs for the same seed and data"
+        assert outs[0] == _digest(_module_outputs(name)), "a subprocess and this process gave different outputs"
 
     def reset_replay():
         m = fresh()
@@ -264,10 +276,10 @@ def _module_contract_checks(name, case_builder):
         assert not learned, f"reset() kept learned attributes {learned}"
         assert _same(feed(m), feed(fresh())), "reset() then replay differs from a fresh instance"
 
-    def pickles():
+    def copies():
         m = fresh()
         ra = feed(m)
-        m2 = pickle.loads(pickle.dumps(m))
+        m2 = copy.deepcopy(m)
         c = case()
         if c.query is not None:
             assert _same(getattr(m, c.query[0])(*c.query[1]), getattr(m2, c.query[0])(*c.query[1]))
@@ -293,7 +305,7 @@ def _module_contract_checks(name, case_builder):
             ("query_before_update_raises", query_before_update), ("query_is_pure", query_pure),
             ("outputs_do_not_alias_inputs", outputs_do_not_alias_inputs),
             ("same_seed_same_output", same_seed_same_output), ("same_output_across_processes", across_processes),
-            ("reset_then_replay", reset_replay), ("pickles_in_memory", pickles), ("saves_without_pickle", saves_without_pickle)]
+            ("reset_then_replay", reset_replay), ("deep_copies", copies), ("saves_without_pickle", saves_without_pickle)]
 
 
 def _module_outputs(name):
@@ -367,11 +379,12 @@ def check_polar_env(env_id, *, n_steps=5, n_bad=None, isolate=True):
         assert _same(_rollout(env_id, 7, n_steps), _rollout(env_id, 7, n_steps)), "same seed, different rollouts"
 
     def across_processes():
-        code = (f"import pickle,sys; from polar_sim.testing.checks import _rollout; "
-                f"sys.stdout.buffer.write(pickle.dumps(_rollout({env_id!r}, 7, {n_steps})))")
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=900)
-        assert r.returncode == 0, r.stderr.decode()[-2000:]
-        assert _same(pickle.loads(r.stdout), _rollout(env_id, 7, n_steps)), "a subprocess gave a different rollout"
+        code = (f"from polar_sim.testing.checks import _digest, _rollout; "
+                f"print(_digest(_rollout({env_id!r}, 7, {n_steps})))")
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert r.stdout.strip().splitlines()[-1] == _digest(_rollout(env_id, 7, n_steps)), \
+            "a subprocess gave a different rollout"
 
     def obs_in_space():
         env = _make_env(env_id)
