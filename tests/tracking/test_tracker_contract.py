@@ -5,7 +5,7 @@ The reference (``tracker_reference.json``) was recorded by ``python tests/tracki
 with the tracker as it was before the change (commit 49bebcb, constructor building the model and the
 filter): per frame the pose and covariance as exact float hex strings, SHA-1 digests of the
 mask, probability, raw probability and label maps, and the scalar outputs, for four configurations
-on synthetic RGB-D (float results of one platform: x86-64, the project's pinned numpy/numba/OpenCV).
+on synthetic RGB-D (recorded on one x86-64 machine; compared to within float round-off, see below).
 """
 
 import hashlib
@@ -71,21 +71,32 @@ def reference():
     return ref["cases"]
 
 
-# ww_640 matched bit for bit where the reference was recorded, but diverged at frame 7 in a fresh CI
-# install (other numpy/OpenCV wheels): the reference is exact only within one environment. It is an
-# expected failure until the reference is re-derived per environment; the 320x240 cases stay exact.
-_UNPORTABLE = {"ww_640"}
+# The floats are compared to within round-off, not bit for bit: on another CPU (another BLAS kernel)
+# the poses differ by 1e-18 to 7e-15 from the recording. The tolerances are far below any change of
+# behaviour (a changed correspondence moves a pose by ~1e-4). Discrete outputs (masks, labels, counts,
+# flags, ROIs) stay exact, and so do the probability maps, except in ww_640, where one frame's maps
+# changed with a 7e-15 change of the pose on the second machine tried.
+_FLOATS = {"pose": 1e-9, "covariance": 1e-9, "pose_filtered": 1e-9, "fitness": 1e-9, "inlier_rmse": 1e-9,
+           "gamma": 1e-9}
+_PROB_EXACT_EXCEPT = {"ww_640"}
 
 
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(
-    reason="bit-exact only in the recording environment", strict=False)) if c[0] in _UNPORTABLE else c
-    for c in CASES], ids=[c[0] for c in CASES])
+def _close(g, w, tol):
+    g = np.array([float.fromhex(x) for x in (g if isinstance(g, list) else [g])])
+    w = np.array([float.fromhex(x) for x in (w if isinstance(w, list) else [w])])
+    return g.shape == w.shape and np.allclose(g, w, rtol=tol, atol=tol)
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_results_match_the_recorded_run_of_the_previous_code(reference, case):
-    # every output of every frame is identical to the run recorded before the module contract
+    # every output of every frame equals the run recorded before the module contract (floats to round-off)
     got, want = _run(case), reference[case[0]]
     assert len(got) == len(want)
+    loose = {"prob", "prob_raw"} if case[0] in _PROB_EXACT_EXCEPT else set()
     for i, (g, w) in enumerate(zip(got, want)):
-        assert g == w, (case[0], i, {k for k in g if g[k] != w[k]})
+        assert g.keys() == w.keys()
+        bad = {k for k in g if k not in loose and (not _close(g[k], w[k], _FLOATS[k]) if k in _FLOATS else g[k] != w[k])}
+        assert not bad, (case[0], i, bad)
 
 
 @pytest.fixture(scope="module")
