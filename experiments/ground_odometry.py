@@ -22,20 +22,12 @@ TARGET_T_PCT, TARGET_R_DEGM, TARGET_MS = 2.0, 0.01, 15.0
 OURS = ("u2", "w2", "u6", "w6", "mono")
 
 
-def _scores(gt, est, prefix=""):
-    from polar_sim import metrics
-
-    t, r = metrics.kitti_errors(gt, est)
-    ts, rs = metrics.kitti_errors(gt, est, lengths=metrics.scaled_lengths(gt))
-    return {f"{prefix}t_pct": t, f"{prefix}r_degm": r, f"{prefix}n_segments": len(metrics.kitti_segment_errors(gt, est)),
-            f"{prefix}t_pct_scaled": ts, f"{prefix}r_degm_scaled": rs, f"{prefix}ate_m": metrics.ate(gt, est)}
-
-
 def trial(params, seed, ctx):
     G.single_thread()
     from polar_sim import metrics
     from polar_sim.ground.integration import integrate
     from polar_sim.ground.replay import replay
+    from polar_sim.metrics.ground import kitti_scores as _scores
     from polar_sim.metrics.ground import laplace_scale, oracle_step_speeds
 
     rec, tr = G.load(params, ctx)
@@ -66,8 +58,8 @@ def trial(params, seed, ctx):
 
 
 def _pooled(table, ctx):
-    """{label: (t %, deg/m, t % scaled, deg/m scaled)} pooled over every route of the table."""
-    from polar_sim import metrics
+    """{label: dict(method, routes, t %, deg/m, t % scaled, deg/m scaled, CPU)} pooled over every route."""
+    from polar_sim.metrics.ground import kitti_scores_pooled
 
     pairs = {}
     for r in table:
@@ -75,15 +67,9 @@ def _pooled(table, ctx):
         for key, lab in (("est", r["method"]), ("planar", r["method"] + " planar"), ("oracle", "oracle scale")):
             if key in z:
                 pairs.setdefault(lab, []).append((z["gt"], z[key]))
-    out = {}
-    for lab, ps in pairs.items():
-        t, rr = metrics.kitti_errors_pooled(ps)
-        rec = np.concatenate([metrics.kitti_segment_errors(g, e, lengths=metrics.scaled_lengths(g)) for g, e in ps])
-        cpu = [r["cpu_ms_median"] for r in table if r["method"] == lab]
-        out[lab] = dict(method=lab, routes=len(ps), t_pct=t, r_degm=rr, t_pct_scaled=100 * float(np.mean(rec["t_err"])),
-                        r_degm_scaled=float(np.degrees(np.mean(rec["r_err"]))),
-                        cpu_ms_median=float(np.median(cpu)) if cpu else None)
-    return out
+    cpu = {lab: [r["cpu_ms_median"] for r in table if r["method"] == lab] for lab in pairs}
+    return {lab: dict(method=lab, **kitti_scores_pooled(ps), cpu_ms_median=float(np.median(cpu[lab])) if cpu[lab] else None)
+            for lab, ps in pairs.items()}
 
 
 def summarize(table, ctx):
