@@ -73,11 +73,6 @@ def _pooled(table, ctx):
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     pooled = list(_pooled(table, ctx).values())
     cols = ["method", "routes", "t_pct", "r_degm", "t_pct_scaled", "r_degm_scaled", "cpu_ms_median"]
     rcols = ["route", "method", "length_m", "t_pct", "r_degm", "planar_t_pct", "t_pct_scaled", "r_degm_scaled", "ate_m",
@@ -89,19 +84,9 @@ def summarize(table, ctx):
              "same estimates integrated in the plane. CPU: median ms of `process` per 621x188 frame, one thread.",
              "", G.table(pooled, cols), "", "Per route:", "", G.table(rows, rcols), ""]
     key = "t_pct_scaled" if ctx.quick else "t_pct"
-    routes, meths = sorted({r["route"] for r in table}), sorted({r["method"] for r in table})
-    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(routes) + 3), 3.6))
-    w = 0.8 / len(meths)
-    for j, m in enumerate(meths):
-        v = [next((r[key] for r in table if r["route"] == rt and r["method"] == m), np.nan) for rt in routes]
-        ax.bar(np.arange(len(routes)) + (j - (len(meths) - 1) / 2) * w, v, w, label=m)
-    ax.axhline(TARGET_T_PCT, color="k", ls="--", lw=0.8, label=f"target {TARGET_T_PCT} %")
-    ax.set_xticks(np.arange(len(routes)), routes, rotation=30, ha="right", fontsize=8)
-    ax.set_yscale("log")
-    ax.set_ylabel("translation error (%)" + (", scaled segments" if ctx.quick else ", 100–800 m segments"))
-    ax.set_title(f"KITTI translation error per route ({ctx.split} split, simulated routes)", fontsize=9)
-    ax.legend(fontsize=7, ncol=3)
-    ax.grid(alpha=0.3, axis="y")
+    fig = G.plot_per_route(table, key, TARGET_T_PCT, "translation error (%)" + (
+        ", scaled segments" if ctx.quick else ", 100–800 m segments"),
+        f"KITTI translation error per route ({ctx.split} split, simulated routes)")
     lines += [savefig(fig, ctx.out_dir, "ground_odometry_errors")]
     return "\n".join(lines)
 
