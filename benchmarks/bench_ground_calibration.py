@@ -12,7 +12,7 @@ Scored against the true ground mask on the settled frames of ``dev`` routes only
 start, outside [-40 m, +10 m] of every zone boundary, as ``ground_appearance``): IoU of P > 0.5 and
 ECE (15 bins, every 2nd pixel), per route and pooled. No test route is ever loaded.
 
-Usage: python benchmarks/bench_ground_calibration.py [--frames 400] [--routes dev_speckle,...] [--json FILE]
+Usage: python benchmarks/bench_ground_calibration.py [--frames 300] [--routes dev_speckle,...] [--json FILE]
 """
 
 import argparse
@@ -56,13 +56,13 @@ def sweep_route(name, frames):
     if name not in SPLITS["dev"]:
         raise ValueError(f"routes: {name!r} is not a dev route (the sweep never loads test routes)")
     cv2.setNumThreads(1)
-    rec = load_route(name)
+    rec = load_route(name, max_frames=frames)  # the first ``frames`` images (recorded as such, once)
     tr, z = route_truth(rec), route_zones(rec, BEFORE_M)
     t, prog = tr["t"], z["progress"]
     settled = (t - t[0]) >= WARMUP_S
     for b in z["boundaries"]:
         settled &= ~((prog >= b - BEFORE_M) & (prog <= b + AFTER_M))
-    n = min(frames, len(rec))
+    n = len(rec)
     pairs = list(itertools.product(DECAYS, PRIORS))
     out = {}
     for win in WINDOWS:
@@ -93,7 +93,7 @@ def main():
     from polar_sim.metrics.ground import pooled_reliability
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=400, help="first frames of each route (default 400)")
+    ap.add_argument("--frames", type=int, default=300, help="first frames of each route (default 300)")
     ap.add_argument("--routes", default=",".join(ROUTES))
     ap.add_argument("--json", default=None)
     a = ap.parse_args()
