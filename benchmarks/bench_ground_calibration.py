@@ -45,6 +45,17 @@ class FanOut:
         return self.cals[self.primary].transform(z)
 
 
+def w6_dev_best(K, camera_height, *, seed=0, **params):
+    """A ``vo`` plug-in: w6 with the calibration settings this sweep found best on dev (window 7, decay
+    0.99, prior weight 5), for ``polar-sim run ground_appearance --set
+    method=[benchmarks.bench_ground_calibration:w6_dev_best]`` (run from the repository root)."""
+    from polar_sim.ground import GroundVO
+
+    params.setdefault("downsample", 1)
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calib_window=7,
+                    calib_decay=0.99, calib_prior_weight=5.0, **params)
+
+
 def sweep_route(name, frames):
     import cv2
 

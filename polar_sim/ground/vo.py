@@ -218,6 +218,9 @@ class GroundVO(Parameterised):
         weighting its draws by the uncalibrated single-pixel posterior of the spec.
     calib_window : int, default=7
         Side (processed px, odd) of the window the log-odds are averaged over before calibration.
+    calib_decay, calib_prior_weight : float, default=0.85, 50
+        The calibrator's per-update decay of old self-labels (0..1) and the weight (samples) of its
+        prior toward the identity map (:class:`~polar_sim.ground.calibration.PlattCalibrator`).
     train_depth : float, optional
         Ground inliers farther than this (m, flat-ground depth h / v in the level frame) do not train
         the ground colour (default 30; "off" and under "code": no limit): near the horizon any point
@@ -235,7 +238,8 @@ class GroundVO(Parameterised):
                  speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15, speed_r=3.0, yaw_prior=0.0,
                  yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None, depth_r=None, depth_p_reset=None,
                  alpha=0.7, ground_prior=0.2, ng_from_outliers=None, horizon_row=None, camera_pitch=0.0,
-                 integration="planar", calibration=None, calib_window=7, train_depth=None, decay_samples=None,
+                 integration="planar", calibration=None, calib_window=7, calib_decay=0.85, calib_prior_weight=50.0,
+                 train_depth=None, decay_samples=None,
                  hue_wrap="fixed", ransac_draw="fixed", track_gates="fixed", filters="fixed", depth_fusion="fixed",
                  ground_labels="fixed", pose_steps="fixed"):
         self.K = K
@@ -280,6 +284,8 @@ class GroundVO(Parameterised):
         self.integration = integration
         self.calibration = calibration
         self.calib_window = calib_window
+        self.calib_decay = calib_decay
+        self.calib_prior_weight = calib_prior_weight
         self.train_depth = train_depth
         self.decay_samples = decay_samples
         self.hue_wrap = hue_wrap
@@ -385,6 +391,8 @@ class GroundVO(Parameterised):
         c["calibration"] = ("none" if code else "platt") if self.calibration is None else check_choice(
             self.calibration, ("platt", "none"), "calibration")
         c["calib_window"] = as_int(self.calib_window, "calib_window", minimum=1)
+        c["calib_decay"] = as_unit_interval(self.calib_decay, "calib_decay")
+        c["calib_prior_weight"] = as_positive_float(self.calib_prior_weight, "calib_prior_weight", allow_zero=True)
         # None picks the default of the mode; under "code" the published behaviour (no limit, per-update decay).
         # None: the mode's default; "off": the spec's behaviour (no depth limit; decay by alpha per update).
         for name, default in (("train_depth", 30.0), ("decay_samples", 450.0)):
@@ -435,7 +443,7 @@ class GroundVO(Parameterised):
         self.prev_labels_ = None
         self.prev_prob_ = None
         self.prev_score_ = None
-        self.calibrator_ = PlattCalibrator()
+        self.calibrator_ = PlattCalibrator(decay=c["calib_decay"], prior_weight=c["calib_prior_weight"])
         self.rates_ = np.zeros(3)
 
     def reset(self):

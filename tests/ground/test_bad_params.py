@@ -25,3 +25,20 @@ def test_the_bounds_themselves_are_accepted(h):
 def test_a_model_that_is_not_a_string_names_model(model):
     with pytest.raises((TypeError, ValueError), match="model"):
         GroundVO(K, 1.0, model=model)
+
+
+@pytest.mark.parametrize("kw, name", [(dict(calib_decay=1.5), "calib_decay"), (dict(calib_decay=-0.1), "calib_decay"),
+                                      (dict(calib_prior_weight=-1.0), "calib_prior_weight"),
+                                      (dict(calib_prior_weight="5"), "calib_prior_weight")])
+def test_bad_calibration_settings_name_the_parameter(kw, name):
+    with pytest.raises((TypeError, ValueError), match=name):
+        GroundVO(K, 1.0, **kw)
+
+
+def test_the_calibration_settings_reach_the_calibrator():
+    vo = GroundVO(K, 1.0, calib_decay=0.5, calib_prior_weight=7.0)
+    vo.process(np.zeros((120, 160, 3), np.uint8), 0.0)
+    assert vo.calibrator_.decay == 0.5 and vo.calibrator_.prior_weight == 7.0
+    vo = GroundVO(K, 1.0)
+    vo.process(np.zeros((120, 160, 3), np.uint8), 0.0)
+    assert vo.calibrator_.decay == 0.85 and vo.calibrator_.prior_weight == 50.0  # the defaults
