@@ -2,7 +2,8 @@
 
 The calibration (``polar_sim.ground.calibration.PlattCalibrator`` inside ``GroundVO``) has three
 settings: the log-odds window ``calib_window`` (a GroundVO parameter), and the calibrator's per-update
-``decay`` and ``prior_weight`` (0.85 and 50 by default). The calibration does not feed back into the
+``decay`` and ``prior_weight`` (GroundVO's ``calib_decay``/``calib_prior_weight``: 0.85 and 50 when
+this sweep was run, 0.99 and 5 since, the sweep's best). The calibration does not feed back into the
 VO (RANSAC weights its draws by the uncalibrated posterior), so one replay per route and window
 drives every (decay, prior_weight) pair at once: the VO's calibrator is replaced after the first
 image by a fan-out that updates one calibrator per pair with the same self-labels and returns the
@@ -25,7 +26,7 @@ import numpy as np
 WINDOWS = (1, 3, 7, 15)
 DECAYS = (0.5, 0.7, 0.85, 0.95, 0.99)
 PRIORS = (5.0, 20.0, 50.0, 200.0, 1000.0)
-DEFAULT = (7, 0.85, 50.0)
+DEFAULT = (7, 0.85, 50.0)  # the GroundVO default when the sweep was run (the fan-out's primary)
 ROUTES = ("dev_speckle", "dev_gravel", "dev_grass", "dev_blotches", "terrain_00")
 WARMUP_S, BEFORE_M, AFTER_M = 5.0, 40.0, 10.0
 

@@ -218,9 +218,10 @@ class GroundVO(Parameterised):
         weighting its draws by the uncalibrated single-pixel posterior of the spec.
     calib_window : int, default=7
         Side (processed px, odd) of the window the log-odds are averaged over before calibration.
-    calib_decay, calib_prior_weight : float, default=0.85, 50
+    calib_decay, calib_prior_weight : float, default=0.99, 5
         The calibrator's per-update decay of old self-labels (0..1) and the weight (samples) of its
-        prior toward the identity map (:class:`~polar_sim.ground.calibration.PlattCalibrator`).
+        prior toward the identity map (:class:`~polar_sim.ground.calibration.PlattCalibrator`). Chosen
+        on dev routes only (``benchmarks/bench_ground_calibration.py``; 0.85 and 50 before).
     train_depth : float, optional
         Ground inliers farther than this (m, flat-ground depth h / v in the level frame) do not train
         the ground colour (default 30; "off" and under "code": no limit): near the horizon any point
@@ -238,7 +239,7 @@ class GroundVO(Parameterised):
                  speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15, speed_r=3.0, yaw_prior=0.0,
                  yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None, depth_r=None, depth_p_reset=None,
                  alpha=0.7, ground_prior=0.2, ng_from_outliers=None, horizon_row=None, camera_pitch=0.0,
-                 integration="planar", calibration=None, calib_window=7, calib_decay=0.85, calib_prior_weight=50.0,
+                 integration="planar", calibration=None, calib_window=7, calib_decay=0.99, calib_prior_weight=5.0,
                  train_depth=None, decay_samples=None,
                  hue_wrap="fixed", ransac_draw="fixed", track_gates="fixed", filters="fixed", depth_fusion="fixed",
                  ground_labels="fixed", pose_steps="fixed"):

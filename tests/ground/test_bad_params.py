@@ -41,4 +41,4 @@ def test_the_calibration_settings_reach_the_calibrator():
     assert vo.calibrator_.decay == 0.5 and vo.calibrator_.prior_weight == 7.0
     vo = GroundVO(K, 1.0)
     vo.process(np.zeros((120, 160, 3), np.uint8), 0.0)
-    assert vo.calibrator_.decay == 0.85 and vo.calibrator_.prior_weight == 50.0  # the defaults
+    assert vo.calibrator_.decay == 0.99 and vo.calibrator_.prior_weight == 5.0  # the defaults (dev sweep)
