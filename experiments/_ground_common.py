@@ -220,3 +220,27 @@ def plot_probability_maps(path, rec, probs, captions, iou):
     fig.colorbar(im, ax=axes[:, 1], fraction=0.02, label="P(ground)")
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
+
+
+def plot_per_route(table, key, target, ylabel, title):
+    """A bar chart (log scale) of ``key`` per route, one bar per method, with the target as a dashed line;
+    returns the figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    routes, meths = sorted({r["route"] for r in table}), sorted({r["method"] for r in table})
+    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(routes) + 3), 3.6))
+    w = 0.8 / len(meths)
+    for j, m in enumerate(meths):
+        v = [next((r[key] for r in table if r["route"] == rt and r["method"] == m), np.nan) for rt in routes]
+        ax.bar(np.arange(len(routes)) + (j - (len(meths) - 1) / 2) * w, v, w, label=m)
+    ax.axhline(target, color="k", ls="--", lw=0.8, label=f"target {target} %")
+    ax.set_xticks(np.arange(len(routes)), routes, rotation=30, ha="right", fontsize=8)
+    ax.set_yscale("log")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, ncol=3)
+    ax.grid(alpha=0.3, axis="y")
+    return fig

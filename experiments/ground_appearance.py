@@ -28,33 +28,31 @@ DEV_ROUTES = ("terrain_00", "terrain_04", "flat_00", "flat_02") + G.DEV_FAMILY_R
 def trial(params, seed, ctx):
     G.single_thread()
     from polar_sim.ground.replay import replay
-    from polar_sim.metrics.ground import classifier_iou, reliability_counts
-    from polar_sim.sim.rover_sequences import route_zones
+    from polar_sim.metrics.ground import class_prob_sums, classifier_iou, reliability_counts
+    from polar_sim.sim.rover_sequences import settled_frames
 
     rec, tr = G.load(params, ctx)
-    z = route_zones(rec, BEFORE_M)
-    t, prog, n = tr["t"], z["progress"], len(rec)
-    settled = (t - t[0]) >= WARMUP_S
-    for b in z["boundaries"]:
-        settled &= ~((prog >= b - BEFORE_M) & (prog <= b + AFTER_M))
+    t, n = tr["t"], len(rec)
+    settled, z = settled_frames(rec, t, warmup_s=WARMUP_S, before_m=BEFORE_M, after_m=AFTER_M)
     pics = {}  # the middle settled frame of each zone
     for k, name in enumerate(G.family_names(rec)):
         idx = np.flatnonzero(settled & (z["zone"] == k))
         if len(idx) >= 10:
             pics[int(idx[len(idx) // 2])] = name
-    iou, bins, probs = np.full(n, np.nan), np.zeros((n, 3, 15)), {}
+    iou, bins, psums, probs = np.full(n, np.nan), np.zeros((n, 3, 15)), np.zeros((n, 4)), {}
 
     def score(i, f, e, prev):
         iou[i] = classifier_iou(e.ground_prob, f["ground_mask"])
         bins[i] = reliability_counts(e.ground_prob[::2, ::2], f["ground_mask"][::2, ::2])
+        psums[i] = class_prob_sums(e.ground_prob[::2, ::2], f["ground_mask"][::2, ::2])
         if i in pics:
             probs[i] = e.ground_prob.copy()
 
     replay(get_method("vo", params["method"])(tr["K"], tr["h"], seed=seed,
                                               **({"downsample": 1} if params["method"] in ("w6", "u6", "w6_nocal") else {})),
            rec.frames(keys=("rgb", "t", "ground_mask")), on_frame=score)
-    ctx.save_arrays("series", t=t, iou=iou, settled=settled, zone=z["zone"], progress=prog, boundaries=z["boundaries"],
-                    bins=bins, families=np.array(G.family_names(rec)))
+    ctx.save_arrays("series", t=t, iou=iou, settled=settled, zone=z["zone"], progress=z["progress"],
+                    boundaries=z["boundaries"], bins=bins, psums=psums, families=np.array(G.family_names(rec)))
     G.plot_probability_maps(ctx.out_dir / "probability_maps.png", rec, probs, pics, iou)
     s = settled & np.isfinite(iou)
     after = (t - t[0]) >= WARMUP_S
@@ -74,17 +72,13 @@ def _ece(b):
 
 
 def _families(table, ctx, method):
-    """{family: (n settled frames, mean IoU, summed bins)} over the settled frames of every zone."""
-    fam = {}
-    for r in [r for r in table if r["method"] == method]:
-        a = ctx.arrays(r, "series")
-        for k, name in enumerate(a["families"]):
-            m = a["settled"] & (a["zone"] == k) & np.isfinite(a["iou"])
-            if m.sum():
-                f = fam.setdefault(str(name), [[], np.zeros((3, 15))])
-                f[0].append(a["iou"][m])
-                f[1] += a["bins"][m].sum(axis=0)
-    return {k: (len(np.concatenate(v[0])), float(np.mean(np.concatenate(v[0]))), v[1]) for k, v in sorted(fam.items())}
+    """{family: (n settled frames, mean IoU, summed bins, mean P on ground / non-ground)} (settled frames)."""
+    from polar_sim.metrics.ground import class_mean_prob_bounds, pool_by_family
+
+    fams = pool_by_family(ctx.arrays(r, "series") for r in table if r["method"] == method)
+    return {k: (f["frames"], f["iou_mean"], f["bins"], (f["psums"][0] / f["psums"][1], f["psums"][2] / f["psums"][3])
+                if f["psums"] is not None else tuple(class_mean_prob_bounds(*f["bins"])[c][0] for c in ("ground", "nonground")))
+            for k, f in fams.items()}
 
 
 def summarize(table, ctx):
@@ -99,20 +93,22 @@ def summarize(table, ctx):
     lines = [f"Split `{ctx.split}`, size `{ctx.size}`. Settled frames: ≥ {WARMUP_S:.0f} s after the start, outside "
              f"[−{BEFORE_M:.0f} m, +{AFTER_M:.0f} m] of each zone boundary. IoU: P(ground) > 0.5 against the true "
              "ground mask (whole image); ECE: 15 bins, every 2nd pixel of the settled frames. Per family (settled "
-             "frames of all its zones pooled):", ""]
+             "frames of all its zones pooled; `p_ground`/`p_nonground`: mean P(ground) on true ground / non-ground "
+             "pixels, from the bins' mean confidence (±1/15) in runs that saved no per-class sums):", ""]
     rels = {}
     for m in sorted({r["method"] for r in table}):
         fams = _families(table, ctx, m)
-        rows = [dict(method=m, family=k, frames=n, iou_mean=iou, ece=pooled_reliability(*b).ece) for k, (n, iou, b) in fams.items()]
+        rows = [dict(method=m, family=k, frames=n, iou_mean=iou, ece=pooled_reliability(*b).ece, p_ground=pm[0],
+                     p_nonground=pm[1]) for k, (n, iou, b, pm) in fams.items()]
         if rows:
             wi, we = min(rows, key=lambda r: r["iou_mean"]), max(rows, key=lambda r: r["ece"])
             rows.append(dict(method=m, family=f"worst (IoU: {wi['family']}; ECE: {we['family']})",
                              iou_mean=wi["iou_mean"], ece=we["ece"]))
-            allb = sum(b for _, _, b in fams.values())
-            rows.append(dict(method=m, family="all (pooled)", frames=sum(n for n, _, _ in fams.values()),
+            allb = sum(f[2] for f in fams.values())
+            rows.append(dict(method=m, family="all (pooled)", frames=sum(f[0] for f in fams.values()),
                              ece=pooled_reliability(*allb).ece))
-            rels[m] = {k: pooled_reliability(*b) for k, (_, _, b) in fams.items()}
-        lines += [G.table(rows, ["method", "family", "frames", "iou_mean", "ece"]), ""]
+            rels[m] = {k: pooled_reliability(*f[2]) for k, f in fams.items()}
+        lines += [G.table(rows, ["method", "family", "frames", "iou_mean", "ece", "p_ground", "p_nonground"]), ""]
     cols = ["route", "method", "families", "n_settled", "iou_settled_mean", "iou_settled_p10", "share_settled_ge_target",
             "ece_settled", "iou_transition_mean", "iou_all_mean"]
     lines += ["Per route:", "", G.table(sorted(table, key=lambda r: (r["route"], r["method"])), cols), ""]
@@ -132,7 +128,7 @@ def checks(table, ctx):
     if not fams:
         return []
     worst = min(fams, key=lambda k: fams[k][1])
-    allb = sum(b for _, _, b in fams.values())
+    allb = sum(f[2] for f in fams.values())
     ece = pooled_reliability(*allb).ece
     worst_ece = max(fams, key=lambda k: pooled_reliability(*fams[k][2]).ece)
     q = " (quick: one zone of one route)" if ctx.quick else ""

@@ -22,20 +22,12 @@ TARGET_T_PCT, TARGET_R_DEGM, TARGET_MS = 2.0, 0.01, 15.0
 OURS = ("u2", "w2", "u6", "w6", "mono")
 
 
-def _scores(gt, est, prefix=""):
-    from polar_sim import metrics
-
-    t, r = metrics.kitti_errors(gt, est)
-    ts, rs = metrics.kitti_errors(gt, est, lengths=metrics.scaled_lengths(gt))
-    return {f"{prefix}t_pct": t, f"{prefix}r_degm": r, f"{prefix}n_segments": len(metrics.kitti_segment_errors(gt, est)),
-            f"{prefix}t_pct_scaled": ts, f"{prefix}r_degm_scaled": rs, f"{prefix}ate_m": metrics.ate(gt, est)}
-
-
 def trial(params, seed, ctx):
     G.single_thread()
     from polar_sim import metrics
     from polar_sim.ground.integration import integrate
     from polar_sim.ground.replay import replay
+    from polar_sim.metrics.ground import kitti_scores as _scores
     from polar_sim.metrics.ground import laplace_scale, oracle_step_speeds
 
     rec, tr = G.load(params, ctx)
@@ -66,8 +58,8 @@ def trial(params, seed, ctx):
 
 
 def _pooled(table, ctx):
-    """{label: (t %, deg/m, t % scaled, deg/m scaled)} pooled over every route of the table."""
-    from polar_sim import metrics
+    """{label: dict(method, routes, t %, deg/m, t % scaled, deg/m scaled, CPU)} pooled over every route."""
+    from polar_sim.metrics.ground import kitti_scores_pooled
 
     pairs = {}
     for r in table:
@@ -75,23 +67,12 @@ def _pooled(table, ctx):
         for key, lab in (("est", r["method"]), ("planar", r["method"] + " planar"), ("oracle", "oracle scale")):
             if key in z:
                 pairs.setdefault(lab, []).append((z["gt"], z[key]))
-    out = {}
-    for lab, ps in pairs.items():
-        t, rr = metrics.kitti_errors_pooled(ps)
-        rec = np.concatenate([metrics.kitti_segment_errors(g, e, lengths=metrics.scaled_lengths(g)) for g, e in ps])
-        cpu = [r["cpu_ms_median"] for r in table if r["method"] == lab]
-        out[lab] = dict(method=lab, routes=len(ps), t_pct=t, r_degm=rr, t_pct_scaled=100 * float(np.mean(rec["t_err"])),
-                        r_degm_scaled=float(np.degrees(np.mean(rec["r_err"]))),
-                        cpu_ms_median=float(np.median(cpu)) if cpu else None)
-    return out
+    cpu = {lab: [r["cpu_ms_median"] for r in table if r["method"] == lab] for lab in pairs}
+    return {lab: dict(method=lab, **kitti_scores_pooled(ps), cpu_ms_median=float(np.median(cpu[lab])) if cpu[lab] else None)
+            for lab, ps in pairs.items()}
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     pooled = list(_pooled(table, ctx).values())
     cols = ["method", "routes", "t_pct", "r_degm", "t_pct_scaled", "r_degm_scaled", "cpu_ms_median"]
     rcols = ["route", "method", "length_m", "t_pct", "r_degm", "planar_t_pct", "t_pct_scaled", "r_degm_scaled", "ate_m",
@@ -103,19 +84,9 @@ def summarize(table, ctx):
              "same estimates integrated in the plane. CPU: median ms of `process` per 621x188 frame, one thread.",
              "", G.table(pooled, cols), "", "Per route:", "", G.table(rows, rcols), ""]
     key = "t_pct_scaled" if ctx.quick else "t_pct"
-    routes, meths = sorted({r["route"] for r in table}), sorted({r["method"] for r in table})
-    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(routes) + 3), 3.6))
-    w = 0.8 / len(meths)
-    for j, m in enumerate(meths):
-        v = [next((r[key] for r in table if r["route"] == rt and r["method"] == m), np.nan) for rt in routes]
-        ax.bar(np.arange(len(routes)) + (j - (len(meths) - 1) / 2) * w, v, w, label=m)
-    ax.axhline(TARGET_T_PCT, color="k", ls="--", lw=0.8, label=f"target {TARGET_T_PCT} %")
-    ax.set_xticks(np.arange(len(routes)), routes, rotation=30, ha="right", fontsize=8)
-    ax.set_yscale("log")
-    ax.set_ylabel("translation error (%)" + (", scaled segments" if ctx.quick else ", 100–800 m segments"))
-    ax.set_title(f"KITTI translation error per route ({ctx.split} split, simulated routes)", fontsize=9)
-    ax.legend(fontsize=7, ncol=3)
-    ax.grid(alpha=0.3, axis="y")
+    fig = G.plot_per_route(table, key, TARGET_T_PCT, "translation error (%)" + (
+        ", scaled segments" if ctx.quick else ", 100–800 m segments"),
+        f"KITTI translation error per route ({ctx.split} split, simulated routes)")
     lines += [savefig(fig, ctx.out_dir, "ground_odometry_errors")]
     return "\n".join(lines)
 

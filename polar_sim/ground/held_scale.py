@@ -50,7 +50,7 @@ class HeldScaleVO(GroundVO):
         halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
         m = estimate_motion(u, v, (u2 - u0) / span, (v2 - v0) / span, n_global=c["n_global"], ridge=c["ridge"],
                             irls_iter=c["irls_iter"], estimate_foe=c["foe"],
-                            span=halves if c["exact_flow"] else None, compat=c["compat"])
+                            span=halves if c["exact_flow"] else None, compat="fixed")
         diag["irls_iterations"] = int(m.iterations)
         rates_raw = m.rates.copy()
         vi = np.flatnonzero(m.valid)

@@ -25,19 +25,26 @@ from polar_sim.ground.depth import fuse, propagate
 from polar_sim.ground.filters import KF1D
 from polar_sim.ground.image import grey, hsv216, reduce2x
 from polar_sim.ground.integration import motion_step
-from polar_sim.ground.models import GROUND_MODELS, fit_ground
+from polar_sim.ground.models import GROUND_MODELS, default_iterations, fit_ground
 from polar_sim.ground.motion import estimate_motion
+from polar_sim.params import Parameterised
 
-__all__ = ["GroundVO", "GroundEstimate", "STATUSES"]
+__all__ = ["GroundVO", "GroundEstimate", "STATUSES", "STAGES"]
 
 logger = logging.getLogger(__name__)
 
 #: Values of ``GroundEstimate.status``.
 STATUSES = ("init", "ok", "static", "no_features", "few_triplets", "no_ground")
 
+#: Stage parameters: each is "fixed" (the spec with its fixes, the default) or "published" (the published
+#: code's behaviour there, spec §10). ``GroundVO.published()`` sets all of them, with the other parameters
+#: of the published code.
+STAGES = ("hue_wrap", "ransac_draw", "track_gates", "filters", "depth_fusion", "ground_labels", "pose_steps")
+
 _MODEL_ALIASES = {"2p": "2param", "3p": "3param", "6p": "6param", "3p_code": "3param"}
 _F_REF = 359.428  # focal length (px) of the processed KITTI images the pixel thresholds were tuned on
 _H_REF = 1.68  # camera height (m) the inverse-depth variances were tuned on
+_H_RANGE = (1e-3, 1e4)  # camera heights (m) accepted
 
 
 @dataclass(frozen=True)
@@ -109,8 +116,13 @@ class GroundEstimate:
         return self.candidates[self.inlier_mask]
 
 
-class GroundVO:
+class GroundVO(Parameterised):
     """Online self-supervised ground segmentation and monocular VO for a ground vehicle.
+
+    The module contract (:class:`polar_sim.params.Parameterised`): the constructor stores its
+    parameters, ``get_params()``/``set_params()``, learned state in ``_``-suffixed attributes created
+    by the first :meth:`process`, :meth:`reset`. The published code's behaviour is the preset
+    :meth:`published` (parameters, among them the ``STAGES`` switches below).
 
     Parameters
     ----------
@@ -124,7 +136,20 @@ class GroundVO:
     sampling : {"weighted", "uniform"}, default="weighted"
         RANSAC draws in proportion to the learned ground probability, or uniformly.
     compat : {"fixed", "code"}, default="fixed"
-        "code" reproduces the published code where the spec lists a difference (§10).
+        Shortcut kept for existing callers: "code" resolves every parameter left at its default to the
+        published code's value and sets every stage below to "published"; ``GroundVO.published()`` is
+        the same behaviour spelled out as parameters (bit-identical).
+    hue_wrap, ransac_draw, track_gates, filters, depth_fusion, ground_labels, pose_steps : \
+{"fixed", "published"}, default="fixed"
+        Per stage, the spec's (fixed) behaviour or the published code's (spec §10): ``hue_wrap`` the
+        HSV hue wrap (B7: negative hues +5/6); ``ransac_draw`` the cumulative draw with redraws and raw
+        P_G weights in the 6param LS; ``track_gates`` the straightness gate without angle wrap and the
+        per-axis static test; ``filters`` the code's adaptive speed noise, resets of the filters to
+        their process noise when static, and a zero yaw measurement when motion is not solved (B10);
+        ``depth_fusion`` B5 (the raw measurement propagated, the raw RANSAC V, new tracks fused
+        against 0, the new-track variance 2 (1.68/h)²); ``ground_labels`` B8 (non-ground = tracks
+        with a negative ground count, frame-k labels), a ground pseudo-count 0.5 and a map border of
+        0.5; ``pose_steps`` semi-implicit integration and no revision of the first step (B27).
     seed : int, numpy.random.Generator or None, default=0
         RANSAC randomness. An int (or a Generator) makes every output bit-identical across runs and
         processes; None draws fresh OS entropy, so two runs differ (issue 17: the former default).
@@ -193,6 +218,10 @@ class GroundVO:
         weighting its draws by the uncalibrated single-pixel posterior of the spec.
     calib_window : int, default=7
         Side (processed px, odd) of the window the log-odds are averaged over before calibration.
+    calib_decay, calib_prior_weight : float, default=0.99, 5
+        The calibrator's per-update decay of old self-labels (0..1) and the weight (samples) of its
+        prior toward the identity map (:class:`~polar_sim.ground.calibration.PlattCalibrator`). Chosen
+        on dev routes only (``benchmarks/bench_ground_calibration.py``; 0.85 and 50 before).
     train_depth : float, optional
         Ground inliers farther than this (m, flat-ground depth h / v in the level frame) do not train
         the ground colour (default 30; "off" and under "code": no limit): near the horizon any point
@@ -210,7 +239,10 @@ class GroundVO:
                  speed_prior=0.0, speed_prior_var=25.0, speed_q=0.15, speed_r=3.0, yaw_prior=0.0,
                  yaw_prior_var=4.0, yaw_q=2.0, yaw_r=5.0, depth_q=None, depth_r=None, depth_p_reset=None,
                  alpha=0.7, ground_prior=0.2, ng_from_outliers=None, horizon_row=None, camera_pitch=0.0,
-                 integration="planar", calibration=None, calib_window=7, train_depth=None, decay_samples=None):
+                 integration="planar", calibration=None, calib_window=7, calib_decay=0.99, calib_prior_weight=5.0,
+                 train_depth=None, decay_samples=None,
+                 hue_wrap="fixed", ransac_draw="fixed", track_gates="fixed", filters="fixed", depth_fusion="fixed",
+                 ground_labels="fixed", pose_steps="fixed"):
         self.K = K
         self.camera_height = camera_height
         self.model = model
@@ -253,26 +285,62 @@ class GroundVO:
         self.integration = integration
         self.calibration = calibration
         self.calib_window = calib_window
+        self.calib_decay = calib_decay
+        self.calib_prior_weight = calib_prior_weight
         self.train_depth = train_depth
         self.decay_samples = decay_samples
+        self.hue_wrap = hue_wrap
+        self.ransac_draw = ransac_draw
+        self.track_gates = track_gates
+        self.filters = filters
+        self.depth_fusion = depth_fusion
+        self.ground_labels = ground_labels
+        self.pose_steps = pose_steps
         # Fail early on the arguments the issue names; everything else is checked in _config().
         self._config()
 
     # ------------------------------------------------------------------------------------------------
     # configuration and state
 
+    #: The published code's parameters (spec §10; ``published()`` adds the two that depend on others:
+    #: 99 RANSAC iterations for the 6param model (B18) and the speed filter's initial variance 2 q).
+    PUBLISHED = dict(weight_exponent=2.0, irls_iter=0, n_global=3, estimate_foe=False, exact_flow=False,
+                     ng_from_outliers=False, calibration="none", train_depth="off", decay_samples="off",
+                     **{k: "published" for k in STAGES})
+
+    @classmethod
+    def published(cls, K, camera_height, **overrides):
+        """A GroundVO with the published code's behaviour, as parameters (bit-identical to
+        ``compat="code"``); ``overrides`` change any of them."""
+        kw = {**cls.PUBLISHED, **overrides}
+        model = _MODEL_ALIASES.get(kw.get("model", "6param"), kw.get("model", "6param"))
+        kw.setdefault("n_iter", default_iterations(model, "code") if model in GROUND_MODELS else None)
+        kw.setdefault("speed_prior_var", 2 * kw.get("speed_q", 0.15))
+        return super().published(K, camera_height, **kw)
+
+    def _check_params(self):
+        return self._config()
+
     def _config(self):
         """Validated, resolved parameters (a dict); raises ValueError/TypeError on a bad parameter."""
         c = {}
         c["K"] = as_intrinsics(self.K, "K")
         c["h"] = as_positive_float(self.camera_height, "camera_height")
+        if not _H_RANGE[0] <= c["h"] <= _H_RANGE[1]:
+            # The noise defaults scale with (1.68 / h)^2: outside this range they over- or underflow.
+            raise ValueError(f"camera_height: expected {_H_RANGE[0]:g} to {_H_RANGE[1]:g} m, got {self.camera_height!r}")
+        if not isinstance(self.model, str):
+            raise TypeError(f"model: expected one of {', '.join(GROUND_MODELS)}, got {type(self.model).__name__}")
         model = _MODEL_ALIASES.get(self.model, self.model)
         c["model"] = check_choice(model, GROUND_MODELS, "model")
         c["sampling"] = check_choice(self.sampling, ("weighted", "uniform"), "sampling")
         c["compat"] = check_choice(self.compat, ("fixed", "code"), "compat")
         as_rng(self.seed, "seed")  # type check only; the generator is made in _build
         code = c["compat"] == "code"
-        c["n_iter"] = None if self.n_iter is None else as_int(self.n_iter, "n_iter", minimum=1)
+        for name in STAGES:  # compat="code" is every stage published
+            c[name] = "published" if code else check_choice(getattr(self, name), ("fixed", "published"), name)
+        c["n_iter"] = (default_iterations(c["model"], c["compat"]) if self.n_iter is None
+                       else as_int(self.n_iter, "n_iter", minimum=1))
         c["lam"] = as_positive_float(self.lam, "lam", allow_zero=True)
         c["sigma"] = None if self.sigma is None else as_positive_float(self.sigma, "sigma")
         c["p"] = (2.0 if code else 1.0) if self.weight_exponent is None else as_positive_float(
@@ -282,11 +350,12 @@ class GroundVO:
         c["win"] = as_int(self.klt_window, "klt_window", minimum=3)
         c["levels"] = as_int(self.klt_levels, "klt_levels", minimum=0)
         c["fb_max"] = as_positive_float(self.fb_max, "fb_max")
-        c["irls_iter"] = ((0 if code else 10) if self.irls_iter is None
-                          else as_int(self.irls_iter, "irls_iter", minimum=0))
-        c["n_global"] = check_choice(self.n_global, (1, 3), "n_global")
+        c["irls_iter"] = as_int(10 if self.irls_iter is None else self.irls_iter, "irls_iter", minimum=0)
+        if code:
+            c["irls_iter"] = 0  # B1: the published IRLS is inert
+        c["n_global"] = 3 if code else check_choice(self.n_global, (1, 3), "n_global")  # B1 under "code"
         c["ridge"] = as_positive_float(self.ridge, "ridge", allow_zero=True)
-        c["foe"] = bool(self.estimate_foe)
+        c["foe"] = bool(self.estimate_foe) and not code
         c["exact_flow"] = bool(self.exact_flow) and not code
         c["ground_warp"] = bool(self.ground_warp)
         c["min_triplets"] = as_int(self.min_triplets, "min_triplets", minimum=10)
@@ -298,6 +367,8 @@ class GroundVO:
             c[name] = float(v)
         for name in ("speed_prior_var", "speed_q", "speed_r", "yaw_prior_var", "yaw_q", "yaw_r"):
             c[name] = as_positive_float(getattr(self, name), name)
+        if code:
+            c["speed_prior_var"] = 2 * c["speed_q"]  # the code's P0 = 2 q
         hs = (_H_REF / c["h"]) ** 2
         c["depth_q"] = 0.02 * hs if self.depth_q is None else as_positive_float(self.depth_q, "depth_q")
         c["depth_r"] = 0.6 * hs if self.depth_r is None else as_positive_float(self.depth_r, "depth_r")
@@ -321,6 +392,8 @@ class GroundVO:
         c["calibration"] = ("none" if code else "platt") if self.calibration is None else check_choice(
             self.calibration, ("platt", "none"), "calibration")
         c["calib_window"] = as_int(self.calib_window, "calib_window", minimum=1)
+        c["calib_decay"] = as_unit_interval(self.calib_decay, "calib_decay")
+        c["calib_prior_weight"] = as_positive_float(self.calib_prior_weight, "calib_prior_weight", allow_zero=True)
         # None picks the default of the mode; under "code" the published behaviour (no limit, per-update decay).
         # None: the mode's default; "off": the spec's behaviour (no depth limit; decay by alpha per update).
         for name, default in (("train_depth", 30.0), ("decay_samples", 450.0)):
@@ -354,12 +427,12 @@ class GroundVO:
         self.pixel_scale_ = self.fx_ / _F_REF
         hp, wp = (shape[0] + ds - 1) // ds, (shape[1] + ds - 1) // ds
         self.cell_ = int(max(6, round(np.sqrt(hp * wp / c["max_features"]))))
-        code = c["compat"] == "code"
-        self.speed_filter_ = KF1D(c["speed_prior"], 2 * c["speed_q"] if code else c["speed_prior_var"],
-                                  c["speed_q"], c["speed_r"], adaptive="code" if code else "innovation")
+        pub_f = c["filters"] == "published"
+        self.speed_filter_ = KF1D(c["speed_prior"], c["speed_prior_var"],
+                                  c["speed_q"], c["speed_r"], adaptive="code" if pub_f else "innovation")
         self.yaw_filter_ = KF1D(c["yaw_prior"], c["yaw_prior_var"], c["yaw_q"], c["yaw_r"])
         self.classifier_ = GroundColourModel(alpha=c["alpha"], prior=c["ground_prior"],
-                                             pseudo_ground=0.5 if code else 1.0, pseudo_nonground=1.0,
+                                             pseudo_ground=0.5 if c["ground_labels"] == "published" else 1.0, pseudo_nonground=1.0,
                                              decay_samples=c["decay_samples"])
         self.rng_ = as_rng(self.seed, "seed")
         # Tracks (processed px): positions at frames k-2, k-1, k (NaN = not tracked then) and state.
@@ -371,7 +444,7 @@ class GroundVO:
         self.prev_labels_ = None
         self.prev_prob_ = None
         self.prev_score_ = None
-        self.calibrator_ = PlattCalibrator()
+        self.calibrator_ = PlattCalibrator(decay=c["calib_decay"], prior_weight=c["calib_prior_weight"])
         self.rates_ = np.zeros(3)
 
     def reset(self):
@@ -424,11 +497,11 @@ class GroundVO:
 
     def _step(self, rgb, t):
         c = self.cfg_
-        code = c["compat"] == "code"
+        pub = {k: c[k] == "published" for k in STAGES}
         ds = c["ds"]
         small = reduce2x(rgb) if ds == 2 else rgb
         g = grey(small)
-        labels = hsv216(small, c["compat"])
+        labels = hsv216(small, "code" if pub["hue_wrap"] else "fixed")
         k = self.n_frames_
         vf, yf = self.speed_filter_, self.yaw_filter_
         ps = self.pixel_scale_
@@ -452,7 +525,7 @@ class GroundVO:
             if k >= 2 and trk["has"].any():
                 u_prev = self._level(trk["xy"][:, 1])[0]
                 h_ = trk["has"] & np.isfinite(u_prev)
-                base = trk["dmeas"] if code else trk["d"]  # B5: the code propagates the raw measurement
+                base = trk["dmeas"] if pub["depth_fusion"] else trk["d"]  # B5: the code propagates the raw measurement
                 d1, P1 = propagate(base[h_], trk["P"][h_], u_prev[h_], vf.x, yf.x, self.dt_prev_, c["depth_q"])
                 trk["d"][h_], trk["P"][h_] = d1, P1
             # KLT with the motion-predicted position as the initial guess (the fix of B6: depth-aware).
@@ -490,7 +563,7 @@ class GroundVO:
             if tri.any():
                 xy = trk["xy"]
                 gate = frontend.straightness_gate(xy[tri, 0], xy[tri, 1], xy[tri, 2], min_flow=2.0 * ps,
-                                                  wrap=not code)
+                                                  wrap=not pub["track_gates"])
                 keep = np.ones(len(xy), dtype=bool)
                 keep[np.flatnonzero(tri)[~gate]] = False  # gated tracks lose their state
                 _select(trk, keep)
@@ -501,12 +574,12 @@ class GroundVO:
                 status = "no_features"
             elif k >= 2:
                 static = diag["n_tracked"] >= 10 and frontend.is_static(disp, thr1=1.0 * ps, thr2=2.0 * ps,
-                                                                       per_axis=code)
+                                                                       per_axis=pub["track_gates"])
                 diag["static"] = bool(static)
                 if static:
                     status = "static"
-                    vf.reset(0.0, c["speed_q"] if code else c["speed_prior_var"])
-                    yf.reset(0.0, c["yaw_q"] if code else c["yaw_prior_var"])
+                    vf.reset(0.0, c["speed_q"] if pub["filters"] else c["speed_prior_var"])
+                    yf.reset(0.0, c["yaw_q"] if pub["filters"] else c["yaw_prior_var"])
                     trk["has"][:] = False
                     rates_raw = np.zeros(3)
                 else:
@@ -521,7 +594,7 @@ class GroundVO:
             # Coast on the filters (the fix of B10: no zero yaw-rate measurement).
             vf.predict()
             yf.predict()
-            if code:
+            if pub["filters"]:
                 yf.update(0.0)  # B10: the published code feeds ω = 0 when motion was not solved
             trk["has"][:] = False
         if not motion_done:
@@ -529,15 +602,15 @@ class GroundVO:
 
         # Pose of this image (one per image; spec §6.1 with the B27 fix).
         if k > 0:
-            if k == 2 and not code:
+            if k == 2 and not pub["pose_steps"]:
                 # The step 0 -> 1 reuses the frame-1 estimate, available only now.
                 self.poses_[1] = self._step_pose(np.eye(4), self.times_[1] - self.times_[0])
             self.poses_.append(self._step_pose(self.poses_[-1], dt))
-            diag["pose_provisional"] = (k == 1 and not code)
+            diag["pose_provisional"] = (k == 1 and not pub["pose_steps"])
 
         # Classifier map of this image (used to weight RANSAC at the next image).
         prob = self.classifier_.predict(labels)
-        if code:
+        if pub["ground_labels"]:
             # The published map is not computed at the borders (1 px top/left, 2 px bottom/right).
             prob[:1, :] = prob[:, :1] = 0.5
             prob[-2:, :] = prob[:, -2:] = 0.5
@@ -553,7 +626,7 @@ class GroundVO:
         existing = trk["xy"][:, 2] if len(trk["xy"]) else np.zeros((0, 2))
         new = frontend.detect_new(g, existing, max_new=c["max_features"] - len(existing), cell=self.cell_)
         if len(new):
-            _append(trk, new, c["depth_p_new"] if code else c["depth_p_reset"])
+            _append(trk, new, c["depth_p_new"] if pub["depth_fusion"] else c["depth_p_reset"])
         diag["n_features"] = int(len(trk["xy"]))
         if status == "no_features" and len(new) > 0:
             status = "few_triplets"  # nothing was tracked in, but this image has features to track on
@@ -581,7 +654,7 @@ class GroundVO:
     def _motion_and_ground(self, trk, tri, t, diag, labels):
         """Steps 8–10 of spec §1 on the triplets; returns (status, filters_done, outputs or None)."""
         c = self.cfg_
-        code = c["compat"] == "code"
+        fusion_pub, labels_pub = c["depth_fusion"] == "published", c["ground_labels"] == "published"
         vf, yf = self.speed_filter_, self.yaw_filter_
         ps = self.pixel_scale_
         idx = np.flatnonzero(tri)
@@ -602,7 +675,7 @@ class GroundVO:
         halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
         m = estimate_motion(u, v, udot, vdot, n_global=c["n_global"], ridge=c["ridge"], irls_iter=c["irls_iter"],
                             estimate_foe=c["foe"], span=halves if c["exact_flow"] else None,
-                            compat=c["compat"])
+                            compat="fixed")
         diag["irls_iterations"] = int(m.iterations)
         rates_raw = m.rates.copy()
         yaw_raw = float(m.rates[1])
@@ -624,7 +697,8 @@ class GroundVO:
                 weights = prob_c ** c["p"]
                 diag["weighted"] = True
         fit = fit_ground(u[ci], v[ci], m.dbar[ci], c["h"], model=c["model"], weights=weights, n_iter=c["n_iter"],
-                         rng=self.rng_, lam=c["lam"], sigma=c["sigma"], compat=c["compat"])
+                         rng=self.rng_, lam=c["lam"], sigma=c["sigma"],
+                         compat="code" if c["ransac_draw"] == "published" else "fixed")
         diag["ransac_iterations"] = int(fit.iterations)
         n_inl = int(fit.inliers.sum())
         diag["n_inliers"] = n_inl
@@ -638,11 +712,11 @@ class GroundVO:
             self.rates_ = np.array([rates_raw[0], yf.x, rates_raw[2]])
             # Metric inverse depths of every valid triplet, fused with their predictions (spec §3.4).
             vi = np.flatnonzero(m.valid)
-            V = fit.speed if code else vf.x  # B5: the code divides by the raw RANSAC V
+            V = fit.speed if fusion_pub else vf.x  # B5: the code divides by the raw RANSAC V
             if V > 0:
                 ti = idx[vi]
                 d_m = m.dbar[vi] / V
-                if code:
+                if fusion_pub:
                     usable = trk["P"][ti] < c["depth_usable"]
                     prior = np.where(trk["has"][ti], trk["d"][ti], 0.0)  # B5: new tracks fuse against 0
                 else:
@@ -662,7 +736,7 @@ class GroundVO:
                 # the ground model whatever it is (sky edges, far obstacles). Learn ground only nearer than
                 # train_depth (metres, flat-ground depth h / v of the level frame).
                 g_xy = g_xy[v[ci[fit.inliers]] * c["train_depth"] > c["h"]]
-            if code:
+            if labels_pub:
                 ng = (trk["gnd"] < 0) & trk["has"]
                 ng_xy = trk["xy"][ng, 1]
                 lab = labels  # B8: frame-k labels sampled at frame-(k-1) positions
@@ -718,7 +792,7 @@ class GroundVO:
         c = self.cfg_
         rates = self.rates_.copy() if c["integration"] == "3d" else np.zeros(3)
         rates[1] = self.yaw_filter_.x
-        step = motion_step(self.speed_filter_.x, rates, dt, c["integration"], semi_implicit=c["compat"] == "code")
+        step = motion_step(self.speed_filter_.x, rates, dt, c["integration"], semi_implicit=c["pose_steps"] == "published")
         return T @ self._to_camera(step)
 
     def _to_camera(self, step):

@@ -23,6 +23,11 @@ __all__ = [
     "oracle_step_speeds",
     "reliability_counts",
     "pooled_reliability",
+    "class_prob_sums",
+    "class_mean_prob_bounds",
+    "pool_by_family",
+    "kitti_scores",
+    "kitti_scores_pooled",
 ]
 
 
@@ -255,3 +260,78 @@ def pooled_reliability(count, prob_sum, label_sum):
     gap = np.abs(freq - conf)
     return Reliability(np.linspace(0.0, 1.0, len(c) + 1), c, conf, freq, float(np.sum(c[nz] * gap[nz]) / n),
                        float(gap[nz].max()), n)
+
+
+def class_prob_sums(prob, labels, *, valid=None):
+    """(sum of p on true ground, ground pixel count, sum of p on non-ground, non-ground count), (4,)
+    float64: add over frames; ``sums[0] / sums[1]`` is the mean P(ground) on ground pixels."""
+    from polar_sim.metrics.calibration import _inputs
+
+    p, y = _inputs(prob, labels, valid)
+    y = y.astype(bool)
+    return np.array([p[y].sum(dtype=np.float64), y.sum(), p[~y].sum(dtype=np.float64), (~y).sum()], np.float64)
+
+
+def class_mean_prob_bounds(count, prob_sum, label_sum):
+    """Mean P(ground) on ground and on non-ground pixels from summed :func:`reliability_counts` alone.
+
+    The bins hold no per-class sum of p, so each class's mean is estimated with the bin's mean
+    confidence, and bounded by the bin edges (every pixel of bin k has p in [k/n, (k+1)/n]).
+    Returns ``{"ground": (estimate, low, high), "nonground": (...)}``; NaN for an empty class.
+    """
+    c = np.asarray(count, dtype=np.float64)
+    ps, ys = np.asarray(prob_sum, dtype=np.float64), np.asarray(label_sum, dtype=np.float64)
+    n = len(c)
+    lo, hi = np.arange(n) / n, np.arange(1, n + 1) / n
+    conf = np.where(c > 0, ps / np.maximum(c, 1), 0.0)
+    out = {}
+    for name, w in (("ground", ys), ("nonground", c - ys)):
+        tot = w.sum()
+        out[name] = tuple(float(np.sum(w * x) / tot) if tot > 0 else float("nan") for x in (conf, lo, hi))
+    return out
+
+
+def pool_by_family(series):
+    """Pool per-frame scores of routes by ground family (the settled frames of every zone).
+
+    ``series``: an iterable of mappings with ``families`` (zone family names), ``settled`` (n,) bool,
+    ``zone`` (n,) zone index, ``iou`` (n,) and ``bins`` (n, 3, n_bins) per-frame
+    :func:`reliability_counts`; optionally ``psums`` (n, 4) per-frame :func:`class_prob_sums`.
+    Returns ``{family: dict(frames, iou_mean, bins (3, n_bins), psums (4,) or None)}``, sorted by name.
+    """
+    fam = {}
+    for a in series:
+        for k, name in enumerate(a["families"]):
+            m = np.asarray(a["settled"], bool) & (np.asarray(a["zone"]) == k) & np.isfinite(a["iou"])
+            if m.sum():
+                f = fam.setdefault(str(name), {"iou": [], "bins": 0.0, "psums": 0.0, "has_psums": "psums" in a})
+                f["iou"].append(np.asarray(a["iou"])[m])
+                f["bins"] = f["bins"] + np.asarray(a["bins"])[m].sum(axis=0)
+                f["has_psums"] &= "psums" in a
+                if "psums" in a:
+                    f["psums"] = f["psums"] + np.asarray(a["psums"])[m].sum(axis=0)
+    return {k: dict(frames=int(sum(len(i) for i in v["iou"])), iou_mean=float(np.mean(np.concatenate(v["iou"]))),
+                    bins=v["bins"], psums=v["psums"] if v["has_psums"] else None) for k, v in sorted(fam.items())}
+
+
+def kitti_scores(gt, est, prefix=""):
+    """The ground chapter's odometry scores of one route (a dict, keys prefixed with ``prefix``):
+    KITTI devkit ``t_pct`` (%) / ``r_degm`` (deg/m) over 100-800 m segments (NaN under 100 m), the same
+    over the non-standard scaled segments (``*_scaled``, L_j = j L_max / 8), ``n_segments`` and ``ate_m``."""
+    from polar_sim import metrics
+
+    t, r = metrics.kitti_errors(gt, est)
+    ts, rs = metrics.kitti_errors(gt, est, lengths=metrics.scaled_lengths(gt))
+    return {f"{prefix}t_pct": t, f"{prefix}r_degm": r, f"{prefix}n_segments": len(metrics.kitti_segment_errors(gt, est)),
+            f"{prefix}t_pct_scaled": ts, f"{prefix}r_degm_scaled": rs, f"{prefix}ate_m": metrics.ate(gt, est)}
+
+
+def kitti_scores_pooled(pairs):
+    """Scores pooled over all segments of all routes: ``pairs`` [(gt, est), ...] -> dict(routes, t_pct,
+    r_degm (100-800 m segments), t_pct_scaled, r_degm_scaled (each route's scaled segments))."""
+    from polar_sim import metrics
+
+    t, r = metrics.kitti_errors_pooled(pairs)
+    rec = np.concatenate([metrics.kitti_segment_errors(g, e, lengths=metrics.scaled_lengths(g)) for g, e in pairs])
+    return dict(routes=len(pairs), t_pct=t, r_degm=r, t_pct_scaled=100 * float(np.mean(rec["t_err"])),
+                r_degm_scaled=float(np.degrees(np.mean(rec["r_err"]))))

@@ -31,7 +31,8 @@ from polar_sim.sim.truth import LABELS
 from polar_sim.sim.world import World
 
 __all__ = ["ROUTES", "TEST_ROUTES", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "RouteSpec", "route_spec",
-           "record_route", "load_route", "route_truth", "route_layout", "route_zones", "KITTI_FOVY_DEG", "reduce2x", "RECORDER_VERSION"]
+           "record_route", "load_route", "route_truth", "route_layout", "route_zones",
+           "settled_frames", "KITTI_FOVY_DEG", "reduce2x", "RECORDER_VERSION"]
 
 #: Vertical field of view that gives KITTI's f = 718.9 px at 376 rows.
 KITTI_FOVY_DEG = float(np.degrees(2 * np.arctan(188.0 / 718.856)))
@@ -299,3 +300,15 @@ def route_zones(rec, margin_m=40.0):
                 b_s.append(float(s_b))
                 b_z.append((int(zor[i - 1]), int(zor[i % len(zor)])))
     return dict(progress=prog, zone=zone, names=lay["zones"], boundaries=np.array(b_s), boundary_zones=b_z, lap_m=L)
+
+
+def settled_frames(rec, times, *, warmup_s=5.0, before_m=40.0, after_m=10.0):
+    """Frames of a route where the ground's appearance has settled: at least ``warmup_s`` after the
+    start and outside [-before_m, +after_m] of every zone boundary (the next zone's texture is in view
+    on the far ground from about 40 m before it). Returns (settled (n,) bool, :func:`route_zones`)."""
+    z = route_zones(rec, before_m)
+    t, prog = np.asarray(times, dtype=np.float64), z["progress"]
+    settled = (t - t[0]) >= warmup_s
+    for b in z["boundaries"]:
+        settled &= ~((prog >= b - before_m) & (prog <= b + after_m))
+    return settled, z
