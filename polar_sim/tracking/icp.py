@@ -279,7 +279,7 @@ def _surface_rms(model, M, Nm, xi, h):
 def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, max_points=1500):
     """Rotations that map the whole model onto itself: the directions its shape can never observe.
 
-    Each principal axis of the centred model points is tried: the model (up to ``max_points``
+    Each eigenvector of the model's rotational point-to-plane information is tried: the model (up to ``max_points``
     points, evenly picked) is turned about it, through the centroid, by each of ``+-angles`` (rad)
     and its distance to the model surface measured as in :func:`unobserved_directions`
     (``h`` = the surface motion at half the diameter). An axis about which every turn keeps the
@@ -295,7 +295,11 @@ def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, max_poin
         return np.zeros((6, 0))
     idx = np.linspace(0, len(P) - 1, min(max_points, len(P))).astype(np.int64)
     M, Nm = P[idx], model.N[idx]
-    _, axes = np.linalg.eigh(np.cov(P.T))
+    # candidate axes: the eigenvectors of sum (m x n)(m x n)^T, the rotation block of the whole
+    # model's point-to-plane information; a revolved surface's axis is its null direction (every
+    # normal meets the axis), which principal axes of the points give only to a degree or so
+    C = np.cross(P, model.N)
+    _, axes = np.linalg.eigh(C.T @ C)
     rho = 0.5 * model.diameter
     out = []
     for a in axes.T:
