@@ -124,12 +124,15 @@ def _logit(p):
     return np.log(p) - np.log1p(-p)
 
 
-def _span(A, tol=0.5):
-    """Orthonormal basis (6, k) of the span of unit columns A (6, n), near-duplicates merged."""
-    if A.shape[1] == 0:
-        return A
-    u, sv, _ = np.linalg.svd(A, full_matrices=False)
-    return u[:, sv > tol]
+def _with_axes(U, A, tol=0.5):
+    """U (6, k) orthonormal, extended (Gram-Schmidt) by each unit column of A (6, n) whose part
+    outside span(U) is longer than ``tol``; U itself is returned when it already spans A."""
+    for a in A.T:
+        r = a - U @ (U.T @ a)
+        nr = float(np.linalg.norm(r))
+        if nr > tol:
+            U = np.concatenate([U, (r / nr)[:, None]], axis=1)
+    return U
 
 
 def _rot_angle(R):
@@ -490,7 +493,7 @@ class ObjectTracker(Parameterised):
             # directions the points cannot see (a revolved object's axis, a face whose edges are
             # hidden) keep the prediction, and the filter integrates no velocity along them
             U, rho = unobserved_directions(m, res.support, res.cov)
-            U = _span(np.concatenate([self.symmetry_axes_, U], axis=1))
+            U = _with_axes(U, self.symmetry_axes_)
             if U.shape[1]:
                 hold = (U, np.array([rho, rho, rho, 1.0, 1.0, 1.0]))
                 es = se3_log(inv_pose(T_bar) @ res.T) * hold[1]
