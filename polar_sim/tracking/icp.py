@@ -255,10 +255,11 @@ def unobserved_directions(model, support, cov, *, step=None, min_std=0.001, n_pr
     return (np.stack(out, axis=1) if out else np.zeros((6, 0))), rho
 
 
-def _surface_rms(model, M, Nm, xi, h):
+def _surface_rms(model, M, Nm, xi, h, keep=1.0):
     """RMS distance (m) of model points M (n, 3) with normals Nm moved by Exp(xi) to the model
     surface: the normal offset to the nearest of 4 model points with a similar normal, plus the
-    tangential offset beyond that point's spacing; no such point (or more than h) counts as h."""
+    tangential offset beyond that point's spacing; no such point (or more than h) counts as h.
+    ``keep`` < 1: over the best ``keep`` fraction of the points only."""
     T = se3_exp(xi)
     Y = M @ T[:3, :3].T + T[:3, 3]
     Ny = Nm @ T[:3, :3].T
@@ -273,16 +274,20 @@ def _surface_rms(model, M, Nm, xi, h):
     dt = np.sqrt(np.maximum(np.einsum("ij,ij->i", dd, dd) - dn * dn, 0.0))
     e2 = dn * dn + np.maximum(dt - model.local_spacing[j], 0.0) ** 2
     e2 = np.where(ok.any(axis=1), np.minimum(e2, h * h), h * h)
+    if keep < 1.0:
+        e2 = np.sort(e2)[: max(1, int(np.ceil(keep * len(e2))))]
     return float(np.sqrt(e2.mean()))
 
 
-def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, max_points=1500):
+def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, keep=0.98, max_points=1500):
     """Rotations that map the whole model onto itself: the directions its shape can never observe.
 
     Each eigenvector of the model's rotational point-to-plane information is tried: the model (up to ``max_points``
     points, evenly picked) is turned about it, through the centroid, by each of ``+-angles`` (rad)
     and its distance to the model surface measured as in :func:`unobserved_directions`
-    (``h`` = the surface motion at half the diameter). An axis about which every turn keeps the
+    (``h`` = the surface motion at half the diameter), over the best ``keep`` of the points (a
+    narrow bevel holds too few samples to find a neighbour of its own normal, and each such point
+    counts as ``h``: 1 % of them alone gives 0.1 h). An axis about which every turn keeps that
     RMS distance below ``max_rms * h`` is a continuous symmetry: a revolved object's axis (all
     three for a sphere). Along it the registration, which sees geometry only, has nothing to go
     by whatever points it is given (a touching hand's included), so the tracker holds it always.
@@ -307,7 +312,7 @@ def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, max_poin
         for th in angles:
             h = th * rho
             xi = np.concatenate([a * th, np.zeros(3)])
-            if max(_surface_rms(model, M, Nm, xi, h), _surface_rms(model, M, Nm, -xi, h)) >= max_rms * h:
+            if max(_surface_rms(model, M, Nm, xi, h, keep), _surface_rms(model, M, Nm, -xi, h, keep)) >= max_rms * h:
                 ok = False
                 break
         if ok:
