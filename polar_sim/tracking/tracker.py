@@ -241,7 +241,7 @@ class ObjectTracker(Parameterised):
     parameters above as given and checks them (``_check_params``, the one place, also used by
     ``set_params`` and the first frame); ``get_params()``/``set_params()``; the state is created
     by the first :meth:`process` in attributes ending in ``_`` (``model_``, ``filter_``,
-    ``appearance_model_``, ``calibration_``, ``rng_``, ``pose_``, ``n_frames_``, ...) and
+    ``appearance_model_``, ``calibration_``, ``symmetry_axes_``, ``rng_``, ``pose_``, ``n_frames_``, ...) and
     :meth:`reset` removes it.
     """
 
