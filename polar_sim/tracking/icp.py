@@ -18,7 +18,7 @@ from polar_sim.geometry import inv_pose, se3_exp, se3_log
 from polar_sim.tracking._kernels import icp_normal_equations, icp_residuals
 from polar_sim.tracking.visibility import project_model
 
-__all__ = ["ICPResult", "weighted_icp", "tukey", "unobserved_directions"]
+__all__ = ["ICPResult", "weighted_icp", "tukey", "unobserved_directions", "symmetry_directions"]
 
 
 @dataclass
@@ -245,29 +245,76 @@ def unobserved_directions(model, support, cov, *, step=None, min_std=0.001, n_pr
     if len(sup) > max_points:
         sup = sup[np.linspace(0, len(sup) - 1, max_points).astype(np.int64)]
     M, Nm = model.P[sup], model.N[sup]
-
-    def rms(xi):
-        T = se3_exp(xi)
-        Y = M @ T[:3, :3].T + T[:3, 3]
-        Ny = Nm @ T[:3, :3].T
-        _, nb = model.tree.query(Y, k=4)
-        ok = np.einsum("nkj,nj->nk", model.N[nb], Ny) > 0.7
-        d = Y[:, None, :] - model.P[nb]
-        dist = np.where(ok, np.linalg.norm(d, axis=2), np.inf)
-        c = np.argmin(dist, axis=1)
-        j = nb[np.arange(len(Y)), c]
-        dd = d[np.arange(len(Y)), c]
-        dn = np.einsum("ij,ij->i", dd, model.N[j])
-        dt = np.sqrt(np.maximum(np.einsum("ij,ij->i", dd, dd) - dn * dn, 0.0))
-        e2 = dn * dn + np.maximum(dt - model.local_spacing[j], 0.0) ** 2
-        e2 = np.where(ok.any(axis=1), np.minimum(e2, h * h), h * h)
-        return float(np.sqrt(e2.mean()))
-
     out = []
     for k in np.argsort(lam)[::-1][:n_probe]:
         if not np.sqrt(max(lam[k], 0.0)) > min_std:
             break
         xi = vec[:, k] / Wd * h
-        if max(rms(xi), rms(-xi)) < max_rms * h:
+        if max(_surface_rms(model, M, Nm, xi, h), _surface_rms(model, M, Nm, -xi, h)) < max_rms * h:
             out.append(vec[:, k])
     return (np.stack(out, axis=1) if out else np.zeros((6, 0))), rho
+
+
+def _surface_rms(model, M, Nm, xi, h, keep=1.0):
+    """RMS distance (m) of model points M (n, 3) with normals Nm moved by Exp(xi) to the model
+    surface: the normal offset to the nearest of 4 model points with a similar normal, plus the
+    tangential offset beyond that point's spacing; no such point (or more than h) counts as h.
+    ``keep`` < 1: over the best ``keep`` fraction of the points only."""
+    T = se3_exp(xi)
+    Y = M @ T[:3, :3].T + T[:3, 3]
+    Ny = Nm @ T[:3, :3].T
+    _, nb = model.tree.query(Y, k=4)
+    ok = np.einsum("nkj,nj->nk", model.N[nb], Ny) > 0.7
+    d = Y[:, None, :] - model.P[nb]
+    dist = np.where(ok, np.linalg.norm(d, axis=2), np.inf)
+    c = np.argmin(dist, axis=1)
+    j = nb[np.arange(len(Y)), c]
+    dd = d[np.arange(len(Y)), c]
+    dn = np.einsum("ij,ij->i", dd, model.N[j])
+    dt = np.sqrt(np.maximum(np.einsum("ij,ij->i", dd, dd) - dn * dn, 0.0))
+    e2 = dn * dn + np.maximum(dt - model.local_spacing[j], 0.0) ** 2
+    e2 = np.where(ok.any(axis=1), np.minimum(e2, h * h), h * h)
+    if keep < 1.0:
+        e2 = np.sort(e2)[: max(1, int(np.ceil(keep * len(e2))))]
+    return float(np.sqrt(e2.mean()))
+
+
+def symmetry_directions(model, *, angles=(0.15, 0.4, 1.0), max_rms=0.1, keep=0.98, max_points=1500):
+    """Rotations that map the whole model onto itself: the directions its shape can never observe.
+
+    Each eigenvector of the model's rotational point-to-plane information is tried: the model (up to ``max_points``
+    points, evenly picked) is turned about it, through the centroid, by each of ``+-angles`` (rad)
+    and its distance to the model surface measured as in :func:`unobserved_directions`
+    (``h`` = the surface motion at half the diameter), over the best ``keep`` of the points (a
+    narrow bevel holds too few samples to find a neighbour of its own normal, and each such point
+    counts as ``h``: 1 % of them alone gives 0.1 h). An axis about which every turn keeps that
+    RMS distance below ``max_rms * h`` is a continuous symmetry: a revolved object's axis (all
+    three for a sphere). Along it the registration, which sees geometry only, has nothing to go
+    by whatever points it is given (a touching hand's included), so the tracker holds it always.
+
+    Returns U (6, k), orthonormal, in the scaled coordinates of :func:`unobserved_directions`
+    (rotation only: ``(a, 0)`` for an axis a); k = 0 for an object with no continuous symmetry.
+    """
+    P = model.P
+    if len(P) < 6:
+        return np.zeros((6, 0))
+    idx = np.linspace(0, len(P) - 1, min(max_points, len(P))).astype(np.int64)
+    M, Nm = P[idx], model.N[idx]
+    # candidate axes: the eigenvectors of sum (m x n)(m x n)^T, the rotation block of the whole
+    # model's point-to-plane information; a revolved surface's axis is its null direction (every
+    # normal meets the axis), which principal axes of the points give only to a degree or so
+    C = np.cross(P, model.N)
+    _, axes = np.linalg.eigh(C.T @ C)
+    rho = 0.5 * model.diameter
+    out = []
+    for a in axes.T:
+        ok = True
+        for th in angles:
+            h = th * rho
+            xi = np.concatenate([a * th, np.zeros(3)])
+            if max(_surface_rms(model, M, Nm, xi, h, keep), _surface_rms(model, M, Nm, -xi, h, keep)) >= max_rms * h:
+                ok = False
+                break
+        if ok:
+            out.append(np.concatenate([a, np.zeros(3)]))
+    return np.stack(out, axis=1) if out else np.zeros((6, 0))

@@ -23,7 +23,7 @@ from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
 from polar_sim.tracking._kernels import roi_distances
 from polar_sim.tracking.appearance import make_appearance
 from polar_sim.tracking.calibration import OnlineCalibration
-from polar_sim.tracking.icp import unobserved_directions, weighted_icp
+from polar_sim.tracking.icp import symmetry_directions, unobserved_directions, weighted_icp
 from polar_sim.tracking.model import ShapeModel, estimate_normals
 from polar_sim.tracking.motion import MotionFilter
 from polar_sim.tracking.visibility import disc, project_model, splat_silhouette
@@ -39,6 +39,8 @@ KAPPA = 3.0
 #: Pose spread assumed by the second E-step (em_refine): 3 mm and 1 degree.
 _EM_SIGMA_TR = 0.003
 _EM_SIGMA_ROT = np.deg2rad(1.0)
+#: Longest frame interval the motion filter predicts over, s (see :meth:`ObjectTracker.process`).
+MAX_GAP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,17 @@ def _logit(p):
     """log(p / (1 - p)) of a probability map (float32), finite for p in [0, 1]."""
     p = np.clip(p.astype(np.float32), np.float32(1e-6), np.float32(1 - 1e-6))
     return np.log(p) - np.log1p(-p)
+
+
+def _with_axes(U, A, tol=0.5):
+    """U (6, k) orthonormal, extended (Gram-Schmidt) by each unit column of A (6, n) whose part
+    outside span(U) is longer than ``tol``; U itself is returned when it already spans A."""
+    for a in A.T:
+        r = a - U @ (U.T @ a)
+        nr = float(np.linalg.norm(r))
+        if nr > tol:
+            U = np.concatenate([U, (r / nr)[:, None]], axis=1)
+    return U
 
 
 def _rot_angle(R):
@@ -209,7 +222,10 @@ class ObjectTracker(Parameterised):
         along a direction in which moving the model does not change its fit to the points (a
         revolved object turning about its axis; a flat face whose boundary is hidden), the pose
         keeps the prediction and the filter's velocity is zeroed, so an object at rest stays at
-        rest where its shape cannot see.
+        rest where its shape cannot see. Rotations that map the whole model onto itself (a
+        revolved object's axis, found once from the model by
+        :func:`polar_sim.tracking.icp.symmetry_directions`) are held on every frame: no data the
+        registration is given, a touching hand's points included, can observe them.
     calibrate : bool, default=True
         Report ``prob`` calibrated by :class:`polar_sim.tracking.calibration.OnlineCalibration`,
         learned from the labels O of the accepted frames (never from truth); False reports the
@@ -225,7 +241,7 @@ class ObjectTracker(Parameterised):
     parameters above as given and checks them (``_check_params``, the one place, also used by
     ``set_params`` and the first frame); ``get_params()``/``set_params()``; the state is created
     by the first :meth:`process` in attributes ending in ``_`` (``model_``, ``filter_``,
-    ``appearance_model_``, ``calibration_``, ``rng_``, ``pose_``, ``n_frames_``, ...) and
+    ``appearance_model_``, ``calibration_``, ``symmetry_axes_``, ``rng_``, ``pose_``, ``n_frames_``, ...) and
     :meth:`reset` removes it.
     """
 
@@ -333,6 +349,8 @@ class ObjectTracker(Parameterised):
         self.appearance_model_ = make_appearance(self.appearance, **kw)
         self.rng_ = np.random.default_rng(self.random_state)
         self.calibration_ = OnlineCalibration() if self.calibrate else None
+        # rotations that map the whole model onto itself (a revolved object's axis): held always
+        self.symmetry_axes_ = symmetry_directions(m) if self.hold_unobserved else np.zeros((6, 0))
         self.n_unobserved_ = 0
         self.image_shape_ = None
         self.t_prev_ = None
@@ -353,7 +371,9 @@ class ObjectTracker(Parameterised):
         rgb : ndarray (H, W, 3) uint8.
         depth : ndarray (H, W) float, metres; 0, NaN or inf = missing.
         t : float, optional
-            Time stamp, s; without it frames are 1/fps apart.
+            Time stamp, s; without it frames are 1/fps apart. Either every frame since the first
+            (or since :meth:`reset`) has one or none has. A gap longer than ``MAX_GAP_S`` (1 s)
+            is predicted as 1 s.
 
         Returns
         -------
@@ -368,7 +388,14 @@ class ObjectTracker(Parameterised):
                 raise ValueError(f"t: expected a finite time stamp in seconds, got {t!r}")
             if t_prev is not None and t <= t_prev:
                 raise ValueError(f"t: time stamps must increase, got {t} after {t_prev}")
+        if built and self.n_frames_ > 0 and (t is None) != (t_prev is None):
+            # mixing stamped and unstamped frames leaves the frame interval undefined
+            raise ValueError("t: every frame needs a time stamp once one was given, and none may be "
+                             f"given after unstamped frames (got {t!r}, previous {t_prev!r}); reset() to start again")
         dt = 1.0 / self.fps if (t is None or t_prev is None) else float(t - t_prev)
+        # a longer gap is predicted as MAX_GAP_S: the covariance is at its caps by then, and constant
+        # velocity is not extrapolated further (nor overflows on absurd gaps)
+        dt = min(dt, MAX_GAP_S)
         # -- validated: from here on the state changes ------------------------------------------
         if not built:
             self._build()
@@ -466,6 +493,7 @@ class ObjectTracker(Parameterised):
             # directions the points cannot see (a revolved object's axis, a face whose edges are
             # hidden) keep the prediction, and the filter integrates no velocity along them
             U, rho = unobserved_directions(m, res.support, res.cov)
+            U = _with_axes(U, self.symmetry_axes_)
             if U.shape[1]:
                 hold = (U, np.array([rho, rho, rho, 1.0, 1.0, 1.0]))
                 es = se3_log(inv_pose(T_bar) @ res.T) * hold[1]

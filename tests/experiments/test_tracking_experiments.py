@@ -103,3 +103,19 @@ def test_track_is_deterministic():
     for k in a1:
         if k not in ("cpu_ms", "wall_ms", "load"):
             assert np.array_equal(a1[k], a2[k], equal_nan=True), k
+
+
+# A run of only some methods (a user's --set method=[...]) summarises without the methods it did not
+# run: the segmentation checks are about the first method run when ww is not among them, and the
+# ablation's comparison with plain ICP is made over the variants run (none without plain ICP).
+@pytest.mark.slow
+def test_tracking_summaries_with_some_methods(tmp_path):
+    seg = _run("tracking_segmentation", tmp_path / "seg", overrides={"method": ["h", "shape-only"], "sequence": ["drill_lift"]})
+    assert {r["method"] for r in seg.table} == {"h", "shape-only"}
+    assert [c.name.split(":")[0] for c in seg.checks] == ["h"] * 3
+    assert (tmp_path / "seg" / "tracking_segmentation.png").is_file() and not seg.findings
+    abl = _run("tracking_ablation", tmp_path / "abl", overrides={"method": ["h", "plain-icp"], "sequence": ["drill_lift"]})
+    (check,) = abl.checks
+    assert "every variant run (h)" in check.name and check.status == "pass", check
+    only = _run("tracking_ablation", tmp_path / "only", overrides={"method": ["no-motion"], "sequence": ["drill_lift"]})
+    assert only.checks == [] and (tmp_path / "only" / "tracking_ablation.png").is_file()
