@@ -110,7 +110,7 @@ class GPISNavEnv(ModuleEnv):
                  obs_mode="stencil", sdf_source="gpis", sdf_params=None, stencil_rays=16,
                  stencil_radii=(0.5, 1.0, 2.0, 3.0), grid_size=32, grid_resolution=0.25, grid_visited=False,
                  tier=None, rooms=None, room_size=None, clutter=None, n_beams=270, max_speed=1.0, max_yaw_rate=1.5,
-                 lidar_noise=_DEFAULT, odometry_noise=_DEFAULT, version=1, **unknown):
+                 lidar_noise=_DEFAULT, odometry_noise=_DEFAULT, reward_weights=None, version=1, **unknown):
         check_kwargs(type(self), unknown)
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode: unknown mode {obs_mode!r}; expected one of {', '.join(OBS_MODES)}")
@@ -123,7 +123,7 @@ class GPISNavEnv(ModuleEnv):
         base = LidarNavEnv(render_mode=render_mode, render_size=render_size, tier=tier, rooms=rooms,
                            room_size=room_size, clutter=clutter, n_beams=n_beams, max_speed=max_speed,
                            max_yaw_rate=max_yaw_rate, lidar_noise=lidar_noise, odometry_noise=odometry_noise,
-                           version=version)
+                           reward_weights=reward_weights, version=version)
         self._v0 = version == 0
         self._pose_source = make_pose_source("truth" if self._v0 else ("slam" if pose_source is None else pose_source),
                                              localize_params)
