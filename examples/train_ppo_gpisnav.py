@@ -194,7 +194,7 @@ def main():
             print(f"  {b}: {res[b]}", flush=True)
         return res
 
-    print(f"{env_id} {kwargs}, {recipe['algorithm']}: baselines on {len(dev)} dev worlds", flush=True)
+    print(f"{env_id} {kwargs}, {recipe['algorithm']}: baselines on {len(dev)} {args.curve_split} worlds", flush=True)
     base_dev = baselines(dev)
     rows = []
 

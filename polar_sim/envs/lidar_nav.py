@@ -25,8 +25,10 @@ MAX_LAYOUT_ATTEMPTS = 20  # navworld layouts tried per reset before its error is
 #: v0's reward weights (progress per m, time per step, collision, success, proximity per step, m).
 REWARD_V0 = {"progress": 1.0, "time": TIME_COST, "collision": COLLISION_PENALTY, "success": SUCCESS_BONUS,
              "proximity": 0.0, "proximity_radius": 0.3}
-#: v1's default reward weights (chosen on dev seeds, see ``reward_weights``).
-REWARD_V1 = dict(REWARD_V0)
+#: v1's default reward weights: a collision costs 1 instead of 5, and a clearance under 0.3 m
+#: costs up to 0.02 per step (chosen on dev worlds, seeds 1000-1019, among collision 5 / 1 and
+#: proximity 0 / 0.02, by 12k-step PPO runs; see ``LidarNavEnv``'s Reward section).
+REWARD_V1 = {**REWARD_V0, "collision": 1.0, "proximity": 0.02}
 
 #: Difficulty tiers: the world each one builds (rooms per side, room side in m, clutter pieces).
 TIERS = {
@@ -144,10 +146,20 @@ class LidarNavEnv(PolarMujocoEnv):
 
     ## Reward
     ``progress`` (decrease of the shortest-path distance to the goal around the walls and
-    clutter, m, as in Habitat's PointNav) − ``time`` (0.01 per step) − ``collision`` (5 on a
-    collision) + ``success`` (5 on reaching the goal). The terms are in ``info["reward_terms"]``.
-    (The straight-line distance would reward pushing into a wall that stands between the robot
-    and the goal.)
+    clutter, m, as in Habitat's PointNav) − ``time`` (per step) − ``collision`` (on a collision)
+    + ``success`` (on reaching the goal) − ``proximity`` (v1, per step: the weight times
+    ``clip(1 − clearance / proximity_radius, 0, 1)``, the clearance being the exact scene SDF at
+    the true robot position minus the robot's radius, m). The terms are in
+    ``info["reward_terms"]``, each with its weight applied; the weights are ``reward_weights``
+    (defaults :data:`REWARD_V1`; v0: progress 1 per m, time 0.01, collision 5, success 5, no
+    proximity term). (The straight-line distance would reward pushing into a wall that stands
+    between the robot and the goal.)
+
+    Why v1's defaults differ from v0's (chosen on dev worlds, see ``benchmarks/RESULTS.md``):
+    with a collision costing 5, an episode that makes 2 m of progress and then touches clutter
+    returns less, discounted at 0.99, than standing still for the whole episode (−5 × 0.99^20 +
+    ~1.8 against −0.01 × ~95), so a learner's first lesson was to stop, and PPO reached 0 % on
+    the room tier. A collision still ends the episode and is never a success.
 
     ## Episode End
     Terminated when the robot is within 0.4 m of the goal (success) or touches an obstacle (a
@@ -166,6 +178,7 @@ class LidarNavEnv(PolarMujocoEnv):
     | ``max_yaw_rate`` | 1.5 | rad/s at action 1 (the rover's limit is 2) |
     | ``lidar_noise`` | (0.01, 0.01) | (range sigma m, dropout probability), or None; v0: None |
     | ``odometry_noise`` | ``OdometryNoise()`` | wheel odometry noise (:class:`polar_sim.envs.noise.OdometryNoise` or a dict of its fields: 3 % of each step's distance, a 2 % scale error, 3 % of each turn plus 0.01 rad/m, a yaw drift of 0.01 rad/s (1-sigma, drawn per episode)), or None; v0: None |
+    | ``reward_weights`` | None | v1: a dict overriding some of :data:`REWARD_V1` (``progress`` per m, ``time`` per step, ``collision``, ``success``, ``proximity`` per step, ``proximity_radius`` m; each finite and >= 0); v0: None only |
     | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0`` |
 
     ## Truth in ``info``
@@ -177,7 +190,8 @@ class LidarNavEnv(PolarMujocoEnv):
     ## Version History
     - v1: lidar noise (1 cm, 1 % dropout) and wheel odometry noise on by default; the goal is
       given once in the start frame (``goal_start``) instead of every step in the true robot
-      frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers.
+      frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers;
+      ``reward_weights``, with a collision costing 1 instead of 5 and a proximity term.
     - v0: first release (GPS+compass: the goal in the true robot frame, exact twist, no noise).
     """
 

@@ -304,3 +304,20 @@ def test_reward_weights_bad_input():
             gym.make(ROOM, reward_weights=bad)
     with pytest.raises(ValueError, match="version 0 has a fixed reward"):
         gym.make("polar_sim/GPISNav-v0", reward_weights={"collision": 1.0})
+
+
+# v1's default weights are REWARD_V1 (collision 1, proximity 0.02 within 0.3 m); v0 keeps its
+# reward (collision 5, no proximity term).
+def test_default_reward_weights_per_version():
+    from polar_sim.envs.lidar_nav import REWARD_V0, REWARD_V1
+
+    assert REWARD_V1["collision"] == 1.0 and REWARD_V1["proximity"] == 0.02 and REWARD_V1["proximity_radius"] == 0.3
+    assert REWARD_V0 == {"progress": 1.0, "time": 0.01, "collision": 5.0, "success": 5.0, "proximity": 0.0,
+                         "proximity_radius": 0.3}
+    for env_id, weights, keys in (("polar_sim/LidarNav-v1", REWARD_V1, 5), ("polar_sim/LidarNav-v0", REWARD_V0, 4)):
+        env = gym.make(env_id, tier="room")
+        env.reset(seed=2)
+        assert env.unwrapped._reward_w == weights
+        _, _, _, _, info = env.step(np.zeros(2, np.float32))
+        assert len(info["reward_terms"]) == keys and info["reward_terms"]["time"] == -0.01
+        env.close()
