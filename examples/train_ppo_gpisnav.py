@@ -110,12 +110,12 @@ def plot_curve(rows, label, baselines, n_dev, title, path, split="dev"):
     plt.close(fig)
 
 
-def replot(curve_csv, title, path, n_dev):
+def replot(curve_csv, title, path, n_dev, split="dev"):
     """Plot a curve.csv written so far (e.g. by a run stopped before its end)."""
     with open(curve_csv, newline="") as fh:
         rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
     wanted = [b for b in ("random", "reactive", "navigator") if f"{b}_success" in rows[0]]
-    plot_curve(rows, "PPO (stencil)", wanted, n_dev, title, path)
+    plot_curve(rows, "PPO (stencil)", wanted, n_dev, title, path, split)
 
 
 def main():
@@ -146,7 +146,8 @@ def main():
     ap.add_argument("--title", default="", help="--replot: the plot's title")
     args = ap.parse_args()
     if args.replot:
-        return replot(args.replot[0], args.title, args.replot[1], args.curve_episodes)
+        return replot(args.replot[0], args.title, args.replot[1], args.curve_episodes,
+                      "held-out" if args.curve_split == "test" else "dev")
     if min(args.curve_episodes, args.test_episodes, args.envs, args.steps) < 1:
         ap.error("--curve-episodes, --test-episodes, --envs and --steps must be >= 1")
 
