@@ -1,4 +1,6 @@
-"""Short PPO diagnostic of reward variants on GPISNav-Room-v1 (slam): each variant trains
+"""Usage: python benchmarks/train_ppo_reward_diag.py STEPS '{"name": {env kwargs}, ...}'
+
+Short PPO diagnostic of reward variants on GPISNav-Room-v1 (slam): each variant trains
 STEPS steps (2 envs, training worlds from seeds 0..), then its deterministic policy is scored on
 20 dev worlds (episode seeds 1000-1019). Prints per-rollout training stats and a JSON line per variant."""
 import sys, json, time, numpy as np, torch, gymnasium as gym
@@ -7,7 +9,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.common.callbacks import BaseCallback
 from polar_sim.envs.learning import make_model, ppo_recipe, ObsNormaliser
-sys.path.insert(0, "/work/wt/envs2/examples")
+from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 from train_ppo_gpisnav import run_episodes, learned
 torch.set_num_threads(1)
 steps = int(sys.argv[1]); variants = json.loads(sys.argv[2])
