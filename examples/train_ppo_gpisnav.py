@@ -8,7 +8,9 @@ Usage:
     python examples/train_ppo_gpisnav.py --tier rooms2 --recurrent ...
 
 Every ``--eval-every`` steps the deterministic policy is scored on ``--curve-episodes`` dev
-worlds (episode seeds 1000, 1001, ...: the split the recipe was chosen on); random actions,
+worlds (episode seeds 1000, 1001, ...: the split the recipe was chosen on; ``--curve-split test``:
+the held-out worlds 10000, 10001, ..., with ``--stop-at`` ending the run once a checkpoint
+reaches that success, nothing else being chosen on them); random actions,
 ``SDFReactive`` and ``SDFNavigator`` are scored once on the same worlds (the scripted ones on the
 stencil observation of the same tier and pose source). At the end the final policy (not a
 chosen checkpoint) and the baselines are scored on ``--test-episodes`` held-out worlds (seeds
@@ -85,7 +87,7 @@ def learned(model, normaliser, recurrent):
     return act, reset
 
 
-def plot_curve(rows, label, baselines, n_dev, title, path):
+def plot_curve(rows, label, baselines, n_dev, title, path, split="dev"):
     """Success against training steps (``rows`` of curve.csv) with the baselines' dev success as lines."""
     import matplotlib
 
@@ -99,7 +101,7 @@ def plot_curve(rows, label, baselines, n_dev, title, path):
     for b in baselines:
         ax.axhline(rows[0][f"{b}_success"], color=styles[b][0], ls=styles[b][1], label=labels[b])
     ax.set_xlabel("training steps")
-    ax.set_ylabel(f"success rate ({n_dev} dev worlds)")
+    ax.set_ylabel(f"success rate ({n_dev} {split} worlds)")
     ax.set_ylim(-0.02, 1.02)
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8, loc="best")
@@ -108,12 +110,12 @@ def plot_curve(rows, label, baselines, n_dev, title, path):
     plt.close(fig)
 
 
-def replot(curve_csv, title, path, n_dev):
+def replot(curve_csv, title, path, n_dev, split="dev"):
     """Plot a curve.csv written so far (e.g. by a run stopped before its end)."""
     with open(curve_csv, newline="") as fh:
         rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
     wanted = [b for b in ("random", "reactive", "navigator") if f"{b}_success" in rows[0]]
-    plot_curve(rows, "PPO (stencil)", wanted, n_dev, title, path)
+    plot_curve(rows, "PPO (stencil)", wanted, n_dev, title, path, split)
 
 
 def main():
@@ -130,6 +132,12 @@ def main():
     ap.add_argument("--test-episodes", type=int, default=50, help="held-out worlds of the final score (>= 1)")
     ap.add_argument("--baselines", default="random,reactive,navigator",
                     help="comma-separated subset of random,reactive,navigator (empty: none)")
+    ap.add_argument("--curve-split", default="dev", choices=["dev", "test"],
+                    help="the worlds of the checkpoints (test: held-out, seeds 10000..)")
+    ap.add_argument("--stop-at", type=float, default=None,
+                    help="stop training once a checkpoint's success reaches this (e.g. 0.8)")
+    ap.add_argument("--skip-start-eval", action="store_true", help="no checkpoint at 0 steps")
+    ap.add_argument("--env-kwargs", default="{}", help="JSON dict of extra env arguments (e.g. reward_weights)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="polar_sim_out/ppo_gpisnav")
     ap.add_argument("--docs", default=None, help="also copy the plot into this folder (e.g. docs/img)")
@@ -138,7 +146,8 @@ def main():
     ap.add_argument("--title", default="", help="--replot: the plot's title")
     args = ap.parse_args()
     if args.replot:
-        return replot(args.replot[0], args.title, args.replot[1], args.curve_episodes)
+        return replot(args.replot[0], args.title, args.replot[1], args.curve_episodes,
+                      "held-out" if args.curve_split == "test" else "dev")
     if min(args.curve_episodes, args.test_episodes, args.envs, args.steps) < 1:
         ap.error("--curve-episodes, --test-episodes, --envs and --steps must be >= 1")
 
@@ -154,12 +163,14 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env_id = TIER_IDS[args.tier]
-    kwargs = {"obs_mode": args.obs_mode, "pose_source": args.pose_source}
+    kwargs = {"obs_mode": args.obs_mode, "pose_source": args.pose_source, **json.loads(args.env_kwargs)}
     if args.grid_visited:
         kwargs["grid_visited"] = True
-    scripted_kwargs = {"obs_mode": "stencil", "pose_source": args.pose_source}
+    scripted_kwargs = {**kwargs, "obs_mode": "stencil"}
+    scripted_kwargs.pop("grid_visited", None)
     name = f"{args.tier}_{args.obs_mode}{'_visited' if args.grid_visited else ''}{'_lstm' if args.recurrent else ''}"
-    dev = np.arange(DEV_SEED, DEV_SEED + args.curve_episodes)
+    dev = np.arange(DEV_SEED if args.curve_split == "dev" else TEST_SEED,
+                    (DEV_SEED if args.curve_split == "dev" else TEST_SEED) + args.curve_episodes)
     test = np.arange(TEST_SEED, TEST_SEED + args.test_episodes)
 
     # Training episodes start from seeds 0.. (make_vec_env) and continue unseeded: their worlds are
@@ -184,7 +195,7 @@ def main():
             print(f"  {b}: {res[b]}", flush=True)
         return res
 
-    print(f"{env_id} {kwargs}, {recipe['algorithm']}: baselines on {len(dev)} dev worlds", flush=True)
+    print(f"{env_id} {kwargs}, {recipe['algorithm']}: baselines on {len(dev)} {args.curve_split} worlds", flush=True)
     base_dev = baselines(dev)
     rows = []
 
@@ -195,6 +206,7 @@ def main():
                      "ppo_mean_length": r["mean_length"], "wall_s": time.perf_counter() - t_wall,
                      **{f"{b}_success": base_dev[b]["success"] for b in wanted}})
         print(f"{steps} steps: PPO {r} ({rows[-1]['wall_s']:.0f} s)", flush=True)
+        save_policy(out / "policy.npz", model, recipe, norm)  # the latest checkpoint, should the run be stopped
         with open(out / "curve.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]))
             w.writeheader()
@@ -209,9 +221,13 @@ def main():
             if self.num_timesteps >= self.next:
                 self.next += args.eval_every
                 evaluate_now(self.num_timesteps)
+                if args.stop_at is not None and rows[-1]["ppo_success"] >= args.stop_at:
+                    print(f"stopping: checkpoint success {rows[-1]['ppo_success']:.2f} >= {args.stop_at}", flush=True)
+                    return False
             return True
 
-    evaluate_now(0)
+    if not args.skip_start_eval:
+        evaluate_now(0)
     model.learn(total_timesteps=args.steps, callback=Evaluate(), progress_bar=False)
     if rows[-1]["steps"] != model.num_timesteps:
         evaluate_now(model.num_timesteps)
@@ -225,7 +241,8 @@ def main():
     print(f"final policy and baselines on {len(test)} held-out worlds", flush=True)
     final = run_episodes(env_id, kwargs, learned(loaded, norm, args.recurrent), test)
     print(f"  PPO: {final}", flush=True)
-    base_test = baselines(test)
+    same = args.curve_split == "test" and args.test_episodes == args.curve_episodes
+    base_test = base_dev if same else baselines(test)
     summary = {"env_id": env_id, "env_kwargs": kwargs, "recipe": recipe, "steps": int(model.num_timesteps),
                "training_wall_s": train_wall, "training_cpu_s": train_cpu, "dev_seeds": [int(dev[0]), int(dev[-1])],
                "test_seeds": [int(test[0]), int(test[-1])], "ppo_test": final, "baselines_test": base_test,
@@ -235,7 +252,7 @@ def main():
     title = (f"{env_id.split('/')[1]} (pose_source={args.pose_source}), simulated; "
              f"held-out: PPO {final['success']:.0%}")
     plot_curve(rows, f"{recipe['algorithm']} ({args.obs_mode}{', LSTM' if args.recurrent else ''})", wanted,
-               len(dev), title, out / "curve.png")
+               len(dev), title, out / "curve.png", "held-out" if args.curve_split == "test" else "dev")
     if args.docs:
         Path(args.docs).mkdir(parents=True, exist_ok=True)
         shutil.copy(out / "curve.png", Path(args.docs) / f"ppo_gpisnav_{name}.png")

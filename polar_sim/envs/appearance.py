@@ -50,6 +50,9 @@ class AppearanceRandomization(gym.Wrapper):
     def reset(self, *, seed=None, options=None):
         from polar_sim.sim.rover_appearance import resolve_appearance, sample_appearance
 
+        from polar_sim.envs.base import check_seed
+
+        seed = check_seed(seed)
         if seed is not None:
             self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7005]))
         options = dict(options or {})

@@ -13,7 +13,7 @@ import inspect
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["PolarMujocoEnv", "check_kwargs", "ACTION_TOLERANCE"]
+__all__ = ["PolarMujocoEnv", "check_kwargs", "check_seed", "ACTION_TOLERANCE"]
 
 #: Actions up to this far outside the action box are taken as the bound (float32 round-off);
 #: further out they raise ``ValueError``.
@@ -27,6 +27,23 @@ def check_kwargs(cls, unknown):
                  for p, v in inspect.signature(c.__init__).parameters.items()
                  if v.kind == v.KEYWORD_ONLY]
         raise TypeError(f"{cls.__name__}: unknown argument(s) {sorted(unknown)}; valid: {sorted(set(valid))}")
+
+
+def check_seed(seed):
+    """``seed`` for ``reset``: None or an integer >= 0 (a numpy integer is taken as ``int``);
+    anything else raises ``TypeError``/``ValueError`` naming ``seed`` before any state changes."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed: expected None or an integer >= 0, got {_short(seed)}")
+    if seed < 0:
+        raise ValueError(f"seed: expected None or an integer >= 0, got {_short(seed)}")
+    return int(seed)
+
+
+def _short(x, n=80):
+    r = repr(x)
+    return r if len(r) <= n else r[:n] + "..."
 
 
 class PolarMujocoEnv(gym.Env):
@@ -75,9 +92,10 @@ class PolarMujocoEnv(gym.Env):
         return self._world
 
     def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
+        seed = check_seed(seed)
         if self._closed:
             raise RuntimeError(f"{type(self).__name__}: reset() after close()")
+        super().reset(seed=seed)
         layout_seed = int(self.np_random.integers(0, 2**31 - 1))
         if self._world is not None:
             self._world.close()
@@ -102,9 +120,14 @@ class PolarMujocoEnv(gym.Env):
         return self._get_obs(), float(reward), bool(terminated), False, info
 
     def _check_action(self, action):
-        a = np.asarray(action)
-        if a.dtype == object or not np.issubdtype(a.dtype, np.number):
-            raise ValueError(f"action: expected a numeric array of shape {self.action_space.shape}, got {action!r}")
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError):
+            a = np.asarray(None, dtype=object)
+        if a.dtype.kind not in "iuf":
+            # bool, complex, str, object: never a velocity command
+            raise ValueError(f"action: expected a real numeric array of shape {self.action_space.shape}, got "
+                             f"{_short(action)}")
         a = a.astype(np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action: expected shape {self.action_space.shape}, got {a.shape}")

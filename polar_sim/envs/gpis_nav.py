@@ -67,12 +67,14 @@ class GPISNavEnv(ModuleEnv):
     n = ``stencil_rays`` x len(``stencil_radii``) = 16 x 4 by default (radii 0.5, 1, 2, 3 m).
 
     ## Action Space, Reward, Episode End
-    As ``LidarNav``: normalised ``(v, omega)``; progress − time − collision + success, from the
-    true pose; terminated on success or collision, truncated at 600 steps (300 for the room tier).
+    As ``LidarNav``: normalised ``(v, omega)``; progress − time − collision + success − proximity,
+    from the true pose, weighted by ``reward_weights`` (v1 defaults: collision 1, proximity 0.02
+    per step within 0.3 m of a surface; v0: collision 5, no proximity term); terminated on success
+    or collision, truncated at 600 steps (300 for the room tier).
 
     ## Arguments
     ``LidarNav``'s (``tier``, ``rooms``, ``room_size``, ``clutter``, ``n_beams``,
-    ``max_speed``, ``max_yaw_rate``, ``lidar_noise``, ``odometry_noise``), plus:
+    ``max_speed``, ``max_yaw_rate``, ``lidar_noise``, ``odometry_noise``, ``reward_weights``), plus:
 
     | argument | default | meaning |
     |---|---|---|
@@ -100,7 +102,8 @@ class GPISNavEnv(ModuleEnv):
       (lidar 1 cm and 1 % dropout, wheel odometry), the map and the observation in the start
       frame at the estimated pose, the goal given once in the start frame, the ``pose``
       observation, ``twist`` from the wheel odometry, ``obs_mode="grid"``, difficulty tiers,
-      the localisation scored in ``info``.
+      the localisation scored in ``info``; the reward's collision cost 1 instead of 5 and a
+      proximity term (``reward_weights``), so that a learner is not taught to stand still.
     - v0: first release (GPS+compass, no noise).
     """
 
@@ -110,7 +113,7 @@ class GPISNavEnv(ModuleEnv):
                  obs_mode="stencil", sdf_source="gpis", sdf_params=None, stencil_rays=16,
                  stencil_radii=(0.5, 1.0, 2.0, 3.0), grid_size=32, grid_resolution=0.25, grid_visited=False,
                  tier=None, rooms=None, room_size=None, clutter=None, n_beams=270, max_speed=1.0, max_yaw_rate=1.5,
-                 lidar_noise=_DEFAULT, odometry_noise=_DEFAULT, version=1, **unknown):
+                 lidar_noise=_DEFAULT, odometry_noise=_DEFAULT, reward_weights=None, version=1, **unknown):
         check_kwargs(type(self), unknown)
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode: unknown mode {obs_mode!r}; expected one of {', '.join(OBS_MODES)}")
@@ -123,7 +126,7 @@ class GPISNavEnv(ModuleEnv):
         base = LidarNavEnv(render_mode=render_mode, render_size=render_size, tier=tier, rooms=rooms,
                            room_size=room_size, clutter=clutter, n_beams=n_beams, max_speed=max_speed,
                            max_yaw_rate=max_yaw_rate, lidar_noise=lidar_noise, odometry_noise=odometry_noise,
-                           version=version)
+                           reward_weights=reward_weights, version=version)
         self._v0 = version == 0
         self._pose_source = make_pose_source("truth" if self._v0 else ("slam" if pose_source is None else pose_source),
                                              localize_params)

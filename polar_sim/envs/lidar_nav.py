@@ -12,7 +12,8 @@ from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.envs.noise import LIDAR_NOISE, ODOMETRY_NOISE, WheelOdometry, as_lidar_noise, as_odometry_noise
 from polar_sim.geometry import T_to_pose2d, between2d
 
-__all__ = ["LidarNavEnv", "NavTask", "TIERS", "DEFAULT_TIER", "resolve_tier"]
+__all__ = ["LidarNavEnv", "NavTask", "TIERS", "DEFAULT_TIER", "resolve_tier", "REWARD_V0", "REWARD_V1",
+           "as_reward_weights"]
 
 GOAL_RADIUS = 0.4  # m
 COLLISION_PENALTY = 5.0
@@ -20,6 +21,14 @@ SUCCESS_BONUS = 5.0
 TIME_COST = 0.01
 LIDAR_MAX = 30.0
 MAX_LAYOUT_ATTEMPTS = 20  # navworld layouts tried per reset before its error is raised
+
+#: v0's reward weights (progress per m, time per step, collision, success, proximity per step, m).
+REWARD_V0 = {"progress": 1.0, "time": TIME_COST, "collision": COLLISION_PENALTY, "success": SUCCESS_BONUS,
+             "proximity": 0.0, "proximity_radius": 0.3}
+#: v1's default reward weights: a collision costs 1 instead of 5, and a clearance under 0.3 m
+#: costs up to 0.02 per step (chosen on dev worlds, seeds 1000-1019, among collision 5 / 1 and
+#: proximity 0 / 0.02, by 12k-step PPO runs; see ``LidarNavEnv``'s Reward section).
+REWARD_V1 = {**REWARD_V0, "collision": 1.0, "proximity": 0.02}
 
 #: Difficulty tiers: the world each one builds (rooms per side, room side in m, clutter pieces).
 TIERS = {
@@ -44,6 +53,29 @@ def resolve_tier(tier, rooms, room_size, clutter):
     if isinstance(clutter, bool) or not isinstance(clutter, (int, np.integer)) or clutter < 0:
         raise ValueError(f"clutter: expected an integer >= 0, got {clutter!r}")
     return int(rooms), _positive(t["room_size"] if room_size is None else room_size, "room_size"), int(clutter)
+
+
+def as_reward_weights(weights, version=1):
+    """The reward weights: the version's defaults (:data:`REWARD_V1`, v0: :data:`REWARD_V0`)
+    updated by ``weights`` (a dict with some of their keys, each finite and >= 0; v0 accepts
+    only None, its reward being fixed)."""
+    if weights is None:
+        return dict(REWARD_V0 if version == 0 else REWARD_V1)
+    if version == 0:
+        raise ValueError("reward_weights: version 0 has a fixed reward; use the v1 ids")
+    if not isinstance(weights, dict):
+        raise TypeError(f"reward_weights: expected a dict with keys among {sorted(REWARD_V1)}, got {weights!r}")
+    out = dict(REWARD_V1)
+    for k, v in weights.items():
+        if k not in REWARD_V1:
+            raise ValueError(f"reward_weights: unknown key {k!r}; expected keys among {sorted(REWARD_V1)}")
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
+                or v < 0:
+            raise ValueError(f"reward_weights: {k!r} must be a finite number >= 0, got {v!r}")
+        out[k] = float(v)
+    if out["proximity_radius"] <= 0:
+        raise ValueError(f"reward_weights: 'proximity_radius' must be > 0, got {out['proximity_radius']!r}")
+    return out
 
 
 def _positive(x, name, upper=None):
@@ -114,10 +146,20 @@ class LidarNavEnv(PolarMujocoEnv):
 
     ## Reward
     ``progress`` (decrease of the shortest-path distance to the goal around the walls and
-    clutter, m, as in Habitat's PointNav) − ``time`` (0.01 per step) − ``collision`` (5 on a
-    collision) + ``success`` (5 on reaching the goal). The terms are in ``info["reward_terms"]``.
-    (The straight-line distance would reward pushing into a wall that stands between the robot
-    and the goal.)
+    clutter, m, as in Habitat's PointNav) − ``time`` (per step) − ``collision`` (on a collision)
+    + ``success`` (on reaching the goal) − ``proximity`` (v1, per step: the weight times
+    ``clip(1 − clearance / proximity_radius, 0, 1)``, the clearance being the exact scene SDF at
+    the true robot position minus the robot's radius, m). The terms are in
+    ``info["reward_terms"]``, each with its weight applied; the weights are ``reward_weights``
+    (defaults :data:`REWARD_V1`; v0: progress 1 per m, time 0.01, collision 5, success 5, no
+    proximity term). (The straight-line distance would reward pushing into a wall that stands
+    between the robot and the goal.)
+
+    Why v1's defaults differ from v0's (chosen on dev worlds, see ``benchmarks/RESULTS.md``):
+    with a collision costing 5, an episode that makes 2 m of progress and then touches clutter
+    returns less, discounted at 0.99, than standing still for the whole episode (−5 × 0.99^20 +
+    ~1.8 against −0.01 × ~95), so a learner's first lesson was to stop, and PPO reached 0 % on
+    the room tier. A collision still ends the episode and is never a success.
 
     ## Episode End
     Terminated when the robot is within 0.4 m of the goal (success) or touches an obstacle (a
@@ -136,6 +178,7 @@ class LidarNavEnv(PolarMujocoEnv):
     | ``max_yaw_rate`` | 1.5 | rad/s at action 1 (the rover's limit is 2) |
     | ``lidar_noise`` | (0.01, 0.01) | (range sigma m, dropout probability), or None; v0: None |
     | ``odometry_noise`` | ``OdometryNoise()`` | wheel odometry noise (:class:`polar_sim.envs.noise.OdometryNoise` or a dict of its fields: 3 % of each step's distance, a 2 % scale error, 3 % of each turn plus 0.01 rad/m, a yaw drift of 0.01 rad/s (1-sigma, drawn per episode)), or None; v0: None |
+    | ``reward_weights`` | None | v1: a dict overriding some of :data:`REWARD_V1` (``progress`` per m, ``time`` per step, ``collision``, ``success``, ``proximity`` per step, ``proximity_radius`` m; each finite and >= 0); v0: None only |
     | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0`` |
 
     ## Truth in ``info``
@@ -147,7 +190,8 @@ class LidarNavEnv(PolarMujocoEnv):
     ## Version History
     - v1: lidar noise (1 cm, 1 % dropout) and wheel odometry noise on by default; the goal is
       given once in the start frame (``goal_start``) instead of every step in the true robot
-      frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers.
+      frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers;
+      ``reward_weights``, with a collision costing 1 instead of 5 and a proximity term.
     - v0: first release (GPS+compass: the goal in the true robot frame, exact twist, no noise).
     """
 
@@ -155,12 +199,13 @@ class LidarNavEnv(PolarMujocoEnv):
 
     def __init__(self, *, render_mode=None, render_size=(480, 480), tier=None, rooms=None, room_size=None,
                  clutter=None, n_beams=270, max_speed=1.0, max_yaw_rate=1.5, lidar_noise=_DEFAULT,
-                 odometry_noise=_DEFAULT, version=1, **unknown):
+                 odometry_noise=_DEFAULT, reward_weights=None, version=1, **unknown):
         check_kwargs(type(self), unknown)
         super().__init__(render_mode=render_mode, render_size=render_size)
         if version not in (0, 1) or isinstance(version, bool):
             raise ValueError(f"version: expected 0 or 1, got {version!r}")
         self._version = int(version)
+        self._reward_w = as_reward_weights(reward_weights, self._version)
         self._rooms, self._room_size, self._clutter = resolve_tier(tier, rooms, room_size, clutter)
         self._tier = tier
         if isinstance(n_beams, bool) or not isinstance(n_beams, (int, np.integer)) or not 8 <= n_beams <= 4096:
@@ -225,6 +270,7 @@ class LidarNavEnv(PolarMujocoEnv):
         self._pose = self._truth["robot_pose2d"]
         self._start = self._pose.copy()
         self._geo = self._prev_dist = self._geodesic(self._pose[:2])
+        self._robot_radius = float(w.meta["robot_radius"])
         self._path_length = 0.0
         self._collision = False
         self._scan = w.lidar("lidar")
@@ -304,9 +350,14 @@ class LidarNavEnv(PolarMujocoEnv):
 
     def _get_reward(self):
         d = self._goal_distance()
-        terms = {"progress": self._prev_dist - self._geo, "time": -TIME_COST,
-                 "collision": -COLLISION_PENALTY if self._collision else 0.0,
-                 "success": SUCCESS_BONUS if (d < GOAL_RADIUS and not self._collision) else 0.0}
+        w = self._reward_w
+        terms = {"progress": w["progress"] * (self._prev_dist - self._geo), "time": -w["time"],
+                 "collision": -w["collision"] if self._collision else 0.0,
+                 "success": w["success"] if (d < GOAL_RADIUS and not self._collision) else 0.0}
+        if self._version == 1:
+            # Clearance of the robot's disc from the exact scene SDF (truth, as the rest of the reward).
+            clear = float(self._world.sdf(self._pose[None, :2])[0]) - self._robot_radius
+            terms["proximity"] = -w["proximity"] * float(np.clip(1.0 - clear / w["proximity_radius"], 0.0, 1.0))
         self._prev_dist = self._geo
         terminated = self._collision or d < GOAL_RADIUS
         return sum(terms.values()), terminated, terms

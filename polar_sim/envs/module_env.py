@@ -62,6 +62,9 @@ class ModuleEnv(gym.Env):
         return self.base.task
 
     def reset(self, *, seed=None, options=None):
+        from polar_sim.envs.base import check_seed
+
+        seed = check_seed(seed)
         super().reset(seed=seed)
         obs, info = self.base.reset(seed=seed, options=options)
         self._module_reset(obs, info)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
-from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
+from polar_sim.envs.base import PolarMujocoEnv, check_kwargs, check_seed
 from polar_sim.envs.observers import RoutePath
 from polar_sim.geometry import inv_pose
 
@@ -161,6 +161,9 @@ class RoverDriveEnv(PolarMujocoEnv):
     def reset(self, *, seed=None, options=None):
         from polar_sim.sim.rover_appearance import resolve_appearance
 
+        seed = check_seed(seed)
+        if options is not None and not isinstance(options, dict):
+            raise TypeError(f"options: expected None or a dict, got {type(options).__name__}")
         look = (options or {}).get("appearance", self._appearance)
         resolve_appearance(look, 0)  # checked before the old world is closed
         self._episode_appearance = look

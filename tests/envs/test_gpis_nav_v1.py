@@ -263,3 +263,61 @@ def test_unreachable_layout_is_redrawn_deterministically():
     for w in (w1, w2, w3):
         w.close()
     base.close()
+
+
+# The v1 reward is the weighted sum of its terms; the proximity term is measured against the exact
+# scene SDF at the true pose (the robot's disc within proximity_radius of a surface).
+def test_reward_terms_and_proximity_against_the_truth():
+    from polar_sim.envs.lidar_nav import REWARD_V1
+
+    w = {"progress": 2.0, "time": 0.02, "collision": 1.5, "success": 7.0, "proximity": 0.5, "proximity_radius": 0.4}
+    env = gym.make(ROOM, pose_source="truth", reward_weights=w)
+    _, info = env.reset(seed=1)
+    world, radius = env.unwrapped.base.world, env.unwrapped.base.world.meta["robot_radius"]
+    prev_geo, seen_near = info["geodesic_distance"], False
+    for _ in range(40):
+        _, r, term, trunc, info = env.step(np.array([0.6, 0.3], np.float32))
+        t = info["reward_terms"]
+        assert set(t) == set(REWARD_V1) - {"proximity_radius"}
+        assert r == pytest.approx(sum(t.values()))
+        assert t["progress"] == pytest.approx(2.0 * (prev_geo - info["geodesic_distance"]))
+        assert t["time"] == -0.02
+        assert t["collision"] == (-1.5 if info["collision"] else 0.0)
+        clear = float(world.sdf(info["robot_pose2d"][None, :2])[0]) - radius
+        assert t["proximity"] == pytest.approx(-0.5 * np.clip(1 - clear / 0.4, 0, 1))
+        seen_near |= t["proximity"] < 0
+        prev_geo = info["geodesic_distance"]
+        if term or trunc:
+            break
+    assert seen_near, "the test drive never came near a surface; pick another seed"
+    env.close()
+
+
+def test_reward_weights_bad_input():
+    for bad, exc, match in (({"collision": -1.0}, ValueError, "reward_weights: 'collision'"),
+                            ({"success": np.nan}, ValueError, "reward_weights: 'success'"),
+                            ({"time": "0.1"}, ValueError, "reward_weights: 'time'"),
+                            ({"proximity_radius": 0.0}, ValueError, "proximity_radius"),
+                            ({"bonus": 1.0}, ValueError, "unknown key 'bonus'"),
+                            ([1.0], TypeError, "reward_weights")):
+        with pytest.raises(exc, match=match):
+            gym.make(ROOM, reward_weights=bad)
+    with pytest.raises(ValueError, match="version 0 has a fixed reward"):
+        gym.make("polar_sim/GPISNav-v0", reward_weights={"collision": 1.0})
+
+
+# v1's default weights are REWARD_V1 (collision 1, proximity 0.02 within 0.3 m); v0 keeps its
+# reward (collision 5, no proximity term).
+def test_default_reward_weights_per_version():
+    from polar_sim.envs.lidar_nav import REWARD_V0, REWARD_V1
+
+    assert REWARD_V1["collision"] == 1.0 and REWARD_V1["proximity"] == 0.02 and REWARD_V1["proximity_radius"] == 0.3
+    assert REWARD_V0 == {"progress": 1.0, "time": 0.01, "collision": 5.0, "success": 5.0, "proximity": 0.0,
+                         "proximity_radius": 0.3}
+    for env_id, weights, keys in (("polar_sim/LidarNav-v1", REWARD_V1, 5), ("polar_sim/LidarNav-v0", REWARD_V0, 4)):
+        env = gym.make(env_id, tier="room")
+        env.reset(seed=2)
+        assert env.unwrapped._reward_w == weights
+        _, _, _, _, info = env.step(np.zeros(2, np.float32))
+        assert len(info["reward_terms"]) == keys and info["reward_terms"]["time"] == -0.01
+        env.close()
