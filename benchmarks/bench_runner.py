@@ -3,10 +3,12 @@
 1. Per-trial overhead with a null trial (returns at once): the local 2-worker pool, and Ray with
    2 CPUs once warm (a first sweep starts the workers, the timed second sweep reuses them).
    Overhead = wall time of the sweep / trials.
-2. Throughput of the local pool on CPU-bound trials (a single-threaded numpy loop of ~1 s):
-   2 workers against 1, measured as alternating pairs in one run, so both see the same machine.
+2. Throughput of the local pool on CPU-bound trials (a single-threaded numpy loop of ~1 s of CPU):
+   2 workers against 1, measured as pairs in one run (the order alternating), so both see the same
+   machine; both sides run in spawn worker processes (the 1-worker side through ``trial_timeout``),
+   16 trials a side, so that the workers' start-up (in the figure: it is part of a sweep) is amortised.
 
-    python benchmarks/bench_runner.py [--quick]
+    python benchmarks/bench_runner.py [--quick] [--only overhead|throughput]
 
 Needs both cores quiet for part 2 (`/work/tools/cpuslot -2` here); the ratio is only as good as
 the second core is free.
@@ -52,12 +54,20 @@ def _sweep(exp, n, **kw):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", choices=["overhead", "throughput"], default=None, help="one part (default both)")
     args = ap.parse_args()
     n_null = 40 if args.quick else 200
     null = Experiment("null", "null trial", grid={"a": [0]}, trial=null_trial, splits={"dev": {"seeds": [0]}})
     cpu = Experiment("cpu", "cpu-bound trial", grid={"cpu_s": [0.5 if args.quick else 1.0]}, trial=cpu_trial,
                      splits={"dev": {"seeds": [0]}})
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
+    if args.only != "throughput":
+        overhead(null, n_null)
+    if args.only != "overhead":
+        throughput(cpu, *((4, 1) if args.quick else (16, 3)))
+
+
+def overhead(null, n_null):
     serial = _sweep(null, n_null)
     pool = _sweep(null, n_null, workers=2)
     print(f"null trial, in-process: {1e3 * serial / n_null:.2f} ms/trial")
@@ -70,14 +80,18 @@ def main():
         print(f"null trial, Ray with 2 CPUs, warm: {1e3 * warm / n_null:.1f} ms/trial (target <= 50)")
     finally:
         ray.shutdown()
-    n_cpu, pairs = (4, 1) if args.quick else (8, 3)
+
+
+def throughput(cpu, n_cpu, pairs):
     ratios = []
     for k in range(pairs):
-        one = _sweep(cpu, n_cpu, workers=1, trial_timeout=600)        # a worker process too, like the pool
-        two = _sweep(cpu, n_cpu, workers=2)
+        # alternate which runs first, so that a drift in the machine's load does not favour one side
+        order = (1, 2) if k % 2 == 0 else (2, 1)
+        t = {w: _sweep(cpu, n_cpu, workers=w, trial_timeout=600) for w in order}   # both in worker processes
+        one, two = t[1], t[2]
         ratios.append(one / two)
-        print(f"pair {k}: {n_cpu} CPU-bound trials, 1 worker {one:.1f} s, 2 workers {two:.1f} s, "
-              f"throughput ratio {one / two:.2f}")
+        print(f"pair {k} ({'1 then 2' if order[0] == 1 else '2 then 1'}): {n_cpu} CPU-bound trials, 1 worker {one:.1f} s, "
+              f"2 workers {two:.1f} s, throughput ratio {one / two:.2f}; load average {os.getloadavg()[0]:.2f}")
     print(f"2-worker throughput / 1-worker: median {np.median(ratios):.2f} over {pairs} pairs (target >= 1.7); "
           f"load average at end: {os.getloadavg()[0]:.2f}")
 

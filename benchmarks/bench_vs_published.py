@@ -62,8 +62,8 @@ def build(src, build_dir=None):
                        f"{', '.join(need)}\nNothing was built.\n")
         raise SetupError(f"--gpismap-src: {why}; clone https://github.com/leebhoram/GPisMap2; build log: {log}")
     with open(log, "w") as fh:
-        for cmd in (["cmake", "-S", str(src), "-B", str(out), "-DCMAKE_BUILD_TYPE=Release"],
-                    ["cmake", "--build", str(out), "-j", "2"]):
+        for step, cmd in (("configure", ["cmake", "-S", str(src), "-B", str(out), "-DCMAKE_BUILD_TYPE=Release"]),
+                          ("build", ["cmake", "--build", str(out), "-j", "2"])):
             fh.write("$ " + " ".join(cmd) + "\n")
             fh.flush()
             try:
@@ -71,7 +71,7 @@ def build(src, build_dir=None):
             except FileNotFoundError:
                 raise SetupError(f"build failed: cmake not found; build log: {log}") from None
             if rc != 0:
-                raise SetupError(f"build failed ({cmd[1]} exited {rc}); build log: {log}")
+                raise SetupError(f"build failed (cmake {step} exited {rc}); build log: {log}")
     lib = next(iter(sorted(out.glob("libgpismap*.so*")) + sorted(out.glob("libgpismap*.dylib"))), None)
     if lib is None:
         raise SetupError(f"build failed: no libgpismap shared library in {out}; build log: {log}")

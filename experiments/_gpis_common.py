@@ -1,7 +1,8 @@
 """Glue shared by the GPIS-chapter experiments (not an experiment itself: the leading underscore keeps
 it out of ``polar-sim list``). The library does the work: recorded drives and orbits come from
 ``polar_sim.sim.drives2d`` / ``polar_sim.sim.orbits``, scores from ``polar_sim.metrics.maps``,
-methods from the plug-in registry (``polar_sim.runner.methods``)."""
+methods from the plug-in registry (``polar_sim.runner.methods``), pictures from
+``polar_sim.runner.pictures2d``."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 from polar_sim.metrics.maps import polyline_points
 from polar_sim.runner.gpis_methods import call_factory
 from polar_sim.runner.methods import get_method
+from polar_sim.runner.pictures2d import error_figure, map_picture, map_panel  # noqa: F401 (used as C.<name>)
 
 SCENES_2D = ("office2d", "warehouse2d")
 #: The mapping drive of gpis_accuracy / surface_vs_rate: 60 s, 5 regions, 1 m/s.
@@ -109,62 +111,3 @@ def mean(rows, key):
     v = np.array([r[key] for r in rows if isinstance(r.get(key), (int, float))], float)
     v = v[np.isfinite(v)]
     return float(v.mean()) if len(v) else float("nan")
-
-
-def error_figure(ax, z, r, scene):
-    """Two panels from a trial's arrays: |SDF error| near surfaces, and ``surface()`` with its worst
-    1 % classed (corner / sparse / wall)."""
-    ax[0].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0)
-    sc = ax[0].scatter(z["P"][:, 0], z["P"][:, 1], c=np.abs(z["err"]), s=1.5, cmap="inferno_r", vmin=0, vmax=0.1, lw=0)
-    ax[0].plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:blue", lw=1, label="drive")
-    ax[0].figure.colorbar(sc, ax=ax[0], shrink=0.8, label="|SDF error| (m), points within 0.3 m of observed surfaces")
-    ax[0].set_title(f"{scene} seed {r['seed']}, {r['method']}: SDF error near surfaces (RMSE {r['near_rmse_m'] * 100:.1f} cm)",
-                    fontsize=9)
-    ax[1].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0, label="observed true surface")
-    if "est" in z:
-        sel = z["dA"] > 0.05
-        ax[1].scatter(z["est"][:, 0], z["est"][:, 1], s=0.3, c="k", lw=0, label="estimated surface")
-        ax[1].scatter(z["est"][sel, 0], z["est"][sel, 1], c=np.minimum(z["dA"][sel], 0.3), s=3, cmap="autumn_r",
-                      vmin=0.05, vmax=0.3, lw=0, label="estimate > 5 cm off the truth")
-        for k, (name, c) in enumerate(zip(["corner", "sparse", "wall"], ["tab:red", "tab:purple", "tab:green"])):
-            s = z["worst_cls"] == k
-            ax[1].scatter(z["worst"][s, 0], z["worst"][s, 1], marker="x", s=18, c=c, label=f"worst 1%: {name}")
-        ax[1].set_title(f"surface: Hausdorff {r['hausdorff_m'] * 100:.1f} cm", fontsize=9)
-    for a in ax:
-        a.set_aspect("equal")
-        a.set_xlabel("x (m)")
-        a.set_ylabel("y (m)")
-        a.legend(loc="lower left", fontsize=7, markerscale=2)
-
-
-def map_picture(m, pts, step):
-    """The map's SDF and variance on a grid of ``step`` m over the box of ``pts`` (k, 2) plus 1 m,
-    and its ``surface()`` polylines (NaN-separated), as arrays for :func:`map_panel`."""
-    lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0
-    xs, ys = np.arange(lo[0], hi[0], step), np.arange(lo[1], hi[1], step)
-    X, Y = np.meshgrid(xs, ys)
-    Q = np.column_stack([X.ravel(), Y.ravel()])
-    s, v = np.empty(len(Q)), np.full(len(Q), np.nan)
-    for i in range(0, len(Q), 10_000):       # below the size where a query goes multi-threaded
-        d, _, var = m.query(Q[i:i + 10_000])
-        s[i:i + 10_000] = d
-        if var is not None:
-            v[i:i + 10_000] = var
-    lines = m.surface() if callable(getattr(m, "surface", None)) else []
-    return {"xs": xs, "ys": ys, "sdf": s.reshape(X.shape).astype(np.float32), "var": v.reshape(X.shape).astype(np.float32),
-            "lines": np.vstack([np.vstack([ln, [np.nan, np.nan]]) for ln in lines]) if lines else np.zeros((0, 2))}
-
-
-def map_panel(ax, z, title, *, var_max=1.0):
-    """Draw :func:`map_picture` arrays: the SDF where the variance is below ``var_max`` (never observed
-    space blank), the surface, the path."""
-    ext = [z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]]
-    show = np.where(~(z["var"] >= var_max), z["sdf"], np.nan)
-    im = ax.imshow(np.clip(show, -1.0, 2.0), origin="lower", extent=ext, cmap="RdBu", vmin=-2.0, vmax=2.0)
-    if len(z["lines"]):
-        ax.plot(z["lines"][:, 0], z["lines"][:, 1], "-", c="k", lw=0.7, label="zero level (surface())")
-    ax.plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:orange", lw=1.0, label="path")
-    ax.set(title=title, xlabel="x (m)", ylabel="y (m)", aspect="equal")
-    ax.title.set_fontsize(9)
-    ax.legend(loc="lower left", fontsize=7)
-    ax.figure.colorbar(im, ax=ax, shrink=0.7, label=f"SDF (m); blank: variance >= {var_max:g} (never observed)")

@@ -27,6 +27,8 @@ import time
 import numpy as np
 
 from polar_sim.runner import Check, Experiment, Finding
+from polar_sim.runner.localise import (budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start,
+                                      pooled_errors)
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
 try:
@@ -39,22 +41,7 @@ COLS = ["method", "seeds", "steps", "pos_median_m", "pos_p90_m", "pos_max_m", "h
         "fail_steps", "seeds_with_failure", "cpu_ms_median", "wall_ms_median"]
 
 
-def noisy_odometry(poses, rng, scale=1.02, drift_deg_per_m=0.5):
-    """Odometry poses (n, 3) integrating the true increments of ``poses`` (n, 3) with a scale error,
-    a yaw drift per metre and Gaussian noise (see the module docstring)."""
-    from polar_sim.geometry import between2d, compose2d
-
-    out = [poses[0].copy()]
-    for a, b in zip(poses[:-1], poses[1:]):
-        dx, dy, dth = between2d(a, b)
-        tr = float(np.hypot(dx, dy))
-        out.append(compose2d(out[-1], np.array([dx * scale + rng.normal(0.0, 0.05 * tr), dy * scale + rng.normal(0.0, 0.01 * tr),
-                                                dth + np.radians(drift_deg_per_m) * tr + rng.normal(0.0, 0.05 * abs(dth) + 0.005 * tr)])))
-    return np.asarray(out)
-
-
 def trial(params, seed, ctx):
-    from polar_sim.geometry import between2d
     from polar_sim.sim.drives2d import recorded_drives
 
     scene, q = params["scene"], ctx.quick
@@ -69,24 +56,13 @@ def trial(params, seed, ctx):
     rng = np.random.default_rng(np.random.SeedSequence([seed, 777]))
     truth = d2.poses
     odom = noisy_odometry(truth, rng)
-    a = rng.uniform(-np.pi, np.pi)
-    loc.reset(truth[0] + np.array([0.1 * np.cos(a), 0.1 * np.sin(a), np.radians(2.0) * rng.choice([-1.0, 1.0])]))
-    err, cpu, wall = [], [], []
-    for i in range(len(truth)):
-        inc = between2d(odom[i - 1], odom[i]) if i else np.zeros(3)
-        t0, c0 = time.perf_counter(), time.process_time()
-        pose = loc.step(d2.angles, d2.ranges[i], inc)
-        cpu.append(1e3 * (time.process_time() - c0))
-        wall.append(1e3 * (time.perf_counter() - t0))
-        dth = (pose[2] - truth[i, 2] + np.pi) % (2 * np.pi) - np.pi
-        err.append((np.hypot(*(pose[:2] - truth[i, :2])), abs(np.degrees(dth))))
-    e = np.asarray(err)
+    r = localise_drive(loc, d2.angles, d2.ranges, truth, odom, perturbed_start(truth[0], rng, offset_m=0.1, offset_deg=2.0))
+    e, cpu = r["err"], r["cpu_ms"]
     ctx.save_arrays(err=e, truth=truth, odom=odom)
-    return {"pos_median_m": float(np.median(e[:, 0])), "pos_p90_m": float(np.percentile(e[:, 0], 90)),
-            "pos_max_m": float(e[:, 0].max()), "head_median_deg": float(np.median(e[:, 1])),
-            "head_p90_deg": float(np.percentile(e[:, 1], 90)), "fail_steps": int((e[:, 0] > FAIL_M).sum()),
+    st = pooled_errors(e, FAIL_M)
+    return {**{k: st[k] for k in ("pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg", "fail_steps")},
             "not_ok_steps": int(getattr(loc, "not_ok_", 0)), "cpu_ms_median": float(np.median(cpu)),
-            "cpu_ms_p90": float(np.percentile(cpu, 90)), "wall_ms_median": float(np.median(wall)), "n_steps": len(truth),
+            "cpu_ms_p90": float(np.percentile(cpu, 90)), "wall_ms_median": float(np.median(r["wall_ms"])), "n_steps": len(truth),
             "map_scans": len(d1.poses), "fit_cpu_s": fit_cpu, "loc_travel_m": float(d2.travelled[-1]),
             "odom_pos_max_m": float(np.hypot(*(odom[:, :2] - truth[:, :2]).T).max()), "load": C.load_now()}
 
@@ -96,20 +72,11 @@ def _stats(table, ctx):
     for k in sorted({r["method"] for r in table}):
         rows = [r for r in table if r["method"] == k]
         e = np.vstack([ctx.arrays(r)["err"] for r in rows])
-        out.append({"method": k, "seeds": len(rows), "steps": len(e), "pos_median_m": float(np.median(e[:, 0])),
-                    "pos_p90_m": float(np.percentile(e[:, 0], 90)), "pos_max_m": float(e[:, 0].max()),
-                    "head_median_deg": float(np.median(e[:, 1])), "head_p90_deg": float(np.percentile(e[:, 1], 90)),
-                    "fail_steps": int((e[:, 0] > FAIL_M).sum()), "seeds_with_failure": sum(r["fail_steps"] > 0 for r in rows),
+        out.append({"method": k, "seeds": len(rows), **pooled_errors(e, FAIL_M),
+                    "seeds_with_failure": sum(r["fail_steps"] > 0 for r in rows),
                     "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rows])),
                     "wall_ms_median": float(np.median([r["wall_ms_median"] for r in rows])), "err": e})
     return out
-
-
-def budget_pf(st):
-    """The PF with the fewest particles whose median CPU per step is at least ICP-G's (else the slowest)."""
-    g = next(s for s in st if s["method"] == "icpg")["cpu_ms_median"]
-    pfs = sorted((s for s in st if s["method"].startswith("pf")), key=lambda s: int(s["method"][2:]))
-    return next((s for s in pfs if s["cpu_ms_median"] >= g), pfs[-1] if pfs else None), g
 
 
 def checks(table, ctx):
@@ -123,7 +90,7 @@ def checks(table, ctx):
            Check("ICP-G: no failures (position error > 0.5 m)", sum(r["fail_steps"] for r in g) == 0,
                  f"{sum(r['fail_steps'] for r in g)} failed steps")]
     st = _stats(table, ctx)
-    pf, gcpu = budget_pf(st)
+    pf, gcpu = budget_match(st)
     if pf is not None:
         gm = next(s for s in st if s["method"] == "icpg")
         out.append(Check("ICP-G error lower than the PF's at the same compute budget (CPU time)",
@@ -151,27 +118,14 @@ def findings(table, ctx):
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     st = _stats(table, ctx)
     write_csv_table(st, COLS, ctx.out_dir / "localisation.csv")
     rows = sorted(table, key=lambda r: (r["method"], r["seed"]))
     pcols = ["method", "seed", "n_steps", "pos_median_m", "head_median_deg", "fail_steps", "not_ok_steps", "cpu_ms_median",
              "odom_pos_max_m", "load"]
     write_csv_table(rows, pcols, ctx.out_dir / "localisation_per_seed.csv")
-    fig, ax = plt.subplots(1, 2, figsize=(13, 4.2))
-    for s in st:
-        for j, (a, unit) in enumerate(zip(ax, ["position error (m)", "heading error (deg)"])):
-            e = np.sort(s["err"][:, j])
-            a.plot(np.maximum(e, 1e-4), np.arange(1, len(e) + 1) / len(e), label=s["method"])
-            a.set(xscale="log", xlabel=unit, ylabel="fraction of steps")
-            a.grid(alpha=0.3)
-    ax[0].axvline(FAIL_M, c="k", ls=":", lw=1)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(f"localisation in office2d ({ctx.split} split): {len(table)} trials, CDF of the per-step errors")
+    fig = error_cdf_figure({s["method"]: s["err"] for s in st}, fail_m=FAIL_M, title=f"localisation in office2d "
+                           f"({ctx.split} split): {len(table)} trials, CDF of the per-step errors")
     return "\n".join([f"Errors pooled over every localisation step of every seed ({ctx.split} split); `fail_steps`: steps "
                       f"> {FAIL_M} m off; times: medians over seeds of the per-seed median step time (ms).", "",
                       markdown_table(st, COLS), "", "Per seed:", "", markdown_table(rows, pcols), "",

@@ -1,0 +1,95 @@
+"""Pictures of 2D maps for experiment summaries (matplotlib; numpy arrays in, axes drawn on).
+
+- :func:`map_picture`: a mapper's SDF, variance and ``surface()`` sampled on a grid, as arrays a
+  trial saves (``ctx.save_arrays``) for the summary;
+- :func:`map_panel`: those arrays drawn (SDF where observed, zero level, path);
+- :func:`map_figure`: the three-panel figure of a whole log (update-time histogram, SDF, variance);
+- :func:`error_figure`: |SDF error| near surfaces and the worst 1 % of the surface, classed.
+
+Coordinates in metres; SDF in metres; variance in m^2; times in ms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["map_picture", "map_panel", "map_figure", "error_figure"]
+
+
+def map_picture(m, pts, step):
+    """The map's SDF and variance on a grid of ``step`` m over the box of ``pts`` (k, 2) plus 1 m,
+    and its ``surface()`` polylines (NaN-separated), as arrays for :func:`map_panel`."""
+    lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0
+    xs, ys = np.arange(lo[0], hi[0], step), np.arange(lo[1], hi[1], step)
+    X, Y = np.meshgrid(xs, ys)
+    Q = np.column_stack([X.ravel(), Y.ravel()])
+    s, v = np.empty(len(Q)), np.full(len(Q), np.nan)
+    for i in range(0, len(Q), 10_000):       # below the size where a query goes multi-threaded
+        d, _, var = m.query(Q[i:i + 10_000])
+        s[i:i + 10_000] = d
+        if var is not None:
+            v[i:i + 10_000] = var
+    lines = m.surface() if callable(getattr(m, "surface", None)) else []
+    return {"xs": xs, "ys": ys, "sdf": s.reshape(X.shape).astype(np.float32), "var": v.reshape(X.shape).astype(np.float32),
+            "lines": np.vstack([np.vstack([ln, [np.nan, np.nan]]) for ln in lines]) if lines else np.zeros((0, 2))}
+
+
+def map_panel(ax, z, title, *, var_max=1.0):
+    """Draw :func:`map_picture` arrays: the SDF where the variance is below ``var_max`` (never observed
+    space blank), the surface, the path."""
+    ext = [z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]]
+    show = np.where(~(z["var"] >= var_max), z["sdf"], np.nan)
+    im = ax.imshow(np.clip(show, -1.0, 2.0), origin="lower", extent=ext, cmap="RdBu", vmin=-2.0, vmax=2.0)
+    if len(z["lines"]):
+        ax.plot(z["lines"][:, 0], z["lines"][:, 1], "-", c="k", lw=0.7, label="zero level (surface())")
+    ax.plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:orange", lw=1.0, label="path")
+    ax.set(title=title, xlabel="x (m)", ylabel="y (m)", aspect="equal")
+    ax.title.set_fontsize(9)
+    ax.legend(loc="lower left", fontsize=7)
+    ax.figure.colorbar(im, ax=ax, shrink=0.7, label=f"SDF (m); blank: variance >= {var_max:g} (never observed)")
+
+
+def error_figure(ax, z, r, scene):
+    """Two panels from a trial's arrays: |SDF error| near surfaces, and ``surface()`` with its worst
+    1 % classed (corner / sparse / wall)."""
+    ax[0].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0)
+    sc = ax[0].scatter(z["P"][:, 0], z["P"][:, 1], c=np.abs(z["err"]), s=1.5, cmap="inferno_r", vmin=0, vmax=0.1, lw=0)
+    ax[0].plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:blue", lw=1, label="drive")
+    ax[0].figure.colorbar(sc, ax=ax[0], shrink=0.8, label="|SDF error| (m), points within 0.3 m of observed surfaces")
+    ax[0].set_title(f"{scene} seed {r['seed']}, {r['method']}: SDF error near surfaces (RMSE {r['near_rmse_m'] * 100:.1f} cm)",
+                    fontsize=9)
+    ax[1].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0, label="observed true surface")
+    if "est" in z:
+        sel = z["dA"] > 0.05
+        ax[1].scatter(z["est"][:, 0], z["est"][:, 1], s=0.3, c="k", lw=0, label="estimated surface")
+        ax[1].scatter(z["est"][sel, 0], z["est"][sel, 1], c=np.minimum(z["dA"][sel], 0.3), s=3, cmap="autumn_r",
+                      vmin=0.05, vmax=0.3, lw=0, label="estimate > 5 cm off the truth")
+        for k, (name, c) in enumerate(zip(["corner", "sparse", "wall"], ["tab:red", "tab:purple", "tab:green"])):
+            s = z["worst_cls"] == k
+            ax[1].scatter(z["worst"][s, 0], z["worst"][s, 1], marker="x", s=18, c=c, label=f"worst 1%: {name}")
+        ax[1].set_title(f"surface: Hausdorff {r['hausdorff_m'] * 100:.1f} cm", fontsize=9)
+    for a in ax:
+        a.set_aspect("equal")
+        a.set_xlabel("x (m)")
+        a.set_ylabel("y (m)")
+        a.legend(loc="lower left", fontsize=7, markerscale=2)
+
+
+def map_figure(z, *, mapper, title):
+    """Three panels from :func:`map_picture` arrays plus ``z["cpu_ms"]`` (per-update CPU ms) and
+    ``z["path"]``: the update-time histogram, the SDF with its zero level, and log10 of the variance."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(20, 6.2))
+    ax[0].hist(z["cpu_ms"], bins=60, color="tab:blue")
+    ax[0].set(xlabel="update CPU time per scan (ms)", ylabel="scans", title=f"{mapper}: update time over the whole log (Fig 7.12a)")
+    map_panel(ax[1], z, "SDF and zero level of the whole log (Fig 7.19)")
+    im = ax[2].imshow(np.log10(np.maximum(z["var"], 1e-6)), origin="lower", cmap="magma",
+                      extent=[z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]])
+    ax[2].set(title="log10 variance of the SDF", xlabel="x (m)", ylabel="y (m)", aspect="equal")
+    fig.colorbar(im, ax=ax[2], shrink=0.7, label="log10 variance (m^2)")
+    fig.suptitle(title)
+    return fig
