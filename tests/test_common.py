@@ -9,24 +9,24 @@ POLAR_SIM_FULL=1 runs 200 per entry point, the size of benchmarks/bench_battery.
 import pytest
 
 from ci_sizes import size
+from polar_sim.envs import ENV_IDS
 from polar_sim.testing import check_module, check_polar_env
 
 N_BAD = size(200, 12)
 
-# Checked in CI: the simulator's entry points, the shared layers, the metrics and the CLI.
+# Checked in CI: the simulator's entry points, the shared layers, the modules, the metrics and the CLI.
 MODULES = [
     "World",                      # World(...) options, step, camera, lidar, sdf
     "RangeNoise",
     "Recording",                  # append, save, load
     "metrics.kitti_errors", "metrics.ate", "metrics.rpe", "metrics.iou", "metrics.hausdorff", "metrics.chamfer",
     "metrics.add", "metrics.adds",
+    "GroundVO", "ObjectTracker",
     "cli",
 ]
 
-# Written and run by benchmarks/bench_battery.py, but not yet passing; their failing checks are
-# listed in the issue-17 report, and each moves up into MODULES / ENVS once its owner's work has
-# landed: "GPISMap2D", "GPISMap3D", "localize", "GroundVO", "ObjectTracker", and every id of polar_sim.envs.ENV_IDS.
-ENVS: list = []
+# Every registered environment id.
+ENVS = list(ENV_IDS)
 
 
 def _checks():

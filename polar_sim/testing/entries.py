@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from polar_sim.testing.battery import EntryPoint, Graceful
+from polar_sim.testing.entry import EntryPoint, Graceful
 from polar_sim.testing.digest import state_digest
 
 __all__ = ["ENTRY_POINTS", "entry_points_of"]
