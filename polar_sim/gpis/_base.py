@@ -11,7 +11,7 @@ import logging
 
 import numpy as np
 
-from polar_sim._validation import as_points, check_updated
+from polar_sim._validation import as_points, as_positive_float, check_updated
 from polar_sim.gpis import _io
 from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
 from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
@@ -21,7 +21,14 @@ from polar_sim.gpis._tree import Tree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GPISMapBase"]
+__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS"]
+
+#: Query points with a coordinate beyond this (metres) get the prior (see ``query``).
+FAR_COORD = 1e100
+#: Cells of the dense cluster grid (int32) and of the free-space grid (uint8) a map may need,
+#: given its reach (root growth limit): 2D defaults 2.6e5 / 2.9e8, 3D defaults 1.7e7 / 1.6e8.
+MAX_CLUSTER_CELLS = 1 << 27
+MAX_FREE_CELLS = 1 << 29
 
 _STATE = ("tree_", "gps_", "n_updates_")
 
@@ -60,8 +67,24 @@ class GPISMapBase:
                 delattr(self, k)
         return self
 
+    def _reach(self, p):
+        """Half-width (m) of the box around the origin that the tree's root can ever cover."""
+        return 4.0 * p["max_half"] + p["init_half"]
+
+    def _check_grids(self, p):
+        """Refuse parameters whose dense cluster or free-space grid could outgrow the limits."""
+        reach = self._reach(p)
+        for name, cell, lim in (("cluster_half", 2.0 * p["cluster_half"], MAX_CLUSTER_CELLS),
+                                ("free_res", self._free_res(), MAX_FREE_CELLS)):
+            n = (2.0 * reach / cell + 4.0) ** self.dim
+            if n > lim:
+                raise ValueError(f"{name}/max_half: the map can reach +-{reach:g} m, a grid of "
+                                 f"{n:.3g} cells of {cell:g} m, over the limit of {lim} cells; "
+                                 "lower max_half or raise the cell size")
+
     def _init_state(self):
         p = self._checked_params()
+        self._check_grids(p)
         faces = None if self.legacy else self._FACE_COS
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
                           p["max_half"], spacing=None if self.legacy else self._spacing(),
@@ -72,7 +95,7 @@ class GPISMapBase:
         self.gps_ = GPStore(self.dim)
         self.gp_gen_ = np.zeros(0, np.int64)
         self.active_ = np.zeros((0, self.dim), np.int64)
-        self.free_ = FreeSpace(self.dim, self._free_res())
+        self.free_ = FreeSpace(self.dim, self._free_res(), reach=self._reach(p))
         self.n_updates_ = 0
         self.version_ = 0
 
@@ -276,6 +299,13 @@ class GPISMapBase:
             Gradient of the distance (unit outward normal near surfaces).
         var : ndarray of shape (n,)
             Variance of the distance (see the module docs for its meaning).
+
+        Notes
+        -----
+        Any finite point is answered. A point with a coordinate beyond ``FAR_COORD`` (1e100 m),
+        where squared distances overflow, gets the prior: its distance to the origin (positive,
+        finite, overflow-safe), the unit gradient away from the origin and the prior variance
+        ``1 + map_noise``; no NaN.
         """
         check_updated(self, "tree_")
         pts = as_points(points, self.dim, "points", allow_empty=True)
@@ -283,10 +313,34 @@ class GPISMapBase:
         d = self.dim
         if n == 0:
             return np.zeros(0), np.zeros((0, d)), np.zeros(0)
+        far = np.abs(pts).max(1) > FAR_COORD
+        if far.any():
+            # squared distances of such points overflow; the map knows nothing there: the prior
+            return self._far_prior(pts, far)
         if self.legacy:
             out = self._gp_query(pts)
             return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
         return self._faithful(pts)
+
+    def _far_prior(self, pts, far):
+        """Query with the points beyond :data:`FAR_COORD` answered by the prior: their distance
+        to the origin (overflow-safe; the map lies within far less than that), its gradient, and
+        the prior variance ``1 + map_noise``."""
+        d = self.dim
+        n = len(pts)
+        dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
+        near = ~far
+        if near.any():
+            r = self.query(pts[near])
+            dist[near], grad[near], var[near] = r
+        x = pts[far]
+        s = np.abs(x).max(1)
+        u = x / s[:, None]
+        nu = np.linalg.norm(u, axis=1)
+        dist[far] = s * nu
+        grad[far] = u / nu[:, None]
+        var[far] = 1.0 + float(self.map_noise)
+        return dist, grad, var
 
     def _kd(self):
         """KD-tree over the samples, rebuilt when the map changed."""
@@ -341,12 +395,19 @@ class GPISMapBase:
         Returns
         -------
         list of ndarray (k, 2) in 2D (polylines, world metres); trimesh.Trimesh in 3D.
+
+        Raises
+        ------
+        ValueError
+            Naming ``res`` when the grid over the samples' bounding box would exceed
+            ``_surface.MAX_SURFACE_NODES`` (2**24) nodes: a coarser ``res`` is needed (e.g. a
+            3D map spanning a room at the default 2 mm). Nothing is allocated before the check.
         """
         from polar_sim.gpis import _surface
 
         check_updated(self, "tree_")
-        res = self._SURF_RES if res is None else float(res)
-        band = self._SURF_BAND if band is None else float(band)
+        res = self._SURF_RES if res is None else as_positive_float(res, "res")
+        band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)
         var_max = self._SURF_VAR if self.legacy else np.inf
         fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
         return fn(self, res, band, var_max)
