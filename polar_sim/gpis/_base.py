@@ -25,8 +25,8 @@ __all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS"]
 
 #: Query points with a coordinate beyond this (metres) get the prior (see ``query``).
 FAR_COORD = 1e100
-#: Cells of the dense cluster grid (int32) and of the free-space grid (uint8) a map may need,
-#: given its reach (root growth limit): 2D defaults 2.6e5 / 2.9e8, 3D defaults 1.7e7 / 1.6e8.
+#: Cells of the dense cluster grid (int32) and of the free-space grid (uint8) a map may grow to
+#: (both cover only the data, clipped to the map's reach): ``update`` refuses a scan beyond them.
 MAX_CLUSTER_CELLS = 1 << 27
 MAX_FREE_CELLS = 1 << 29
 
@@ -71,20 +71,62 @@ class GPISMapBase:
         """Half-width (m) of the box around the origin that the tree's root can ever cover."""
         return 4.0 * p["max_half"] + p["init_half"]
 
-    def _check_grids(self, p):
-        """Refuse parameters whose dense cluster or free-space grid could outgrow the limits."""
+    def _precheck(self, scan):
+        """Refuse (``ValueError`` naming the pose argument) a scan that would grow the dense
+        cluster grid or the free-space grid past their limits, before any state changes.
+
+        Both grids cover only what the data needs, clipped to the map's reach (the tree cannot
+        hold samples beyond it), so this triggers only for fine grids over large extents."""
+        p = self._checked_params()
+        d = self.dim
+        name = getattr(scan, "pose_name", "pose")
         reach = self._reach(p)
-        for name, cell, lim in (("cluster_half", 2.0 * p["cluster_half"], MAX_CLUSTER_CELLS),
-                                ("free_res", self._free_res(), MAX_FREE_CELLS)):
-            n = (2.0 * reach / cell + 4.0) ** self.dim
-            if n > lim:
-                raise ValueError(f"{name}/max_half: the map can reach +-{reach:g} m, a grid of "
-                                 f"{n:.3g} cells of {cell:g} m, over the limit of {lim} cells; "
-                                 "lower max_half or raise the cell size")
+        have = hasattr(self, "tree_")
+        # free-space grid (FreeSpace.mark / _cover)
+        res = self._free_res()
+        hits = getattr(scan, "free_hits", scan.hits)
+        pts = np.vstack([hits, np.asarray(scan.origin_sensor, float)[None]])
+        lim = np.floor(reach / res) + 2.0
+        lo = np.clip(np.floor(pts.min(0) / res) - 1, -lim, lim)
+        hi = np.clip(np.floor(pts.max(0) / res) + 2, -lim, lim)
+        if (hi > lo).all():
+            if have and self.free_.grid.size:
+                glo = self.free_.goff.astype(float)
+                ghi = glo + self.free_.gshape
+                if not ((lo >= glo).all() and (hi <= ghi).all()):
+                    pad = np.floor((ghi - glo) / 4)
+                    lo = np.minimum(lo, glo - np.where(lo < glo, pad, 0))
+                    hi = np.maximum(hi, ghi + np.where(hi > ghi, pad, 0))
+                else:
+                    lo, hi = glo, ghi
+            n = float(np.prod(hi - lo))
+            if n > MAX_FREE_CELLS:
+                raise ValueError(f"{name}: this scan would grow the free-space grid to {n:.3g} "
+                                 f"cells of {res:g} m, over the limit of {MAX_FREE_CELLS} cells "
+                                 "(MAX_FREE_CELLS); raise free_res")
+        # cluster grid (Tree.reserve / _cover)
+        w = 2.0 * p["cluster_half"]
+        org = -p["init_half"]
+        rc = self.tree_.root[:d] if have else np.zeros(d)
+        limb = 4.0 * p["max_half"]
+        P = np.clip(scan.hits, rc - limb, rc + limb)
+        if len(P):
+            lo = np.floor((P.min(0) - org) / w) - 2
+            hi = np.floor((P.max(0) - org) / w) + 3
+            if have and self.tree_.cgrid.size > 1:
+                glo = self.tree_.goff.astype(float)
+                ghi = glo + self.tree_.gshape
+                span = ghi - glo
+                lo = np.minimum(lo, np.where(lo < glo, glo - np.floor(span / 2), glo))
+                hi = np.maximum(hi, np.where(hi > ghi, ghi + np.floor(span / 2), ghi))
+            n = float(np.prod(hi - lo))
+            if n > MAX_CLUSTER_CELLS:
+                raise ValueError(f"{name}: this scan would grow the cluster grid to {n:.3g} "
+                                 f"cells of {w:g} m, over the limit of {MAX_CLUSTER_CELLS} cells "
+                                 "(MAX_CLUSTER_CELLS); raise cluster_half or lower max_half")
 
     def _init_state(self):
         p = self._checked_params()
-        self._check_grids(p)
         faces = None if self.legacy else self._FACE_COS
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
                           p["max_half"], spacing=None if self.legacy else self._spacing(),
@@ -122,6 +164,7 @@ class GPISMapBase:
     # -- the update pipeline --------------------------------------------------------------------
     def _run_update(self, scan):
         """Stages 2-4 given a prepared scan (subclass ``_prepare`` output)."""
+        self._precheck(scan)
         if not hasattr(self, "tree_"):
             self._init_state()
         tr = self.tree_

@@ -239,7 +239,7 @@ class GPISMap2D(GPISMapBase):
         # sensor_offset give the same map
         origin = t if p["legacy"] else R @ o + t
         return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=origin, rmax=float(r.max()),
-                               sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
+                               sensor_pts=sp, hits=hits, origin_sensor=R @ o + t, pose_name="pose2d",
                                lim=np.asarray(p["angle_obs_limit"], float), model=model)
 
     # -- sensor model ---------------------------------------------------------------------------

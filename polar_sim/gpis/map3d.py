@@ -222,7 +222,8 @@ class GPISMap3D(GPISMapBase):
         hits = sp @ R.T + t
         scan = SimpleNamespace(gp=gp, R=R, t=t, origin=t, origin_sensor=t, rmax=float(zz.max()),
                                sensor_pts=sp, hits=hits, pix=(v[ii], u[jj]), r=zz,
-                               win=(v[0], v[-1], u[0], u[-1]), spherical=spherical)
+                               win=(v[0], v[-1], u[0], u[-1]), spherical=spherical,
+                               pose_name="T_world_sensor" if spherical else "T_world_cam")
         scan.free_hits = hits[:: -(-len(hits) // 4096)]      # at most ~4096 free-space rays
         self._run_update(scan)
 
