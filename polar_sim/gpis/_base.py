@@ -12,6 +12,7 @@ import logging
 import numpy as np
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
+from polar_sim.params import Parameterised
 from polar_sim.gpis import _io
 from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
 from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
@@ -33,8 +34,17 @@ MAX_FREE_CELLS = 1 << 29
 _STATE = ("tree_", "gps_", "n_updates_")
 
 
-class GPISMapBase:
-    """Common machinery; see :class:`GPISMap2D` / :class:`GPISMap3D` for the parameters."""
+class GPISMapBase(Parameterised):
+    """Common machinery; see :class:`GPISMap2D` / :class:`GPISMap3D` for the parameters.
+
+    The module contract is :class:`polar_sim.params.Parameterised`'s: ``get_params()``,
+    ``set_params()`` (checked, the map unchanged on a bad value), ``reset()``, and the published
+    behaviour as a named preset, ``published(**overrides)``, built from ``PUBLISHED``.
+    """
+
+    #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
+    #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
+    PUBLISHED = {"legacy": True}
 
     dim = 0
     _T_BLEND = 0.4          # query blending threshold (spec §9.1)
@@ -56,6 +66,9 @@ class GPISMapBase:
                             # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
+    def _check_params(self):
+        return self._checked_params()
+
     def get_params(self):
         """The constructor arguments, by name."""
         return {k: getattr(self, k) for k in self._PARAMS}
