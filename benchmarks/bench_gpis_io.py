@@ -44,9 +44,11 @@ def main(argv=None):
         _map3d(3).save(ref)
         t0 = time.perf_counter()
         res = iofaults.kill_mid_save(ref, td / "target.npz", args.kills, dim=3, seed=args.seed)
-        out["kills"] = {"n": len(res), "intact": sum(r[1] for r in res), "file_bytes": ref.stat().st_size,
+        out["kills"] = {"n": len(res), "intact": sum(r[1] for r in res), "mid_write": sum(r[3] for r in res),
+                        "file_bytes": ref.stat().st_size,
                         "failures": [r for r in res if not r[1]], "seconds": round(time.perf_counter() - t0, 1)}
-        print(f"kill mid-save: {out['kills']['intact']}/{len(res)} intact ({ref.stat().st_size} bytes)", flush=True)
+        print(f"kill mid-save: {out['kills']['intact']}/{len(res)} intact, {out['kills']['mid_write']} landed "
+              f"mid-write ({ref.stat().st_size} bytes)", flush=True)
         names = iofaults.write_bases(td, n2=3, n3=1)
         cases = iofaults.all_cases(td, names)
         t0 = time.perf_counter()

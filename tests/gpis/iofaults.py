@@ -79,7 +79,9 @@ while True:
 
 
 def kill_mid_save(ref, target, n_kills, *, dim=3, seed=0):
-    """Kill a re-saving subprocess ``n_kills`` times; return a list of (delay_s, ok, message).
+    """Kill a re-saving subprocess ``n_kills`` times; return a list of (delay_s, ok, message,
+    mid_write), ``mid_write`` True when the kill left the writer's temporary file (it landed
+    while a save was under way).
 
     ``ref`` is a valid map file; the worker loads it and re-saves it over ``target`` in a loop,
     and is SIGKILLed ``delay`` seconds (uniform over two save times, seeded) after it reports its
@@ -103,13 +105,18 @@ def kill_mid_save(ref, target, n_kills, *, dim=3, seed=0):
         time.sleep(delay)
         p.send_signal(signal.SIGKILL)
         p.wait()
+        # a killed writer's temporary file shows that the kill landed mid-write; remove it
+        tmps = list(Path(target).parent.glob(f".{Path(target).name}.*.tmp"))
+        for t in tmps:
+            t.unlink()
+        mid = bool(tmps)
         try:
             got = cls.load(target)
             q = got.query(pts)
             ok = all(np.array_equal(a, b) for a, b in zip(q, q0))
-            out.append((delay, ok, "" if ok else "answers differ"))
+            out.append((delay, ok, "" if ok else "answers differ", mid))
         except Exception as exc:  # noqa: BLE001 - any failure to load is what is counted
-            out.append((delay, False, f"{type(exc).__name__}: {exc}"))
+            out.append((delay, False, f"{type(exc).__name__}: {exc}", mid))
     return out
 
 

@@ -88,9 +88,8 @@ def test_kill_mid_save(tmp_path):
     target = tmp_path / "target.npz"
     res = iofaults.kill_mid_save(ref, target, N_KILLS, dim=3, seed=1)
     assert [r for r in res if not r[1]] == []
-    # only the killed writers' own hidden temporary files can remain; never at the target path
-    assert all(n == "ref.npz" or n == "target.npz" or (n.startswith(".target.npz.") and n.endswith(".tmp"))
-               for n in os.listdir(tmp_path))
+    assert sum(r[3] for r in res) >= 1              # at least one kill landed mid-write
+    assert sorted(os.listdir(tmp_path)) == ["ref.npz", "target.npz"]
 
 
 @pytest.fixture(scope="module")
