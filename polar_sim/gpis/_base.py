@@ -44,7 +44,15 @@ class GPISMapBase(Parameterised):
 
     #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
     #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
-    PUBLISHED = {"legacy": True}
+    PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
+                 "fusion": "published", "query_mode": "published"}
+    #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
+    _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
+                         "fusion": "published", "query_mode": "published", "scan_model": "published"}
+    #: Allowed values of the behaviour parameters, the default first.
+    CHOICES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
+               "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
+               "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
 
     dim = 0
     _T_BLEND = 0.4          # query blending threshold (spec §9.1)
@@ -66,6 +74,10 @@ class GPISMapBase(Parameterised):
                             # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
+    def _pub(self, name):
+        """True when behaviour ``name`` is the published one (its parameter, or ``legacy``)."""
+        return bool(self.legacy) or getattr(self, name) == self._PUBLISHED_CHOICE[name]
+
     def _check_params(self):
         return self._checked_params()
 
@@ -140,9 +152,10 @@ class GPISMapBase(Parameterised):
 
     def _init_state(self):
         p = self._checked_params()
-        faces = None if self.legacy else self._FACE_COS
+        chain = self._pub("spacing_rule")
+        faces = None if chain else self._FACE_COS
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
-                          p["max_half"], spacing=None if self.legacy else self._spacing(),
+                          p["max_half"], spacing=None if chain else self._spacing(),
                           face_cos=faces,
                           # leaves small enough for both faces of a wall thinner than min_half
                           leaf_half=None if faces is None else 0.5 * p["min_half"])
@@ -223,7 +236,7 @@ class GPISMapBase(Parameterised):
         touched.append(tr.pos[kept])
         self._sync_slot_arrays()
         # stage 4: retrain
-        if self.legacy:
+        if self._pub("retrain"):
             self._retrain_legacy(np.concatenate(touched) if touched else np.zeros((0, self.dim)))
         else:
             self._retrain_dirty(np.concatenate(changed))
@@ -244,7 +257,7 @@ class GPISMapBase(Parameterised):
         than 2x, since the values the GPs were last trained on.
         """
         tr = self.tree_
-        if self.legacy or self._retrain_tol() <= 0:
+        if self._pub("retrain") or self._retrain_tol() <= 0:
             return action >= 1
         out = (action >= 2) & (new < 0)                      # dropped or lost
         i = np.where(new >= 0, new, cand)
@@ -291,9 +304,9 @@ class GPISMapBase(Parameterised):
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
         self._sync_slot_arrays()
         self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
-                        self.legacy and self.dim == 2,
-                        NOGRAD_VALUE_NOISE if self.legacy else self._NOGRAD_NOISE,
-                        0.0 if self.legacy else self._VALUE_FLOOR)
+                        self._pub("gp_noise") and self.dim == 2,
+                        NOGRAD_VALUE_NOISE if self._pub("gp_noise") else self._NOGRAD_NOISE,
+                        0.0 if self._pub("gp_noise") else self._VALUE_FLOOR)
         self._sync_slot_arrays()
         self.gp_gen_[slots] = self.slot_gen_[slots]
 
@@ -332,7 +345,7 @@ class GPISMapBase(Parameterised):
         W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
         v0, g0 = _var_consts(self.dim, float(self.map_scale))
         mmax = g.m_max
-        query_gp(pts, float(W), self._T_BLEND, bool(self.legacy), float(self.map_scale), v0, g0,
+        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.map_scale), v0, g0,
                  1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
                  tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                  g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(mmax, 1), out)
@@ -373,7 +386,7 @@ class GPISMapBase(Parameterised):
         if far.any():
             # squared distances of such points overflow; the map knows nothing there: the prior
             return self._far_prior(pts, far)
-        if self.legacy:
+        if self._pub("query_mode"):
             out = self._gp_query(pts)
             return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
         return self._faithful(pts)
@@ -464,7 +477,7 @@ class GPISMapBase(Parameterised):
         check_updated(self, "tree_")
         res = self._SURF_RES if res is None else as_positive_float(res, "res")
         band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)
-        var_max = self._SURF_VAR if self.legacy else np.inf
+        var_max = self._SURF_VAR if self._pub("query_mode") else np.inf
         fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
         return fn(self, res, band, var_max)
 

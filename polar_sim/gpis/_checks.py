@@ -24,7 +24,12 @@ def check_params(est, vec2=()):
     out = {}
     for k in est._PARAMS:
         v = getattr(est, k)
-        if k == "legacy":
+        if k in getattr(est, "CHOICES", {}):
+            allowed = est.CHOICES[k]
+            if not isinstance(v, str) or v not in allowed:
+                raise ValueError(f"{k}: expected one of {', '.join(map(repr, allowed))}, got {v!r}")
+            out[k] = v
+        elif k == "legacy":
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"legacy: expected a bool, got {type(v).__name__}")
             out[k] = bool(v)

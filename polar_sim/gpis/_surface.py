@@ -85,12 +85,12 @@ def surface_2d(m, res, band, var_max):
         return []
     axes = _axes(m, res, 2 * res + band)
     sdf, mask = grid_query(m, axes, band, var_max)
-    if not m.legacy:
+    if not m._pub("query_mode"):
         mask = mask & ~_jumps(sdf, res)
     lines = find_contours(sdf, 0.0, mask=mask)
     x0 = np.array([a[0] for a in axes])
     out = [x0 + c * res for c in lines if len(c) >= 2]
-    if not m.legacy:
+    if not m._pub("query_mode"):
         # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
         # field's sign (a spurious zero between samples), not a surface the grid can resolve
         out = [ln for ln in out if not (np.allclose(ln[0], ln[-1]) and
