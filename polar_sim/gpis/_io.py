@@ -68,11 +68,16 @@ def _read(path):
     if total > MAX_FILE_BYTES:
         raise ValueError(f"path: {path} declares {total} bytes of arrays, over the "
                          f"{MAX_FILE_BYTES}-byte limit of a GPIS map file")
+    key = None
     try:
         with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+            out = {}
+            for key in z.files:
+                out[key] = z[key]
+            return out
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError) as exc:
-        raise ValueError(f"path: {path} is not a readable GPIS map file ({exc})") from None
+        where = "" if key is None else f", array {key!r}"
+        raise ValueError(f"path: {path} is not a readable GPIS map file{where} ({exc})") from None
 
 
 def load(cls, path):
