@@ -11,7 +11,8 @@ import logging
 
 import numpy as np
 
-from polar_sim._validation import as_points, check_updated
+from polar_sim._validation import as_points, as_positive_float, check_updated
+from polar_sim.params import Parameterised
 from polar_sim.gpis import _io
 from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
 from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
@@ -21,13 +22,37 @@ from polar_sim.gpis._tree import Tree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GPISMapBase"]
+__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS"]
+
+#: Query points with a coordinate beyond this (metres) get the prior (see ``query``).
+FAR_COORD = 1e100
+#: Cells of the dense cluster grid (int32) and of the free-space grid (uint8) a map may grow to
+#: (both cover only the data, clipped to the map's reach): ``update`` refuses a scan beyond them.
+MAX_CLUSTER_CELLS = 1 << 27
+MAX_FREE_CELLS = 1 << 29
 
 _STATE = ("tree_", "gps_", "n_updates_")
 
 
-class GPISMapBase:
-    """Common machinery; see :class:`GPISMap2D` / :class:`GPISMap3D` for the parameters."""
+class GPISMapBase(Parameterised):
+    """Common machinery; see :class:`GPISMap2D` / :class:`GPISMap3D` for the parameters.
+
+    The module contract is :class:`polar_sim.params.Parameterised`'s: ``get_params()``,
+    ``set_params()`` (checked, the map unchanged on a bad value), ``reset()``, and the published
+    behaviour as a named preset, ``published(**overrides)``, built from ``PUBLISHED``.
+    """
+
+    #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
+    #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
+    PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
+                 "fusion": "published", "query_mode": "published"}
+    #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
+    _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
+                         "fusion": "published", "query_mode": "published", "scan_model": "published"}
+    #: Allowed values of the behaviour parameters, the default first.
+    CHOICES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
+               "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
+               "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
 
     dim = 0
     _T_BLEND = 0.4          # query blending threshold (spec §9.1)
@@ -49,6 +74,13 @@ class GPISMapBase:
                             # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
+    def _pub(self, name):
+        """True when behaviour ``name`` is the published one (its parameter, or ``legacy``)."""
+        return bool(self.legacy) or getattr(self, name) == self._PUBLISHED_CHOICE[name]
+
+    def _check_params(self):
+        return self._checked_params()
+
     def get_params(self):
         """The constructor arguments, by name."""
         return {k: getattr(self, k) for k in self._PARAMS}
@@ -60,11 +92,70 @@ class GPISMapBase:
                 delattr(self, k)
         return self
 
+    def _reach(self, p):
+        """Half-width (m) of the box around the origin that the tree's root can ever cover."""
+        return 4.0 * p["max_half"] + p["init_half"]
+
+    def _precheck(self, scan):
+        """Refuse (``ValueError`` naming the pose argument) a scan that would grow the dense
+        cluster grid or the free-space grid past their limits, before any state changes.
+
+        Both grids cover only what the data needs, clipped to the map's reach (the tree cannot
+        hold samples beyond it), so this triggers only for fine grids over large extents."""
+        p = self._checked_params()
+        d = self.dim
+        name = getattr(scan, "pose_name", "pose")
+        reach = self._reach(p)
+        have = hasattr(self, "tree_")
+        # free-space grid (FreeSpace.mark / _cover)
+        res = self._free_res()
+        hits = getattr(scan, "free_hits", scan.hits)
+        pts = np.vstack([hits, np.asarray(scan.origin_sensor, float)[None]])
+        lim = np.floor(reach / res) + 2.0
+        lo = np.clip(np.floor(pts.min(0) / res) - 1, -lim, lim)
+        hi = np.clip(np.floor(pts.max(0) / res) + 2, -lim, lim)
+        if (hi > lo).all():
+            if have and self.free_.grid.size:
+                glo = self.free_.goff.astype(float)
+                ghi = glo + self.free_.gshape
+                if not ((lo >= glo).all() and (hi <= ghi).all()):
+                    pad = np.floor((ghi - glo) / 4)
+                    lo = np.minimum(lo, glo - np.where(lo < glo, pad, 0))
+                    hi = np.maximum(hi, ghi + np.where(hi > ghi, pad, 0))
+                else:
+                    lo, hi = glo, ghi
+            n = float(np.prod(hi - lo))
+            if n > MAX_FREE_CELLS:
+                raise ValueError(f"{name}: this scan would grow the free-space grid to {n:.3g} "
+                                 f"cells of {res:g} m, over the limit of {MAX_FREE_CELLS} cells "
+                                 "(MAX_FREE_CELLS); raise free_res")
+        # cluster grid (Tree.reserve / _cover)
+        w = 2.0 * p["cluster_half"]
+        org = -p["init_half"]
+        rc = self.tree_.root[:d] if have else np.zeros(d)
+        limb = 4.0 * p["max_half"]
+        P = np.clip(scan.hits, rc - limb, rc + limb)
+        if len(P):
+            lo = np.floor((P.min(0) - org) / w) - 2
+            hi = np.floor((P.max(0) - org) / w) + 3
+            if have and self.tree_.cgrid.size > 1:
+                glo = self.tree_.goff.astype(float)
+                ghi = glo + self.tree_.gshape
+                span = ghi - glo
+                lo = np.minimum(lo, np.where(lo < glo, glo - np.floor(span / 2), glo))
+                hi = np.maximum(hi, np.where(hi > ghi, ghi + np.floor(span / 2), ghi))
+            n = float(np.prod(hi - lo))
+            if n > MAX_CLUSTER_CELLS:
+                raise ValueError(f"{name}: this scan would grow the cluster grid to {n:.3g} "
+                                 f"cells of {w:g} m, over the limit of {MAX_CLUSTER_CELLS} cells "
+                                 "(MAX_CLUSTER_CELLS); raise cluster_half or lower max_half")
+
     def _init_state(self):
         p = self._checked_params()
-        faces = None if self.legacy else self._FACE_COS
+        chain = self._pub("spacing_rule")
+        faces = None if chain else self._FACE_COS
         self.tree_ = Tree(self.dim, p["init_half"], p["cluster_half"], p["min_half"],
-                          p["max_half"], spacing=None if self.legacy else self._spacing(),
+                          p["max_half"], spacing=None if chain else self._spacing(),
                           face_cos=faces,
                           # leaves small enough for both faces of a wall thinner than min_half
                           leaf_half=None if faces is None else 0.5 * p["min_half"])
@@ -72,7 +163,7 @@ class GPISMapBase:
         self.gps_ = GPStore(self.dim)
         self.gp_gen_ = np.zeros(0, np.int64)
         self.active_ = np.zeros((0, self.dim), np.int64)
-        self.free_ = FreeSpace(self.dim, self._free_res())
+        self.free_ = FreeSpace(self.dim, self._free_res(), reach=self._reach(p))
         self.n_updates_ = 0
         self.version_ = 0
 
@@ -99,6 +190,7 @@ class GPISMapBase:
     # -- the update pipeline --------------------------------------------------------------------
     def _run_update(self, scan):
         """Stages 2-4 given a prepared scan (subclass ``_prepare`` output)."""
+        self._precheck(scan)
         if not hasattr(self, "tree_"):
             self._init_state()
         tr = self.tree_
@@ -144,7 +236,7 @@ class GPISMapBase:
         touched.append(tr.pos[kept])
         self._sync_slot_arrays()
         # stage 4: retrain
-        if self.legacy:
+        if self._pub("retrain"):
             self._retrain_legacy(np.concatenate(touched) if touched else np.zeros((0, self.dim)))
         else:
             self._retrain_dirty(np.concatenate(changed))
@@ -165,7 +257,7 @@ class GPISMapBase:
         than 2x, since the values the GPs were last trained on.
         """
         tr = self.tree_
-        if self.legacy or self._retrain_tol() <= 0:
+        if self._pub("retrain") or self._retrain_tol() <= 0:
             return action >= 1
         out = (action >= 2) & (new < 0)                      # dropped or lost
         i = np.where(new >= 0, new, cand)
@@ -212,9 +304,9 @@ class GPISMapBase:
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
         self._sync_slot_arrays()
         self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
-                        self.legacy and self.dim == 2,
-                        NOGRAD_VALUE_NOISE if self.legacy else self._NOGRAD_NOISE,
-                        0.0 if self.legacy else self._VALUE_FLOOR)
+                        self._pub("gp_noise") and self.dim == 2,
+                        NOGRAD_VALUE_NOISE if self._pub("gp_noise") else self._NOGRAD_NOISE,
+                        0.0 if self._pub("gp_noise") else self._VALUE_FLOOR)
         self._sync_slot_arrays()
         self.gp_gen_[slots] = self.slot_gen_[slots]
 
@@ -253,7 +345,7 @@ class GPISMapBase:
         W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
         v0, g0 = _var_consts(self.dim, float(self.map_scale))
         mmax = g.m_max
-        query_gp(pts, float(W), self._T_BLEND, bool(self.legacy), float(self.map_scale), v0, g0,
+        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.map_scale), v0, g0,
                  1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
                  tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                  g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(mmax, 1), out)
@@ -276,6 +368,13 @@ class GPISMapBase:
             Gradient of the distance (unit outward normal near surfaces).
         var : ndarray of shape (n,)
             Variance of the distance (see the module docs for its meaning).
+
+        Notes
+        -----
+        Any finite point is answered. A point with a coordinate beyond ``FAR_COORD`` (1e100 m),
+        where squared distances overflow, gets the prior: its distance to the origin (positive,
+        finite, overflow-safe), the unit gradient away from the origin and the prior variance
+        ``1 + map_noise``; no NaN.
         """
         check_updated(self, "tree_")
         pts = as_points(points, self.dim, "points", allow_empty=True)
@@ -283,10 +382,34 @@ class GPISMapBase:
         d = self.dim
         if n == 0:
             return np.zeros(0), np.zeros((0, d)), np.zeros(0)
-        if self.legacy:
+        far = np.abs(pts).max(1) > FAR_COORD
+        if far.any():
+            # squared distances of such points overflow; the map knows nothing there: the prior
+            return self._far_prior(pts, far)
+        if self._pub("query_mode"):
             out = self._gp_query(pts)
             return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
         return self._faithful(pts)
+
+    def _far_prior(self, pts, far):
+        """Query with the points beyond :data:`FAR_COORD` answered by the prior: their distance
+        to the origin (overflow-safe; the map lies within far less than that), its gradient, and
+        the prior variance ``1 + map_noise``."""
+        d = self.dim
+        n = len(pts)
+        dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
+        near = ~far
+        if near.any():
+            r = self.query(pts[near])
+            dist[near], grad[near], var[near] = r
+        x = pts[far]
+        s = np.abs(x).max(1)
+        u = x / s[:, None]
+        nu = np.linalg.norm(u, axis=1)
+        dist[far] = s * nu
+        grad[far] = u / nu[:, None]
+        var[far] = 1.0 + float(self.map_noise)
+        return dist, grad, var
 
     def _kd(self):
         """KD-tree over the samples, rebuilt when the map changed."""
@@ -341,13 +464,20 @@ class GPISMapBase:
         Returns
         -------
         list of ndarray (k, 2) in 2D (polylines, world metres); trimesh.Trimesh in 3D.
+
+        Raises
+        ------
+        ValueError
+            Naming ``res`` when the grid over the samples' bounding box would exceed
+            ``_surface.MAX_SURFACE_NODES`` (2**24) nodes: a coarser ``res`` is needed (e.g. a
+            3D map spanning a room at the default 2 mm). Nothing is allocated before the check.
         """
         from polar_sim.gpis import _surface
 
         check_updated(self, "tree_")
-        res = self._SURF_RES if res is None else float(res)
-        band = self._SURF_BAND if band is None else float(band)
-        var_max = self._SURF_VAR if self.legacy else np.inf
+        res = self._SURF_RES if res is None else as_positive_float(res, "res")
+        band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)
+        var_max = self._SURF_VAR if self._pub("query_mode") else np.inf
         fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
         return fn(self, res, band, var_max)
 

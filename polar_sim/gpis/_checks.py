@@ -6,7 +6,9 @@ import numpy as np
 
 from polar_sim._validation import _as_float_array, as_positive_float
 
-__all__ = ["check_params", "as_directions"]
+__all__ = ["check_params", "as_directions", "MAX_CLUSTER_NODES"]
+
+MAX_CLUSTER_NODES = 100_000     # tree nodes per cluster cell (2D default 341, 3D 585)
 
 _ALLOW_ZERO = {"fbias", "min_grad_noise", "map_noise", "min_range", "blend_near", "retrain_tol"}
 _OPTIONAL = {"surfel_radius", "free_res", "retrain_tol", "sample_spacing"}
@@ -22,7 +24,12 @@ def check_params(est, vec2=()):
     out = {}
     for k in est._PARAMS:
         v = getattr(est, k)
-        if k == "legacy":
+        if k in getattr(est, "CHOICES", {}):
+            allowed = est.CHOICES[k]
+            if not isinstance(v, str) or v not in allowed:
+                raise ValueError(f"{k}: expected one of {', '.join(map(repr, allowed))}, got {v!r}")
+            out[k] = v
+        elif k == "legacy":
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"legacy: expected a bool, got {type(v).__name__}")
             out[k] = bool(v)
@@ -49,6 +56,16 @@ def check_params(est, vec2=()):
         raise ValueError("blend_near/blend_far: expected blend_near < blend_far")
     if not out["min_half"] <= out["cluster_half"] <= out["init_half"] <= out["max_half"] * 2:
         raise ValueError("min_half <= cluster_half <= init_half <= 2*max_half is required")
+    # a cluster owns a complete subtree down to leaves below min_half (min_half / 2 for the
+    # faces of thin walls): its node count must stay bounded
+    lvl, h = 0, out["cluster_half"]
+    while not h < 0.5 * out["min_half"] and lvl <= 64:
+        h, lvl = h / 2.0, lvl + 1
+    B = 1 << int(est.dim)
+    if (B ** (lvl + 1) - 1) // (B - 1) > MAX_CLUSTER_NODES:
+        raise ValueError(f"cluster_half/min_half: {out['cluster_half']} / {out['min_half']} gives "
+                         f"clusters of more than {MAX_CLUSTER_NODES} tree nodes (the limit); "
+                         "raise min_half or lower cluster_half")
     r = out["init_half"] / out["cluster_half"]
     if abs(np.log2(r) - round(np.log2(r))) > 1e-9:
         raise ValueError("init_half / cluster_half must be a power of two")

@@ -39,21 +39,44 @@ def _mark(grid, gshape, goff, res, origin, hits, margin):
         for k in range(dim):
             e = hits[h, k] - origin[k]
             L2 += e * e
-        Lr = np.sqrt(L2) - margin * res
-        if Lr <= 0:
+        L = np.sqrt(L2)
+        Lr = L - margin * res
+        if not Lr > 0 or not np.isfinite(L):
+            continue
+        # only the part of the ray inside the grid's box is walked (slab clipping), so the work
+        # per ray is bounded by the grid, whatever the ray's length or position
+        t0, t1 = 0.0, Lr / L
+        for k in range(dim):
+            dk = hits[h, k] - origin[k]
+            blo = goff[k] * res
+            bhi = (goff[k] + gshape[k]) * res
+            if dk == 0.0:
+                if origin[k] < blo or origin[k] >= bhi:
+                    t1 = -1.0
+            else:
+                ta = (blo - origin[k]) / dk
+                tb = (bhi - origin[k]) / dk
+                if ta > tb:
+                    ta, tb = tb, ta
+                t0 = max(t0, ta)
+                t1 = min(t1, tb)
+        if not t0 <= t1:
             continue
         n = int(Lr / step) + 1
-        for s in range(n):
-            t = min(s * step, Lr) / np.sqrt(L2)
+        s0 = max(int(t0 * L / step) - 1, 0)
+        s1 = min(int(t1 * L / step) + 2, n)
+        for s in range(s0, s1):
+            t = min(s * step, Lr) / L
             idx = 0
             stride = 1
             ok = True
             for k in range(dim):
                 x = origin[k] + t * (hits[h, k] - origin[k])
-                c[k] = int(np.floor(x / res)) - goff[k]
-                if c[k] < 0 or c[k] >= gshape[k]:
+                xf = np.floor(x / res) - goff[k]      # compared as a float: no overflowing cast
+                if not (xf >= 0 and xf < gshape[k]):
                     ok = False
                     break
+                c[k] = int(xf)
                 idx += c[k] * stride
                 stride *= gshape[k]
             if ok:
@@ -63,8 +86,11 @@ def _mark(grid, gshape, goff, res, origin, hits, margin):
 class FreeSpace:
     """Cells (edge ``res`` metres) that a sensor ray crossed at least ``margin`` cells before its return."""
 
-    def __init__(self, dim, res, margin=1.5):
+    def __init__(self, dim, res, margin=1.5, reach=np.inf):
+        # ``reach``: the grid never extends beyond [-reach, reach]^dim (metres), the region the
+        # map's tree can ever hold samples in; rays outside it are not recorded
         self.dim, self.res, self.margin = dim, float(res), float(margin)
+        self.reach = float(reach)
         self.grid = np.zeros(0, np.uint8)
         self.gshape = np.zeros(dim, np.int64)
         self.goff = np.zeros(dim, np.int64)
@@ -90,9 +116,14 @@ class FreeSpace:
         if len(hits) == 0:
             return
         pts = np.vstack([hits, origin[None]])
-        lo = np.floor(pts.min(0) / self.res).astype(np.int64) - 1
-        hi = np.floor(pts.max(0) / self.res).astype(np.int64) + 2
-        self._cover(lo, hi)
+        # the cover is clipped to the reachable box before any integer conversion: a scan far
+        # away (1e12 m) grows nothing
+        lim = np.floor(self.reach / self.res) + 2.0
+        lo = np.clip(np.floor(pts.min(0) / self.res) - 1, -lim, lim)
+        hi = np.clip(np.floor(pts.max(0) / self.res) + 2, -lim, lim)
+        if not (hi > lo).all():
+            return
+        self._cover(lo.astype(np.int64), hi.astype(np.int64))
         _mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
               np.ascontiguousarray(hits, np.float64), self.margin)
 

@@ -126,7 +126,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_s
     Returns (action, P_new, N_new, sp_new, sg_new); see ``apply_reeval`` for the actions.
     """
     k, d = p.shape
-    legacy = bool(m.legacy)
+    legacy = m._pub("fusion")
     dx = float(m.delx)
     rng = (lambda q: np.linalg.norm(q, axis=1)) if d == 2 else (lambda q: q[:, 2])
     action = np.zeros(k, np.int8)

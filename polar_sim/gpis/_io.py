@@ -7,10 +7,14 @@ import zipfile
 
 import numpy as np
 
+from polar_sim.fileio import atomic_write, check_destination, check_source
+from polar_sim.gpis import _loadcheck
+
 __all__ = ["save", "load", "FORMAT", "VERSION"]
 
 FORMAT = "polar_sim.gpis"
 VERSION = 1
+MAX_FILE_BYTES = 16 << 30     # declared array bytes a map file may hold (16 GiB)
 
 
 def _params_json(m):
@@ -26,7 +30,15 @@ def _params_json(m):
 
 
 def save(m, path):
-    """Write map ``m`` to ``path``; an un-updated map stores only its parameters."""
+    """Write map ``m`` to ``path`` atomically; an un-updated map stores only its parameters.
+
+    The file is written to a temporary file in the same folder and moved over ``path`` with
+    ``os.replace`` (:func:`polar_sim.fileio.atomic_write`): a crash mid-save leaves the previous
+    file intact and no temporary file behind. ``path`` must be a ``str``/``os.PathLike`` naming a
+    new file or an existing regular file (``TypeError`` for an ``int``, ``ValueError`` for a
+    directory, device, FIFO or socket), checked before anything is written.
+    """
+    path = check_destination(path, "path")
     arrs = {"format": np.array(FORMAT), "version": np.array(VERSION),
             "cls": np.array(type(m).__name__), "params": np.array(_params_json(m)),
             "fitted": np.array(hasattr(m, "tree_"))}
@@ -41,69 +53,76 @@ def save(m, path):
             arrs["free/" + k] = v
         arrs.update({"slot_gen": m.slot_gen_, "gp_gen": m.gp_gen_, "active": m.active_,
                      "n_updates": np.array(m.n_updates_)})
-    with open(path, "wb") as f:
+    with atomic_write(path, "path") as f:
         np.savez(f, **arrs)
 
 
-def load(cls, path):
-    """Read a map of class ``cls`` from ``path``; any defect raises ``ValueError``."""
+def _read(path):
+    """All arrays of the .npz at ``path`` (no pickle; members declared larger than the limit are
+    refused before they are read, so a small compressed file cannot expand without bound)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            total = sum(i.file_size for i in zf.infolist())
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError) as exc:
+        raise ValueError(f"path: {path} is not a readable GPIS map file ({exc})") from None
+    if total > MAX_FILE_BYTES:
+        raise ValueError(f"path: {path} declares {total} bytes of arrays, over the "
+                         f"{MAX_FILE_BYTES}-byte limit of a GPIS map file")
+    key = None
     try:
         with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise ValueError(f"path: {path} is not a readable GPIS map file ({exc})") from exc
+            out = {}
+            for key in z.files:
+                out[key] = z[key]
+            return out
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError) as exc:
+        where = "" if key is None else f", array {key!r}"
+        raise ValueError(f"path: {path} is not a readable GPIS map file{where} ({exc})") from None
+
+
+def load(cls, path):
+    """Read a map of class ``cls`` from ``path``.
+
+    The file is untrusted input: every array is validated (:mod:`polar_sim.gpis._loadcheck`:
+    keys, dtypes, shapes, finiteness, index bounds, tree structure, integer version) before any
+    kernel sees it. ``TypeError`` for a non-path, ``FileNotFoundError`` for a missing file, and
+    ``ValueError`` naming the file (and the array) for anything else.
+    """
+    path = check_source(path, "path")
+    data = _read(path)
+    ver, name, params_text, fitted = _loadcheck.check_meta(path, data)
+    if str(data["format"]) != FORMAT:
+        raise ValueError(f"path: {path} is not a GPIS map (format {data['format']!s})")
+    if ver != VERSION:
+        raise ValueError(f"path: {path} has format version {ver}; this code reads {VERSION}")
+    if name != cls.__name__:
+        raise ValueError(f"path: {path} holds a {name}, not a {cls.__name__}")
+    _loadcheck.check_keys(path, data, fitted, cls.dim)
     try:
-        if str(data["format"]) != FORMAT:
-            raise ValueError(f"path: {path} is not a GPIS map (format {data['format']!s})")
-        ver = int(data["version"])
-        if ver != VERSION:
-            raise ValueError(f"path: {path} has format version {ver}; this code reads {VERSION}")
-        if str(data["cls"]) != cls.__name__:
-            raise ValueError(f"path: {path} holds a {data['cls']!s}, not a {cls.__name__}")
-        params = json.loads(str(data["params"]))
-        for k in ("sensor_offset", "angle_obs_limit"):      # JSON has no tuples
-            if isinstance(params.get(k), list):
-                params[k] = tuple(params[k])
-        m = cls(**params)
-        if not bool(data["fitted"]):
-            return m
-        m._init_state()
-        m.tree_.set_state({k[5:]: v for k, v in data.items() if k.startswith("tree/")})
-        g = m.gps_
-        g.set_state({k[3:]: v for k, v in data.items() if k.startswith("gp/")})
-        m.free_.set_state({k[5:]: v for k, v in data.items() if k.startswith("free/")})
-        m.slot_gen_ = data["slot_gen"].astype(np.int64).copy()
-        m.gp_gen_ = data["gp_gen"].astype(np.int64).copy()
-        m.active_ = data["active"].astype(np.int64).reshape(-1, m.dim).copy()
-        m.n_updates_ = int(data["n_updates"])
-        _consistent(m)
-    except ValueError:
-        raise
-    except (KeyError, TypeError, IndexError, json.JSONDecodeError) as exc:
-        raise ValueError(f"path: {path} is a corrupt GPIS map file ({exc!r})") from exc
-    return m
-
-
-def _consistent(m):
-    """Cheap structural checks so a tampered file fails here, not inside numba."""
-    t, g = m.tree_, m.gps_
-    d = m.dim
-    S, N = t.node_sample.shape[0], t.pos.shape[0]
-    ok = (t.pos.ndim == 2 and t.pos.shape[1] == d and t.nrm.shape == t.pos.shape
-          and t.node_internal.shape == t.node_sample.shape and t.node_sample.shape[1] == t.n_nodes
-          and t.cgrid.size == int(np.prod(t.gshape)) and t.counts.shape == (4,)
-          and 0 <= t.counts[0] <= N and 0 <= t.counts[2] <= S
-          and (t.node_sample < N).all() and (t.cgrid < S).all()
-          and g.gp_m.shape == g.gp_obs.shape == g.gp_tri.shape
-          and m.slot_gen_.shape[0] >= S and m.gp_gen_.shape[0] >= g.gp_m.shape[0]
-          and np.isfinite(t.pos).all() and np.isfinite(g.Lbuf).all())
-    if ok:
-        live = g.gp_m > 0
-        ok = (not live.any()) or (
-            (g.gp_obs[live] + g.gp_m[live]).max() <= g.X.shape[0]
-            and (g.gp_tri[live] + g.gp_m[live] * (g.gp_m[live] + 1) // 2).max() <= g.Lbuf.shape[0])
-    if not ok:
-        raise ValueError("map file is inconsistent (corrupt arrays)")
+        params = json.loads(params_text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"path: {path}: array 'params' is not JSON ({exc})") from None
+    if not isinstance(params, dict) or not set(params) <= set(cls._PARAMS):
+        raise ValueError(f"path: {path}: array 'params' is not a dict of {cls.__name__} parameters")
+    for k in ("sensor_offset", "angle_obs_limit"):      # JSON has no tuples
+        if isinstance(params.get(k), list):
+            params[k] = tuple(params[k])
+    m = cls(**params)
+    try:
+        m._checked_params()
+        if fitted:
+            m._init_state()
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"path: {path}: array 'params': {exc}") from None
+    if not fitted:
+        return m
+    _loadcheck.check_arrays(path, data, m)
+    m.tree_.set_state({k[5:]: v for k, v in data.items() if k.startswith("tree/")})
+    m.gps_.set_state({k[3:]: v for k, v in data.items() if k.startswith("gp/")})
+    m.free_.set_state({k[5:]: v for k, v in data.items() if k.startswith("free/")})
+    m.slot_gen_ = data["slot_gen"].copy()
+    m.gp_gen_ = data["gp_gen"].copy()
+    m.active_ = data["active"].copy()
+    m.n_updates_ = int(data["n_updates"])
     m.version_ = 1
+    return m

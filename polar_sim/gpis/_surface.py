@@ -55,10 +55,25 @@ def _jumps(sdf, res, k=2.0):
     return out
 
 
+#: Grid nodes :meth:`surface` evaluates at most (about 60 bytes each while it runs).
+MAX_SURFACE_NODES = 1 << 24
+
+
 def _axes(m, res, margin):
+    """Grid axes over the samples' bounding box; ``ValueError`` naming ``res`` and the limit
+    when the grid would exceed :data:`MAX_SURFACE_NODES` (checked before anything is allocated)."""
+    if not (np.isfinite(res) and res > 0):
+        raise ValueError(f"res: expected a finite grid step > 0 m, got {res!r}")
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError(f"band: expected a finite band >= 0 m, got {margin!r}")
     pts = m.samples()["points"]
     lo = np.floor((pts.min(0) - margin) / res) * res
     hi = np.ceil((pts.max(0) + margin) / res) * res
+    n = np.prod([float(x) for x in np.floor((hi - lo) / res + 1.5)])
+    if not n <= MAX_SURFACE_NODES:
+        raise ValueError(f"res: a surface grid of {n:.3g} nodes at res={res:g} m over the map's "
+                         f"{np.round(hi - lo, 3).tolist()} m extent is over the limit of "
+                         f"{MAX_SURFACE_NODES} nodes (MAX_SURFACE_NODES); raise res")
     return [np.arange(a, b + 0.5 * res, res) for a, b in zip(lo, hi)]
 
 
@@ -70,12 +85,12 @@ def surface_2d(m, res, band, var_max):
         return []
     axes = _axes(m, res, 2 * res + band)
     sdf, mask = grid_query(m, axes, band, var_max)
-    if not m.legacy:
+    if not m._pub("query_mode"):
         mask = mask & ~_jumps(sdf, res)
     lines = find_contours(sdf, 0.0, mask=mask)
     x0 = np.array([a[0] for a in axes])
     out = [x0 + c * res for c in lines if len(c) >= 2]
-    if not m.legacy:
+    if not m._pub("query_mode"):
         # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
         # field's sign (a spurious zero between samples), not a surface the grid can resolve
         out = [ln for ln in out if not (np.allclose(ln[0], ln[-1]) and

@@ -92,9 +92,34 @@ class GPISMap2D(GPISMapBase):
         trusted normal keep their position (value noise = position noise, not 2.0) with the
         normal facing the sensor. Legacy mode uses the spec's model (0.01 r^2 and the view-angle
         terms).
+    spacing_rule : {"strict", "chain"}, default="strict"
+        "strict": ``sample_spacing`` enforced across cell borders (in 2D only between samples of
+        the same face); "chain": the published chain-only test (about half the spacing).
+    retrain : {"changed", "box"}, default="changed"
+        "changed": retrain exactly the clusters whose training set changed by more than
+        ``retrain_tol``; "box": the published box around the active clusters, every change,
+        with its |U| <= 1 carry-over (spec §8.1).
+    gp_noise : {"model", "published"}, default="model"
+        Value noise of the local GPs: the default model (samples without a gradient keep their
+        position noise, plus a value floor) or the published one (2.0, no floor, the 2D
+        x-gradient noise quirk).
+    fusion : {"fixed", "published"}, default="fixed"
+        Re-evaluation: the fixed line search and slerp normal fusion (weight
+        sg_old / (sg_old + sg_new)), or the published ones (3D line search that re-projects the
+        original point, inverted weight, unnormalised 3D rotation axis).
+    query_mode : {"faithful", "published"}, default="faithful"
+        "faithful": GPIS near surfaces blended into the surfel distance; "published": the
+        published SDF ``f + fbias`` of the nearest clusters' GPs only (and ``surface()`` keeps
+        the published variance cut).
+    scan_model : {"range", "published"}, default="range"
+        2D scans: the range-sigma noise model, the field of view applied to new samples and
+        re-evaluation around the laser; or the published ones (spec noise model, limits for
+        re-evaluation only, re-evaluation around the base).
     legacy : bool, default=False
-        Reproduce the published implementation, quirks and bugs included (spec [quirk]/[bug]);
-        the query is then the published SDF f + fbias. The published demo's laser offset is a
+        Shorthand for every behaviour parameter above at its published value: the published
+        implementation, quirks and bugs included (spec [quirk]/[bug]); the query is then the
+        published SDF f + fbias. ``GPISMap2D.published()`` is the same map built from those
+        parameters (``PUBLISHED``) with ``legacy=False``. The published demo's laser offset is a
         parameter, not part of this switch: pass ``sensor_offset=(0.08, 0)`` with base poses.
 
     Attributes
@@ -108,6 +133,7 @@ class GPISMap2D(GPISMapBase):
     """
 
     dim = 2
+    PUBLISHED = {**GPISMapBase.PUBLISHED, "scan_model": "published"}
     # the two faces of a wall thinner than the sample spacing (office walls are 15 cm) both
     # need samples: spacing is enforced only between samples whose normals agree (dot >= -0.5)
     _FACE_COS = -0.5
@@ -132,7 +158,8 @@ class GPISMap2D(GPISMapBase):
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
                "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
-               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "range_noise", "legacy")
+               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "range_noise", "spacing_rule", "retrain", "gp_noise", "fusion",
+               "query_mode", "scan_model", "legacy")
 
     def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
                  min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
@@ -140,7 +167,8 @@ class GPISMap2D(GPISMapBase):
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
                  max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.05, blend_far=0.25,
                  surfel_radius=None, free_res=None, retrain_tol=None, sample_spacing=None,
-                 range_noise=0.01, legacy=False):
+                 range_noise=0.01, spacing_rule="strict", retrain="changed", gp_noise="model",
+                 fusion="fixed", query_mode="faithful", scan_model="range", legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
         self.obs_var_thre = obs_var_thre
@@ -165,6 +193,12 @@ class GPISMap2D(GPISMapBase):
         self.retrain_tol = retrain_tol
         self.sample_spacing = sample_spacing
         self.range_noise = range_noise
+        self.spacing_rule = spacing_rule
+        self.retrain = retrain
+        self.gp_noise = gp_noise
+        self.fusion = fusion
+        self.query_mode = query_mode
+        self.scan_model = scan_model
         self.legacy = legacy
 
     def _checked_params(self):
@@ -211,7 +245,8 @@ class GPISMap2D(GPISMapBase):
         lim = np.asarray(p["angle_obs_limit"], float)
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(ranges) & (ranges > p["min_range"]) & (ranges < p["max_range"])
-        if not p["legacy"]:        # the published code uses the limits for re-evaluation only
+        pub = self._pub("scan_model")
+        if not pub:                # the published code uses the limits for re-evaluation only
             valid &= (angles >= lim[0] - 1e-6) & (angles <= lim[1] + 1e-6)
         if valid.sum() < 2:
             return self
@@ -219,10 +254,10 @@ class GPISMap2D(GPISMapBase):
         if np.any(np.diff(phi) <= 0):
             order = np.argsort(phi, kind="stable")
             phi, r = phi[order], r[order]
-        self._run_update(self._prepare(phi, r, pose, p))
+        self._run_update(self._prepare(phi, r, pose, p, pub))
         return self
 
-    def _prepare(self, phi, r, pose, p):
+    def _prepare(self, phi, r, pose, p, pub):
         c, s = np.cos(pose[2]), np.sin(pose[2])
         R = np.array([[c, -s], [s, c]])
         t = pose[:2].copy()
@@ -231,15 +266,15 @@ class GPISMap2D(GPISMapBase):
         sp = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
         hits = (sp + o) @ R.T + t
         model = None
-        if not p["legacy"]:
+        if not pub:
             dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
             model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         # re-evaluation searches around the base in the published code (spec §2.1); the default
         # searches around the laser, so that a sensor pose and a base pose with the mounting as
         # sensor_offset give the same map
-        origin = t if p["legacy"] else R @ o + t
+        origin = t if pub else R @ o + t
         return SimpleNamespace(phi=phi, r=r, R=R, t=t, o=o, gp=gp, origin=origin, rmax=float(r.max()),
-                               sensor_pts=sp, hits=hits, origin_sensor=R @ o + t,
+                               sensor_pts=sp, hits=hits, origin_sensor=R @ o + t, pose_name="pose2d",
                                lim=np.asarray(p["angle_obs_limit"], float), model=model)
 
     # -- sensor model ---------------------------------------------------------------------------

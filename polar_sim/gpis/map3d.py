@@ -58,8 +58,28 @@ class GPISMap3D(GPISMapBase):
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
         None = 0.01 m.
+    spacing_rule : {"strict", "chain"}, default="strict"
+        "strict": ``sample_spacing`` enforced across cell borders (in 2D only between samples of
+        the same face); "chain": the published chain-only test (about half the spacing).
+    retrain : {"changed", "box"}, default="changed"
+        "changed": retrain exactly the clusters whose training set changed by more than
+        ``retrain_tol``; "box": the published box around the active clusters, every change,
+        with its |U| <= 1 carry-over (spec §8.1).
+    gp_noise : {"model", "published"}, default="model"
+        Value noise of the local GPs: the default model (samples without a gradient keep their
+        position noise, plus a value floor) or the published one (2.0, no floor, the 2D
+        x-gradient noise quirk).
+    fusion : {"fixed", "published"}, default="fixed"
+        Re-evaluation: the fixed line search and slerp normal fusion (weight
+        sg_old / (sg_old + sg_new)), or the published ones (3D line search that re-projects the
+        original point, inverted weight, unnormalised 3D rotation axis).
+    query_mode : {"faithful", "published"}, default="faithful"
+        "faithful": GPIS near surfaces blended into the surfel distance; "published": the
+        published SDF ``f + fbias`` of the nearest clusters' GPs only (and ``surface()`` keeps
+        the published variance cut).
     legacy : bool, default=False
-        Reproduce the published implementation (3D line search that re-projects the original
+        Shorthand for every behaviour parameter above at its published value
+        (``GPISMap3D.published()`` builds the same map from those parameters). Reproduce the published implementation (3D line search that re-projects the original
         point, inverted normal-fusion weight, unnormalised rotation axis, chain-only spacing).
 
     Attributes
@@ -85,14 +105,16 @@ class GPISMap3D(GPISMapBase):
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "obs_skip", "min_depth", "max_depth", "init_half",
                "cluster_half", "min_half", "max_half", "obs_scale", "obs_noise", "blend_near",
-               "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "legacy")
+               "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "spacing_rule", "retrain",
+               "gp_noise", "fusion", "query_mode", "legacy")
 
     def __init__(self, *, map_scale=0.04, fbias=0.2, obs_var_thre=0.04, delx=0.001,
                  min_position_noise=0.001, min_grad_noise=0.01, map_noise=0.005, obs_skip=2,
                  min_depth=0.4, max_depth=4.0, init_half=0.4, cluster_half=0.025,
                  min_half=0.00625, max_half=1.6, obs_scale=0.5, obs_noise=0.01,
                  blend_near=0.002, blend_far=0.006, surfel_radius=None, free_res=None,
-                 retrain_tol=None, sample_spacing=None, legacy=False):
+                 retrain_tol=None, sample_spacing=None, spacing_rule="strict", retrain="changed",
+                 gp_noise="model", fusion="fixed", query_mode="faithful", legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
         self.obs_var_thre = obs_var_thre
@@ -115,6 +137,11 @@ class GPISMap3D(GPISMapBase):
         self.free_res = free_res
         self.retrain_tol = retrain_tol
         self.sample_spacing = sample_spacing
+        self.spacing_rule = spacing_rule
+        self.retrain = retrain
+        self.gp_noise = gp_noise
+        self.fusion = fusion
+        self.query_mode = query_mode
         self.legacy = legacy
 
     @property
@@ -222,7 +249,8 @@ class GPISMap3D(GPISMapBase):
         hits = sp @ R.T + t
         scan = SimpleNamespace(gp=gp, R=R, t=t, origin=t, origin_sensor=t, rmax=float(zz.max()),
                                sensor_pts=sp, hits=hits, pix=(v[ii], u[jj]), r=zz,
-                               win=(v[0], v[-1], u[0], u[-1]), spherical=spherical)
+                               win=(v[0], v[-1], u[0], u[-1]), spherical=spherical,
+                               pose_name="T_world_sensor" if spherical else "T_world_cam")
         scan.free_hits = hits[:: -(-len(hits) // 4096)]      # at most ~4096 free-space rays
         self._run_update(scan)
 
