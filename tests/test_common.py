@@ -21,7 +21,7 @@ MODULES = [
     "Recording",                  # append, save, load
     "metrics.kitti_errors", "metrics.ate", "metrics.rpe", "metrics.iou", "metrics.hausdorff", "metrics.chamfer",
     "metrics.add", "metrics.adds",
-    "GroundVO", "ObjectTracker",
+    "GPISMap2D", "GPISMap3D", "localize", "GroundVO", "ObjectTracker",
     "cli",
 ]
 

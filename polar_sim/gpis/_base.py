@@ -7,6 +7,7 @@ dimension-specific constants. Everything else (fusion, tree updates, training, q
 
 from __future__ import annotations
 
+import copy
 import logging
 
 import numpy as np
@@ -84,6 +85,26 @@ class GPISMapBase(Parameterised):
     def get_params(self):
         """The constructor arguments, by name."""
         return {k: getattr(self, k) for k in self._PARAMS}
+
+    def set_params(self, **params):
+        """Change parameters (checked; the map unchanged on a bad value).
+
+        On a fitted map, a change that would give the map another tree or free-space geometry
+        (``init_half``, ``cluster_half``, ``min_half``, ``max_half``, the sample spacing, the
+        free-space resolution, ...) is refused with ``ValueError``: the learned state was built
+        on the old geometry, and neither queries nor a saved file could use it. Call
+        :meth:`reset` first.
+        """
+        if hasattr(self, "tree_"):
+            trial = copy.copy(self)
+            Parameterised.set_params(trial, **params)
+            trial._init_state()            # rebinds the copy's state only; self's stays
+            same = (np.array_equal(trial.tree_.geo, self.tree_.geo)
+                    and (trial.free_.res, trial.free_.reach) == (self.free_.res, self.free_.reach))
+            if not same:
+                raise ValueError(f"{sorted(params)[0]}: changes the geometry of a fitted map "
+                                 f"(params {sorted(params)}); call reset() first")
+        return Parameterised.set_params(self, **params)
 
     def reset(self):
         """Forget everything learned; parameters stay."""
