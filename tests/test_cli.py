@@ -85,6 +85,13 @@ def test_cli_slips(argv, match, capsys):
     assert err.startswith("polar-sim: error:") and match in err and err.count("\n") == 1, err
 
 
+# A callable that is not a policy is named once it is called (after the progress bar has started).
+def test_eval_names_a_callable_that_is_not_a_policy(capsys):
+    assert main(["eval", "polar_sim/GPISNav-v0", "--policy", "os:getcwd", "--episodes", "1"]) == 1
+    last = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
+    assert last.startswith("polar-sim: error: policy: ") and "policy(obs)" in last, last
+
+
 # compare: two runs of the same toy sweep give per-metric differences with bootstrap intervals.
 def test_compare(tmp_path):
     from polar_sim.runner.compare import bootstrap_difference, compare_runs

@@ -56,6 +56,14 @@ def load_policy(spec, env=None):
     return obj
 
 
+def _act(policy, obs):
+    """``policy(obs)``; a callable that cannot be called so (``os:getcwd``, say) is named."""
+    try:
+        return policy(obs)
+    except TypeError as exc:
+        raise TypeError(f"policy: {policy!r} cannot be called as policy(obs) -> action ({exc})") from exc
+
+
 def _scalar_info(info):
     out = {}
     for k, v in info.items():
@@ -84,7 +92,7 @@ def evaluate(env_id, policy, *, episodes=10, seed=10_000, env_kwargs=None, out_d
                 policy.reset()
             ret, n, terminated, truncated = 0.0, 0, False, False
             while not (terminated or truncated):
-                obs, r, terminated, truncated, info = env.step(policy(obs))
+                obs, r, terminated, truncated, info = env.step(_act(policy, obs))
                 ret += r
                 n += 1
             row = {"episode": i, "seed": int(seed) + i, "return": ret, "length": n, "truncated": bool(truncated)}
