@@ -251,23 +251,43 @@ DEMOS = [("scenes", demo_scenes), ("gpis", demo_gpis), ("ground", demo_ground), 
          ("envs", demo_env)]
 
 
+def _kernels_cached() -> bool:
+    """True when numba's cache already holds the GPIS kernels (``$NUMBA_CACHE_DIR`` if set, else the
+    package's ``__pycache__``): a first run compiles them, which takes most of its time."""
+    import os
+
+    import polar_sim.gpis as gpis
+
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    folder = Path(root) if root else Path(gpis.__file__).parent / "__pycache__"
+    return folder.is_dir() and any(folder.rglob("_distance*.nbi"))
+
+
 def run_demo(out: Path, quick=True):
     """Run every demo part; returns the process exit code."""
+    from tqdm import tqdm
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"polar_sim demo: writing pictures to {out}/")
+    if not _kernels_cached():
+        print("first run: numba compiles the GPIS, ground and tracking kernels once (one to two minutes "
+              "on 2 cores); later runs load them from numba's cache")
     rc = 0
-    for name, fn in DEMOS:
+    bar = tqdm(DEMOS, desc="demo", unit="part")
+    for name, fn in bar:
+        bar.set_postfix_str(name)
         t0 = time.perf_counter()
         try:
             lines = fn(out)
         except Exception as exc:  # report and carry on with the other parts
-            print(f"[{name}] FAILED: {type(exc).__name__}: {exc}")
+            tqdm.write(f"[{name}] FAILED: {type(exc).__name__}: {exc}")
             rc = 1
             continue
         for line in lines:
-            print(f"[{name}] {line}")
-        print(f"[{name}] done in {time.perf_counter() - t0:.1f} s")
+            tqdm.write(f"[{name}] {line}")
+        tqdm.write(f"[{name}] done in {time.perf_counter() - t0:.1f} s")
+    bar.close()
     pngs = sorted(out.glob("*.png"))
     print(f"wrote {len(pngs)} PNGs to {out}/")
     return rc
