@@ -77,7 +77,6 @@ def _short(x, n=40):
 
 
 # Kept for callers that imported the old private name; new code uses as_float_array.
-_as_float_array = as_float_array
 
 
 def as_points(x, dim, name, *, allow_empty=False):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim._validation import _as_float_array, as_angles, as_intrinsics, as_points, as_pose, as_pose2d
+from polar_sim._validation import as_float_array, as_angles, as_intrinsics, as_points, as_pose, as_pose2d
 from polar_sim.registration import as_sensor_offset, transform2d
 from polar_sim.geometry import pose2d_to_T
 
@@ -110,7 +110,7 @@ class RoomSDF2D(_Room):
         pose = as_pose2d(pose, "pose")
         self.pose = pose
         T = pose2d_to_T(pose)
-        super().__init__(_as_float_array(size, "size").reshape(2), pillars, np.delete(np.delete(T, 2, 0), 2, 1))
+        super().__init__(as_float_array(size, "size").reshape(2), pillars, np.delete(np.delete(T, 2, 0), 2, 1))
 
     def scan(self, pose2d, angles, *, sensor_offset=(0.0, 0.0)):
         """Exact ranges (n,) of beams at ``angles`` (rad, sensor frame) from a robot at ``pose2d``.
@@ -151,7 +151,7 @@ class RoomSDF3D(_Room):
     def __init__(self, size=(4.0, 3.0, 2.5), balls=((2.5, 1.5, 1.0, 0.4),), T=None):
         T = np.eye(4) if T is None else as_pose(T, "T")
         self.T = T
-        super().__init__(_as_float_array(size, "size").reshape(3), balls, T)
+        super().__init__(as_float_array(size, "size").reshape(3), balls, T)
 
     def depth_image(self, T_world_cam, K, shape):
         """Exact planar depth (H, W) in metres seen by a pinhole camera (OpenCV axes) inside the room."""

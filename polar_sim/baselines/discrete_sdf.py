@@ -38,7 +38,7 @@ import itertools
 import numpy as np
 from scipy import ndimage
 
-from polar_sim._validation import _as_float_array, as_points, as_positive_float, check_choice, check_updated
+from polar_sim._validation import as_float_array, as_points, as_positive_float, check_choice, check_updated
 from polar_sim.baselines._common import ResetMixin
 
 __all__ = ["DiscreteSDF2D", "DiscreteSDF3D"]
@@ -78,7 +78,7 @@ class _DiscreteSDF(ResetMixin):
         occ = self._as_mask(occupied, "occupied")
         if any(s < 2 for s in occ.shape):
             raise ValueError(f"occupied: expected at least 2 cells along each axis, got shape {occ.shape}")
-        origin = _as_float_array(origin, "origin")
+        origin = as_float_array(origin, "origin")
         if origin.shape != (d,) or not np.isfinite(origin).all():
             raise ValueError(f"origin: expected {d} finite numbers, got {origin!r}")
         cs = as_positive_float(cell_size, "cell_size")

@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from polar_sim._validation import (
-    _as_float_array,
+    as_float_array,
     as_int,
     as_points,
     as_pose,
@@ -125,7 +125,7 @@ class ICPLocalizer(ResetMixin):
                                 f"got {type(target).__name__}")
             return self
         pts = target.surface_points() if hasattr(target, "surface_points") else target
-        arr = _as_float_array(pts, "target")
+        arr = as_float_array(pts, "target")
         dim = arr.shape[1] if arr.ndim == 2 and arr.shape[1] in (2, 3) else 2
         self.points_ = as_points(arr, dim, "target")
         self.tree_ = cKDTree(self.points_)
@@ -159,13 +159,13 @@ class ICPLocalizer(ResetMixin):
     # ------------------------------------------------------------------ point-to-point
     def _point_to_point(self, scan, initial_pose):
         dim = self.points_.shape[1]
-        pose_arr = _as_float_array(initial_pose, "initial_pose")
+        pose_arr = as_float_array(initial_pose, "initial_pose")
         prior = as_pose2d(pose_arr, "initial_pose") if dim == 2 else as_pose(pose_arr, "initial_pose")
         T0 = pose2d_to_matrix(prior) if dim == 2 else prior.copy()
         max_it = as_int(self.max_iterations, "max_iterations", minimum=1)
         tol = as_positive_float(self.tolerance, "tolerance")
         max_d = as_positive_float(self.max_correspondence_distance, "max_correspondence_distance")
-        corr = _as_float_array(self.max_correction, "max_correction")
+        corr = as_float_array(self.max_correction, "max_correction")
         n_budget = (200 if dim == 2 else 600) if self.n_points is None else as_int(self.n_points, "n_points", minimum=1)
         if dim == 2:
             if not (isinstance(scan, (tuple, list)) and len(scan) == 2):

@@ -10,7 +10,7 @@ import numpy as np
 from scipy import ndimage
 
 from polar_sim._validation import (
-    _as_float_array,
+    as_float_array,
     as_points,
     as_pose2d,
     as_positive_float,
@@ -176,7 +176,7 @@ class OccupancyGrid2D(ResetMixin):
         if self.free_threshold > self.occupied_threshold:
             raise ValueError("free_threshold: must not exceed occupied_threshold")
         if self.bounds is not None:
-            b = _as_float_array(self.bounds, "bounds")
+            b = as_float_array(self.bounds, "bounds")
             if b.shape != (4,) or not np.isfinite(b).all() or not (b[2] - b[0] >= cs and b[3] - b[1] >= cs):
                 raise ValueError("bounds: expected finite (xmin, ymin, xmax, ymax) at least one cell wide, "
                                  f"got {self.bounds!r}")

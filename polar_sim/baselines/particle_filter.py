@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim._validation import (
-    _as_float_array,
+    as_float_array,
     as_int,
     as_pose2d,
     as_positive_float,
@@ -119,7 +119,7 @@ class ParticleFilterLocalizer(ResetMixin):
     def _check_params(self):
         as_int(self.n_particles, "n_particles", minimum=1)
         as_int(self.n_beams, "n_beams", minimum=1)
-        a = _as_float_array(self.alphas, "alphas")
+        a = as_float_array(self.alphas, "alphas")
         if a.shape != (4,) or not np.isfinite(a).all() or (a < 0).any():
             raise ValueError(f"alphas: expected 4 finite non-negative numbers, got {self.alphas!r}")
         t = as_positive_float(self.resample_threshold, "resample_threshold", allow_zero=True)
@@ -148,7 +148,7 @@ class ParticleFilterLocalizer(ResetMixin):
         self._check_params()
         check_updated(field, "log_field_")
         pose2d = as_pose2d(pose2d, "pose2d")
-        std = _as_float_array(std, "std")
+        std = as_float_array(std, "std")
         if std.shape != (3,) or not np.isfinite(std).all() or (std < 0).any():
             raise ValueError(f"std: expected 3 finite non-negative numbers, got {std!r}")
         self.reset()

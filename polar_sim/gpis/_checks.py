@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim._validation import _as_float_array, as_positive_float
+from polar_sim._validation import as_float_array, as_positive_float
 
 __all__ = ["check_params", "as_directions", "MAX_CLUSTER_NODES"]
 
@@ -34,7 +34,7 @@ def check_params(est, vec2=()):
                 raise TypeError(f"legacy: expected a bool, got {type(v).__name__}")
             out[k] = bool(v)
         elif k in vec2:
-            a = _as_float_array(v, k)
+            a = as_float_array(v, k)
             if a.shape != (2,) or not np.isfinite(a).all():
                 raise ValueError(f"{k}: expected 2 finite numbers, got {v!r}")
             out[k] = a
@@ -74,7 +74,7 @@ def check_params(est, vec2=()):
 
 def as_directions(x, name, *, n=None):
     """Return unit ray directions (n, 3) as float64; zero-length or non-finite rows raise."""
-    a = _as_float_array(x, name)
+    a = as_float_array(x, name)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name}: expected shape (n, 3), got {a.shape}")
     if n is not None and a.shape[0] != n:

@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from polar_sim._validation import _as_float_array, as_points, as_positive_float
+from polar_sim._validation import as_float_array, as_points, as_positive_float
 
 __all__ = [
     "SurfaceErrorStats",
@@ -111,8 +111,8 @@ def sdf_error(est, truth, *, mask=None) -> SurfaceErrorStats:
     ``mask`` (same shape, bool) selects the points to score, e.g. those within 0.3 m of a wall or
     where the map variance is low. NaN or inf in the selected values raise ``ValueError``.
     """
-    e = _as_float_array(est, "est").ravel()
-    t = _as_float_array(truth, "truth").ravel()
+    e = as_float_array(est, "est").ravel()
+    t = as_float_array(truth, "truth").ravel()
     if e.shape != t.shape:
         raise ValueError(f"truth: expected {e.shape[0]} values like est, got {t.shape[0]}")
     if mask is not None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim._validation import (
-    _as_float_array,
+    as_float_array,
     as_angles,
     as_depth,
     as_intrinsics,
@@ -26,7 +26,7 @@ __all__ = ["as_sensor_offset", "as_scan2d", "valid_beams", "beam_points", "trans
 
 def as_sensor_offset(offset, name="sensor_offset"):
     """Return a planar sensor mounting ``(x, y, yaw)`` (3,) from (x, y) or (x, y, yaw), m and rad."""
-    a = _as_float_array(offset, name)
+    a = as_float_array(offset, name)
     if a.shape not in ((2,), (3,)):
         raise ValueError(f"{name}: expected (x, y) or (x, y, yaw), got shape {a.shape}")
     if not np.isfinite(a).all():
@@ -93,7 +93,7 @@ def scan3d_points(scan, *, pixel_stride, min_range, max_range):
     if not isinstance(scan, (tuple, list)) or len(scan) != 2:
         raise TypeError("scan: expected a tuple (depth, K) or (directions, ranges)")
     first, second = scan
-    second_a = _as_float_array(second, "scan")
+    second_a = as_float_array(second, "scan")
     if second_a.ndim == 2:
         K = as_intrinsics(second_a, "K")
         depth = as_depth(first, "depth")

@@ -29,7 +29,7 @@ import logging
 
 import numpy as np
 
-from polar_sim._validation import _as_float_array, as_int, as_pose, as_pose2d, as_positive_float, check_choice
+from polar_sim._validation import as_float_array, as_int, as_pose, as_pose2d, as_positive_float, check_choice
 from polar_sim.registration.robust import DEFAULT_SCALE, ROBUST_KERNELS, robust_cost, robust_weight
 from polar_sim.registration.scans import (
     arc_length_subsample,
@@ -206,7 +206,7 @@ def register_sdf(
         without data (one whose ``query`` raises ``NotUpdatedError``).
     """
     # ---- inputs
-    pose_arr = _as_float_array(initial_pose, "initial_pose")
+    pose_arr = as_float_array(initial_pose, "initial_pose")
     if pose_arr.shape == (3,):
         problem = _Problem2D(as_pose2d(pose_arr, "initial_pose"))
         dim = 2
@@ -317,7 +317,7 @@ def register_sdf(
 
 
 def _pair(v, name):
-    a = _as_float_array(v, name)
+    a = as_float_array(v, name)
     if a.shape != (2,):
         raise ValueError(f"{name}: expected (metres, radians), got {v!r}")
     return float(a[0]), float(a[1])
