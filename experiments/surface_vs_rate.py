@@ -87,7 +87,7 @@ def findings(table, ctx):
         out.append(Finding("Ch. 7, surface accuracy against data rate", "GPIS surfaces are more accurate than occupancy "
                            "grids (and their EDT), most of all when the data are sparse",
                            f"{scene}: GPIS lower on both Hausdorff and surface RMSE than grid 5/10 cm and EDT at "
-                           f"{len(won)}/{len(sps)} scan spacings ({', '.join(f'{s:g}' for s in won) or 'none'} m)",
+                           f"{len(won)}/{len(sps)} scan spacings" + (f" ({', '.join(f'{s:g}' for s in won)} m)" if won else ""),
                            "held" if len(won) == len(sps) else ("partly held" if won else "not held"),
                            "simulated lidar drives scored against the exact SDF; our grids, not the dissertation's"))
         sp = sps[-1]
