@@ -21,6 +21,7 @@ for name, kw in variants.items():
                         monitor_kwargs={"info_keywords": ("is_success", "collision")})
     venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     recipe = ppo_recipe("stencil")
+    recipe["action"] = None  # as these diagnostics were run: the env's own action, no ForwardDriveAction
     model = make_model(recipe, venv, seed=0)
     eps = []
     class CB(BaseCallback):

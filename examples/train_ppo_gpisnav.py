@@ -32,6 +32,7 @@ import numpy as np
 
 import polar_sim.envs  # noqa: F401  (registers the ids)
 from polar_sim.envs.evaluate import RandomPolicy
+from polar_sim.envs.learning import env_action
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
 
 TIER_IDS = {"room": "polar_sim/GPISNav-Room-v1", "rooms2": "polar_sim/GPISNav-Rooms2-v1",
@@ -67,8 +68,9 @@ def scripted(cls):
     return pol, pol.reset
 
 
-def learned(model, normaliser, recurrent):
-    """(act, reset) of a trained model: deterministic actions on normalised observations."""
+def learned(model, normaliser, recurrent, action=None):
+    """(act, reset) of a trained model: deterministic actions on normalised observations, mapped
+    to the env's action by the recipe's ``action`` parametrisation (None: clipped to the box)."""
     state = {"h": None, "start": True}
 
     def act(obs):
@@ -79,7 +81,7 @@ def learned(model, normaliser, recurrent):
             state["start"] = False
         else:
             a, _ = model.predict(o, deterministic=True)
-        return np.clip(a[0], -1.0, 1.0).astype(np.float32)
+        return env_action(action, a[0])
 
     def reset():
         state.update(h=None, start=True)
@@ -138,6 +140,11 @@ def main():
                     help="stop training once a checkpoint's success reaches this (e.g. 0.8)")
     ap.add_argument("--skip-start-eval", action="store_true", help="no checkpoint at 0 steps")
     ap.add_argument("--env-kwargs", default="{}", help="JSON dict of extra env arguments (e.g. reward_weights)")
+    ap.add_argument("--eval-pose-source", default=None, choices=["slam", "odometry", "truth"],
+                    help="pose source of every evaluation (checkpoints, baselines, final); default --pose-source")
+    ap.add_argument("--action", default=None, choices=["box", "forward_drive"],
+                    help="the policy's action parametrisation (default: the recipe's)")
+    ap.add_argument("--recipe-kwargs", default="{}", help="JSON dict overriding the recipe's PPO kwargs")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="polar_sim_out/ppo_gpisnav")
     ap.add_argument("--docs", default=None, help="also copy the plot into this folder (e.g. docs/img)")
@@ -156,7 +163,7 @@ def main():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from polar_sim.envs.learning import ObsNormaliser, load_policy, make_model, ppo_recipe, save_policy
+    from polar_sim.envs.learning import ObsNormaliser, load_policy, make_model, ppo_recipe, save_policy, wrap_action
 
     torch.set_num_threads(1)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
@@ -166,7 +173,8 @@ def main():
     kwargs = {"obs_mode": args.obs_mode, "pose_source": args.pose_source, **json.loads(args.env_kwargs)}
     if args.grid_visited:
         kwargs["grid_visited"] = True
-    scripted_kwargs = {**kwargs, "obs_mode": "stencil"}
+    eval_kwargs = {**kwargs, "pose_source": args.eval_pose_source or args.pose_source}
+    scripted_kwargs = {**eval_kwargs, "obs_mode": "stencil"}
     scripted_kwargs.pop("grid_visited", None)
     name = f"{args.tier}_{args.obs_mode}{'_visited' if args.grid_visited else ''}{'_lstm' if args.recurrent else ''}"
     dev = np.arange(DEV_SEED if args.curve_split == "dev" else TEST_SEED,
@@ -175,22 +183,28 @@ def main():
 
     # Training episodes start from seeds 0.. (make_vec_env) and continue unseeded: their worlds are
     # neither the dev nor the test worlds.
-    venv = make_vec_env("polar_sim.envs:" + env_id, n_envs=args.envs, seed=args.seed, env_kwargs=kwargs)
+    recipe = ppo_recipe(args.obs_mode, args.recurrent)
+    if args.action is not None:
+        recipe["action"] = None if args.action == "box" else {"name": args.action, "kwargs": {}}
+    overrides = json.loads(args.recipe_kwargs)
+    recipe["kwargs"]["policy_kwargs"].update(overrides.pop("policy_kwargs", {}))
+    recipe["kwargs"].update(overrides)
+    venv = make_vec_env("polar_sim.envs:" + env_id, n_envs=args.envs, seed=args.seed, env_kwargs=kwargs,
+                        wrapper_class=wrap_action, wrapper_kwargs={"action": recipe.get("action")})
     # The goal (metres, up to the world's diagonal), the SDF and its variance span very different
     # scales; running normalisation lets one learning rate serve them all.
-    venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
-    recipe = ppo_recipe(args.obs_mode, args.recurrent)
+    venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=recipe["kwargs"]["gamma"])
     model = make_model(recipe, venv, seed=args.seed)
 
     wanted = [b for b in args.baselines.split(",") if b]
-    probe = gym.make(env_id, **kwargs)
+    probe = gym.make(env_id, **eval_kwargs)
     makers = {"random": lambda: (lambda p: (p, p.reset))(RandomPolicy(probe.action_space, seed=args.seed)),
               "reactive": lambda: scripted(SDFReactive), "navigator": lambda: scripted(SDFNavigator)}
 
     def baselines(seeds):
         res = {}
         for b in wanted:
-            kw = kwargs if b == "random" else scripted_kwargs
+            kw = eval_kwargs if b == "random" else scripted_kwargs
             res[b] = run_episodes(env_id, kw, makers[b](), seeds)
             print(f"  {b}: {res[b]}", flush=True)
         return res
@@ -201,7 +215,7 @@ def main():
 
     def evaluate_now(steps):
         norm = ObsNormaliser.from_vecnormalize(venv)
-        r = run_episodes(env_id, kwargs, learned(model, norm, args.recurrent), dev)
+        r = run_episodes(env_id, eval_kwargs, learned(model, norm, args.recurrent, recipe.get("action")), dev)
         rows.append({"steps": steps, "ppo_success": r["success"], "ppo_collision": r["collision"],
                      "ppo_mean_length": r["mean_length"], "wall_s": time.perf_counter() - t_wall,
                      **{f"{b}_success": base_dev[b]["success"] for b in wanted}})
@@ -239,17 +253,19 @@ def main():
     loaded, norm = load_policy(out / "policy.npz", probe)
     probe.close()
     print(f"final policy and baselines on {len(test)} held-out worlds", flush=True)
-    final = run_episodes(env_id, kwargs, learned(loaded, norm, args.recurrent), test)
+    final = run_episodes(env_id, eval_kwargs, learned(loaded, norm, args.recurrent, recipe.get("action")), test)
     print(f"  PPO: {final}", flush=True)
     same = args.curve_split == "test" and args.test_episodes == args.curve_episodes
     base_test = base_dev if same else baselines(test)
-    summary = {"env_id": env_id, "env_kwargs": kwargs, "recipe": recipe, "steps": int(model.num_timesteps),
+    summary = {"env_id": env_id, "env_kwargs": kwargs, "eval_env_kwargs": eval_kwargs, "recipe": recipe, "steps": int(model.num_timesteps),
                "training_wall_s": train_wall, "training_cpu_s": train_cpu, "dev_seeds": [int(dev[0]), int(dev[-1])],
                "test_seeds": [int(test[0]), int(test[-1])], "ppo_test": final, "baselines_test": base_test,
                "baselines_dev": base_dev, "curve": rows}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
 
-    title = (f"{env_id.split('/')[1]} (pose_source={args.pose_source}), simulated; "
+    ps = args.pose_source if eval_kwargs["pose_source"] == args.pose_source else \
+        f"train {args.pose_source}, eval {eval_kwargs['pose_source']}"
+    title = (f"{env_id.split('/')[1]} (pose_source={ps}), simulated; "
              f"held-out: PPO {final['success']:.0%}")
     plot_curve(rows, f"{recipe['algorithm']} ({args.obs_mode}{', LSTM' if args.recurrent else ''})", wanted,
                len(dev), title, out / "curve.png", "held-out" if args.curve_split == "test" else "dev")

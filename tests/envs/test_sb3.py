@@ -72,3 +72,58 @@ def test_training_script_loop(tmp_path):
     assert summary["steps"] >= 1024 and summary["test_seeds"][0] == 10_000 and summary["dev_seeds"][0] < 10_000
     assert 0.0 <= summary["ppo_test"]["success"] <= 1.0 and len(summary["curve"]) >= 2
     assert (tmp_path / "run" / "policy.npz").exists() and (tmp_path / "docs" / "ppo_gpisnav_room_stencil.png").exists()
+
+
+# ForwardDriveAction maps the policy's action exactly: v = m + (1 - m)(b0 + 1)/2, omega = b1,
+# after clipping b to the box; the env receives that action.
+def test_forward_drive_action_mapping_is_exact():
+    from polar_sim.envs.learning import ForwardDriveAction, env_action
+
+    F = ForwardDriveAction.map_action
+    np.testing.assert_array_equal(F([0.0, 0.0]), np.float32([0.5, 0.0]))
+    np.testing.assert_array_equal(F([-1.0, 1.0]), np.float32([0.0, 1.0]))
+    np.testing.assert_array_equal(F([1.0, -1.0]), np.float32([1.0, -1.0]))
+    np.testing.assert_array_equal(F([3.0, -7.0]), np.float32([1.0, -1.0]))  # clipped first
+    np.testing.assert_allclose(F([0.0, 0.25], 0.2), [0.6, 0.25], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(F([-0.5, 0.0], 0.5), [0.5 + 0.5 * 0.25, 0.0], rtol=0, atol=1e-7)
+    act = {"name": "forward_drive", "kwargs": {"min_drive": 0.2}}
+    np.testing.assert_array_equal(env_action(act, [0.0, 0.25]), F([0.0, 0.25], 0.2))
+    np.testing.assert_array_equal(env_action(None, [2.0, -0.5]), np.float32([1.0, -0.5]))
+
+    seen = []
+    env = gym.make("polar_sim/GPISNav-Room-v1", pose_source="truth")
+    env.unwrapped.base.step = (lambda step: lambda a: (seen.append(np.array(a)), step(a))[1])(env.unwrapped.base.step)
+    w = ForwardDriveAction(env, min_drive=0.2)
+    w.reset(seed=1000)
+    w.step(np.float32([0.0, -0.5]))
+    np.testing.assert_allclose(seen[-1], [0.6, -0.5], rtol=0, atol=1e-7)
+    assert w.action_space == gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    env.close()
+
+
+# Bad arguments raise ValueError naming them; the wrapped env is untouched.
+@pytest.mark.parametrize("bad", [-0.1, 1.0, 1.5, float("nan"), True, "0.2", None])
+def test_forward_drive_action_rejects_bad_min_drive(bad):
+    from polar_sim.envs.learning import ForwardDriveAction
+
+    env = gym.make("polar_sim/GPISNav-Room-v1", pose_source="truth")
+    with pytest.raises(ValueError, match="min_drive"):
+        ForwardDriveAction(env, min_drive=bad)
+    with pytest.raises(ValueError, match="min_drive"):
+        ForwardDriveAction.map_action([0.0, 0.0], bad)
+    assert env.action_space == gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    env.close()
+
+
+def test_action_parametrisation_names_are_checked():
+    from polar_sim.envs.learning import ForwardDriveAction, env_action, wrap_action
+
+    env = gym.make("polar_sim/GPISNav-Room-v1", pose_source="truth")
+    with pytest.raises(ValueError, match="action"):
+        wrap_action(env, {"name": "nope"})
+    with pytest.raises(ValueError, match="action"):
+        env_action({"name": "nope"}, [0.0, 0.0])
+    with pytest.raises(ValueError, match="env"):
+        ForwardDriveAction(gym.wrappers.RescaleAction(env, -2.0, 2.0))
+    assert wrap_action(env, None) is env
+    env.close()
