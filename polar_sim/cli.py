@@ -195,7 +195,7 @@ def _cmd_compare(args):
 def _cmd_demo(args):
     from polar_sim.demo import run_demo
 
-    return run_demo(_out_dir(args.out), quick=True)
+    return run_demo(_out_dir(args.out), quick=True, workers=args.workers)
 
 
 def _cmd_eval(args):
@@ -259,6 +259,8 @@ def build_parser():
 
     s = sub.add_parser("demo", help="a short headless run of every part; PNGs in ./polar_sim_out/")
     s.add_argument("--out", default="polar_sim_out", help="output folder (default ./polar_sim_out)")
+    s.add_argument("--workers", type=int, choices=(1, 2), default=None,
+                   help="processes: 1 runs the parts one by one, 2 (default on 2+ cores) in two lanes")
     s.set_defaults(func=_cmd_demo)
 
     s = sub.add_parser("render", help="pictures of a scene from its cameras")

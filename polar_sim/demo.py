@@ -263,30 +263,78 @@ def _kernels_cached() -> bool:
     return folder.is_dir() and any(folder.rglob("_distance*.nbi"))
 
 
-def run_demo(out: Path, quick=True):
-    """Run every demo part; returns the process exit code."""
+# The parts that use the GPIS kernels run in one process, so that its kernels compile once there
+# (numba compiles per process); the others in the second.
+_LANES = (("gpis", "envs"), ("scenes", "ground", "tracking"))
+
+
+def _run_part(name, out):
+    """Run one part by name: (lines, seconds, error message or None). A failure is reported, not
+    raised, so that the other parts carry on."""
+    fn = dict(DEMOS)[name]
+    t0 = time.perf_counter()
+    try:
+        lines = fn(Path(out))
+    except Exception as exc:  # report and carry on with the other parts
+        return [], time.perf_counter() - t0, f"{type(exc).__name__}: {exc}"
+    return lines, time.perf_counter() - t0, None
+
+
+def run_demo(out: Path, quick=True, workers=None):
+    """Run every demo part; returns the process exit code.
+
+    ``workers``: 1 runs the parts one after the other in this process; 2 (the default when the
+    machine has two or more cores) runs them in two worker processes, the GPIS parts (``gpis``,
+    ``envs``) in one and the rest in the other, so that a first run's numba compiles overlap the
+    other parts. Each part is seeded, so its numbers and pictures do not depend on ``workers``.
+    """
+    import os
+
     from tqdm import tqdm
 
+    if workers is None:
+        workers = 2 if (os.cpu_count() or 1) >= 2 else 1
+    if workers not in (1, 2):
+        raise ValueError(f"workers must be 1 or 2, got {workers!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"polar_sim demo: writing pictures to {out}/")
     if not _kernels_cached():
-        print("first run: numba compiles the GPIS, ground and tracking kernels once (one to two minutes "
+        print("first run: numba compiles the GPIS, ground and tracking kernels once (about a minute "
               "on 2 cores); later runs load them from numba's cache")
     rc = 0
-    bar = tqdm(DEMOS, desc="demo", unit="part")
-    for name, fn in bar:
-        bar.set_postfix_str(name)
-        t0 = time.perf_counter()
-        try:
-            lines = fn(out)
-        except Exception as exc:  # report and carry on with the other parts
-            tqdm.write(f"[{name}] FAILED: {type(exc).__name__}: {exc}")
+    bar = tqdm(total=len(DEMOS), desc="demo", unit="part")
+
+    def report(name, lines, dt, err):
+        nonlocal rc
+        if err is not None:
+            tqdm.write(f"[{name}] FAILED: {err}")
             rc = 1
-            continue
-        for line in lines:
-            tqdm.write(f"[{name}] {line}")
-        tqdm.write(f"[{name}] done in {time.perf_counter() - t0:.1f} s")
+        else:
+            for line in lines:
+                tqdm.write(f"[{name}] {line}")
+            tqdm.write(f"[{name}] done in {dt:.1f} s")
+        bar.update(1)
+
+    if workers == 1:
+        for name, _ in DEMOS:
+            bar.set_postfix_str(name)
+            report(name, *_run_part(name, out))
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        ctx = mp.get_context("spawn")  # a fresh interpreter: no forked MuJoCo/EGL or numba state
+        pools = [ProcessPoolExecutor(1, mp_context=ctx) for _ in _LANES]
+        try:
+            futs = {pool.submit(_run_part, name, str(out)): name
+                    for pool, lane in zip(pools, _LANES) for name in lane}
+            bar.set_postfix_str(", ".join(lane[0] for lane in _LANES))
+            for f in as_completed(futs):
+                report(futs[f], *f.result())
+        finally:
+            for pool in pools:
+                pool.shutdown()
     bar.close()
     pngs = sorted(out.glob("*.png"))
     print(f"wrote {len(pngs)} PNGs to {out}/")

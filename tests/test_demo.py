@@ -24,3 +24,19 @@ def test_cold_cache_detected(tmp_path, monkeypatch):
     (tmp_path / "gpis_x").mkdir()
     (tmp_path / "gpis_x" / "_distance.query_kernel-32.py311.nbi").write_bytes(b"")
     assert _kernels_cached()
+
+
+# The two worker lanes run every part exactly once.
+def test_lanes_cover_every_part():
+    from polar_sim.demo import _LANES
+
+    names = [n for lane in _LANES for n in lane]
+    assert sorted(names) == sorted(n for n, _ in DEMOS)
+
+
+# workers other than 1 or 2 is refused before anything is written.
+@pytest.mark.parametrize("bad", [0, 3, -1])
+def test_bad_workers(tmp_path, bad):
+    with pytest.raises(ValueError, match="workers"):
+        run_demo(tmp_path / "out", workers=bad)
+    assert not (tmp_path / "out").exists()

@@ -398,7 +398,8 @@ class GPISMapBase(Parameterised):
         ``1 + map_noise``; no NaN.
         """
         check_updated(self, "tree_")
-        pts = as_points(points, self.dim, "points", allow_empty=True)
+        # C order: a strided view would compile every distance kernel a second time (layout A)
+        pts = np.ascontiguousarray(as_points(points, self.dim, "points", allow_empty=True))
         n = len(pts)
         d = self.dim
         if n == 0:

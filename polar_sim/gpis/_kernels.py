@@ -590,7 +590,7 @@ def _run_evals(ne, ev_pt, ev_out, ev_s, pts, a, dim, var_f0, gp_m, gp_obs, gp_tr
     if ne == 0:
         return
     order = np.argsort(ev_s[:ne], kind="mergesort")
-    g0 = 0
+    g0 = np.int64(0)  # not a literal 0: numba would type (and compile) _eval_group for Literal[int](0) too
     while g0 < ne:
         s = ev_s[order[g0]]
         g1 = g0 + 1
@@ -637,7 +637,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     rbuf = np.empty((dim + 3, mmax))
     Z = np.empty((4, mmax))
     acc = np.empty(4)
-    ne = 0
+    ne = np.int64(0)  # not a literal 0 (see _run_evals)
     for t in range(n):
         i = i0 + t
         o = out[i]
@@ -669,7 +669,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     _run_evals(ne, ev_pt, ev_out, ev_s, sub, a, dim, var_f0, gp_m, gp_obs, gp_tri, X, kinds,
                alpha, Lbuf, rbuf, Z, acc, cand)
     # second round: the other clusters of points whose nearest GP is not confident enough
-    ne = 0
+    ne = np.int64(0)  # not a literal 0 (see _run_evals)
     for t in range(n):
         if nv[t] > 1 and cand[t, 0, dim + 1] > T:
             for j in range(1, nv[t]):

@@ -268,7 +268,7 @@ def _remove(i, dim, level_off, cgrid, gshape, goff, node_sample, node_internal, 
             slot_free, s_slot, s_node, s_free, counts):
     """Remove sample i; collapse parents whose children are all empty leaves; free empty clusters."""
     s = s_slot[i]
-    node = s_node[i]
+    node = np.int64(s_node[i])  # int64 throughout: an int32 first pass compiles _parent twice
     node_sample[s, node] = -1
     s_slot[i] = -1
     s_node[i] = -1

@@ -593,6 +593,7 @@ class ObjectTracker(Parameterised):
     def _distances(self, D, roi, T, vis, kappa=1.0):
         m, K = self.model_, self.K_
         Ti = np.linalg.inv(T)
+        D = np.ascontiguousarray(D, np.float32)  # one layout: a crop would compile the kernel twice
         out = np.empty(D.shape, np.float32)
         roi_distances(D, roi[0], roi[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                       np.ascontiguousarray(Ti[:3, :3]), np.ascontiguousarray(Ti[:3, 3]),
