@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pick_frame", "draw_strip", "stack_pngs"]
+__all__ = ["pick_frame", "draw_strip", "stack_pngs", "success_curves"]
 
 
 def pick_frame(values, start, end):

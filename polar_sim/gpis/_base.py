@@ -486,6 +486,9 @@ class GPISMapBase(Parameterised):
         Returns
         -------
         list of ndarray (k, 2) in 2D (polylines, world metres); trimesh.Trimesh in 3D.
+        In 2D (default mode) objects smaller than ``res`` are kept: around samples the grid
+        misses, the zero level is traced on a grid five times finer, and a sample where the map
+        only touches zero (a post seen end-on) is returned as a (1, 2) array, a point.
 
         Raises
         ------

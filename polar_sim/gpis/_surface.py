@@ -78,7 +78,9 @@ def _axes(m, res, margin):
 
 
 def surface_2d(m, res, band, var_max):
-    """List of polylines (k, 2) along the zero level of the map's query, near observed samples."""
+    """List of polylines (k, 2) along the zero level of the map's query, near observed samples;
+    (default mode) with the zero level of objects smaller than ``res`` (:func:`_refined`), where
+    a (1, 2) array is a point at which the level only touches zero."""
     from skimage.measure import find_contours
 
     if len(m.tree_.alive()) == 0:
@@ -93,8 +95,58 @@ def surface_2d(m, res, band, var_max):
     if not m._pub("query_mode"):
         # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
         # field's sign (a spurious zero between samples), not a surface the grid can resolve
-        out = [ln for ln in out if not (np.allclose(ln[0], ln[-1]) and
-                                        np.linalg.norm(np.diff(ln, axis=0), axis=1).sum() < 4 * res)]
+        out = [ln for ln in out if not _bubble(ln, res)]
+        out += _refined(m, out, res)
+    return out
+
+
+def _bubble(line, res):
+    """A closed polyline shorter than 4 grid steps ``res``."""
+    return bool(np.allclose(line[0], line[-1]) and np.linalg.norm(np.diff(line, axis=0), axis=1).sum() < 4 * res)
+
+
+#: Refinement of :func:`surface_2d` around samples its grid misses: the finer step (a share of
+#: ``res``) and the window's half-width (in ``res``).
+REFINE_STEP, REFINE_HALF = 0.2, 3
+
+
+def _refined(m, lines, res):
+    """The zero level of objects smaller than the grid resolves (a post a few cm across, seen
+    end-on, whose zero level at ``res`` is a bubble or no crossing at all).
+
+    Around every sample with no polyline within ``2 res``: the zero level of a window of
+    ``REFINE_HALF`` res at ``REFINE_STEP`` res, its own bubbles dropped; a sample that still has
+    no polyline near it but where the map is zero (within the finer step) is a point of the zero
+    level that only touches zero, returned as a (1, 2) array."""
+    from scipy.spatial import cKDTree
+    from skimage.measure import find_contours
+
+    P = m.samples()["points"]
+    fine, half = REFINE_STEP * res, REFINE_HALF * res
+    if len(lines):
+        orphan = P[cKDTree(np.vstack(lines)).query(P, distance_upper_bound=2 * res)[0] > 2 * res]
+    else:
+        orphan = P
+    if not len(orphan):
+        return []
+    ax = np.arange(-half, half + 0.5 * fine, fine)
+    win = np.stack(np.meshgrid(ax, ax, indexing="ij"), -1).reshape(-1, 2)
+    kd = cKDTree(orphan)
+    out, covered = [], np.zeros(len(orphan), bool)
+    for i, c in enumerate(orphan):
+        if covered[i]:
+            continue
+        inside = np.array(kd.query_ball_point(c, 0.8 * half), int)   # one window per cluster
+        covered[inside] = True
+        sdf = m.query(win + c)[0].reshape(len(ax), len(ax))
+        found = [ln for ln in (c - half + k * fine for k in find_contours(sdf, 0.0))
+                 if len(ln) >= 2 and not _bubble(ln, fine)]
+        out += found
+        q = orphan[inside]
+        if found:
+            q = q[cKDTree(np.vstack(found)).query(q, distance_upper_bound=2 * fine)[0] > 2 * fine]
+        if len(q):
+            out += [p[None] for p, d in zip(q, m.query(q)[0]) if abs(d) < fine]
     return out
 
 

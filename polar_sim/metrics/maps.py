@@ -246,10 +246,11 @@ def sdf_map_scores(d, grad, E):
 
 
 def polyline_points(lines, spacing=0.01):
-    """Points every ``spacing`` metres along a list of polylines (k, 2)."""
+    """Points every ``spacing`` metres along a list of polylines (k, 2); a (1, 2) entry is a point."""
     from polar_sim.metrics.surface import sample_polyline
 
-    pts = [sample_polyline(ln, spacing) for ln in lines if len(ln) >= 2]
+    pts = [sample_polyline(ln, spacing) if len(ln) >= 2 else np.asarray(ln, float).reshape(-1, 2)
+           for ln in lines if len(ln)]
     return np.vstack(pts) if pts else np.zeros((0, 2))
 
 

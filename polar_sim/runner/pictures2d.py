@@ -41,7 +41,10 @@ def map_panel(ax, z, title, *, var_max=1.0):
     show = np.where(~(z["var"] >= var_max), z["sdf"], np.nan)
     im = ax.imshow(np.clip(show, -1.0, 2.0), origin="lower", extent=ext, cmap="RdBu", vmin=-2.0, vmax=2.0)
     if len(z["lines"]):
-        ax.plot(z["lines"][:, 0], z["lines"][:, 1], "-", c="k", lw=0.7, label="zero level (surface())")
+        # a lone vertex between NaN separators is a point of the zero level (an object below the
+        # grid's resolution): give every vertex a dot small enough to vanish along the lines
+        ax.plot(z["lines"][:, 0], z["lines"][:, 1], "-", c="k", lw=0.7, marker=".", ms=1.5,
+                label="zero level (surface())")
     ax.plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:orange", lw=1.0, label="path")
     ax.set(title=title, xlabel="x (m)", ylabel="y (m)", aspect="equal")
     ax.title.set_fontsize(9)

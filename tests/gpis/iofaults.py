@@ -10,7 +10,7 @@ and benchmarks/bench_gpis_io.py.
   subprocess with a time limit (many cases per worker): a crash or hang is recorded against the
   case, and a new worker goes on from the next one.
 
-    python -m tests.gpis.iofaults tamper-worker BASE_DIR START STOP   # (internal) one worker
+    python -m tests.gpis.iofaults tamper-worker BASE_DIR NAMES START STOP [selftest]   # (internal) one worker
 """
 
 from __future__ import annotations
@@ -256,14 +256,32 @@ def tamper_cases(data, dim):
     return cases
 
 
-def all_cases(base_dir, names):
-    """[(base name, label, fn)] over the bases, in a fixed order."""
+def selftest_cases(data, dim):
+    """Cases whose outcome the harness must report, to show that it can fail: an untouched copy
+    ("accepted"), a worker that segfaults ("crash") and one that sleeps past the time limit
+    ("hang"), each followed by a real tampering ("clear"), so that a new worker is seen to go on
+    after a crash or a hang."""
+    real = tamper_cases(data, dim)
+
+    def segfault(d):
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+    def sleep(d):
+        time.sleep(3600)
+
+    return [("selftest:untouched", lambda d: d), ("selftest:segfault", segfault), real[0],
+            ("selftest:sleep", sleep), real[1]]
+
+
+def all_cases(base_dir, names, selftest=False):
+    """[(base name, label, fn)] over the bases, in a fixed order (``selftest``: the harness's own
+    check cases, :func:`selftest_cases`, instead of the tamperings)."""
     out = []
     for name in names:
         with np.load(Path(base_dir) / f"{name}.npz", allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
         dim = 3 if name.startswith("3d") else 2
-        out += [(name, lab, fn) for lab, fn in tamper_cases(data, dim)]
+        out += [(name, lab, fn) for lab, fn in (selftest_cases if selftest else tamper_cases)(data, dim)]
     return out
 
 
@@ -277,10 +295,10 @@ def _probe(m, dim):
         m.query(np.array([[0.0, 0.0, 0.9], [0.01, 0.0, 1.0]]))
 
 
-def _worker(base_dir, names, start, stop):
+def _worker(base_dir, names, start, stop, selftest=False):
     import tempfile
 
-    cases = all_cases(base_dir, names)
+    cases = all_cases(base_dir, names, selftest)
     bases = {}
     tmp = Path(tempfile.mkdtemp(prefix="gpis-tamper-"))
     try:
@@ -311,10 +329,11 @@ def _worker(base_dir, names, start, stop):
         tmp.rmdir()
 
 
-def run_tampered(base_dir, names, indices=None, *, batch=60, timeout=120.0):
+def run_tampered(base_dir, names, indices=None, *, batch=60, timeout=120.0, selftest=False):
     """Outcome per case index: "clear" (ValueError naming the file), "unclear" (another
-    exception or message), "accepted" (loaded silently), "crash" (the worker died) or "hang"."""
-    n = len(all_cases(base_dir, names))
+    exception or message), "accepted" (loaded silently), "crash" (the worker died) or "hang"
+    (``timeout`` s per worker). ``selftest``: run :func:`selftest_cases` instead."""
+    n = len(all_cases(base_dir, names, selftest))
     todo = list(range(n)) if indices is None else sorted(indices)
     res = {}
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
@@ -326,7 +345,7 @@ def run_tampered(base_dir, names, indices=None, *, batch=60, timeout=120.0):
             hi += 1
         wanted = [i for i in todo if lo <= i <= hi]
         cmd = [sys.executable, "-m", "tests.gpis.iofaults", "tamper-worker", str(base_dir), ",".join(names),
-               str(lo), str(hi + 1)]
+               str(lo), str(hi + 1)] + (["selftest"] if selftest else [])
         try:
             p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT, env=env)
             out, died = p.stdout, p.returncode != 0
@@ -351,4 +370,4 @@ def run_tampered(base_dir, names, indices=None, *, batch=60, timeout=120.0):
 
 if __name__ == "__main__":
     if sys.argv[1] == "tamper-worker":
-        _worker(sys.argv[2], sys.argv[3].split(","), int(sys.argv[4]), int(sys.argv[5]))
+        _worker(sys.argv[2], sys.argv[3].split(","), int(sys.argv[4]), int(sys.argv[5]), sys.argv[6:] == ["selftest"])

@@ -114,13 +114,22 @@ def test_tampered_files(bases):
     assert len(res) == (n if idx is None else len(idx))
 
 
-# the tamper harness can fail: an untampered copy is accepted, and a loader that does not check
-# would be caught (the valid base files load)
+# the tamper harness can fail: the valid base files load, and an untouched copy, a worker that
+# segfaults and one that hangs are reported as such, the harness going on after each
 def test_tamper_harness_baseline(bases):
     d, names = bases
     for name in names:
         cls = GPISMap3D if name.startswith("3d") else GPISMap2D
         cls.load(d / f"{name}.npz")
+    name = names[0]
+    assert name.startswith("2d")
+    labels = [lab for _, lab, _ in iofaults.all_cases(d, [name], selftest=True)]
+    first = iofaults.run_tampered(d, [name], [0, 1, 2], selftest=True)
+    # a short limit for the hang; the worker's import and load take a few seconds
+    second = iofaults.run_tampered(d, [name], [3, 4], selftest=True, timeout=20.0)
+    got = {labels[i]: o for i, o in {**first, **second}.items()}
+    assert got == {"selftest:untouched": "accepted", "selftest:segfault": "crash", labels[2]: "clear",
+                   "selftest:sleep": "hang", labels[4]: "clear"}
 
 
 # the messages name the file and the array
