@@ -1,8 +1,7 @@
 """Usage: python benchmarks/bench_envs_battery.py N [ENV_ID ...]
 
 Run check_polar_env(env_id, n_bad=N) over polar_sim.envs.ENV_IDS; print pass/fail per check."""
-import sys, time, traceback, json
-import polar_sim.envs
+import sys, time, json
 from polar_sim.envs import ENV_IDS
 from polar_sim.testing import check_polar_env
 n = int(sys.argv[1]); ids = sys.argv[2:] or list(ENV_IDS)

@@ -24,8 +24,8 @@ import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-__all__ = ["ForwardDriveAction", "SDFGridExtractor", "ppo_recipe", "wrap_action", "make_model", "ObsNormaliser", "save_policy", "load_policy",
-           "POLICY_FORMAT_VERSION"]
+__all__ = ["ForwardDriveAction", "SDFGridExtractor", "ppo_recipe", "wrap_action", "env_action", "make_model",
+           "ObsNormaliser", "save_policy", "load_policy", "POLICY_FORMAT_VERSION"]
 
 POLICY_FORMAT_VERSION = 1
 
@@ -92,10 +92,10 @@ def env_action(action, b):
     """The env action of the policy action ``b`` under a recipe's ``action`` (None: ``b`` clipped)."""
     if action is None:
         return np.clip(np.asarray(b, np.float64), -1.0, 1.0).astype(np.float32)
-    wrap_action_check = ACTION_WRAPPERS.get(action.get("name")) if isinstance(action, dict) else None
-    if wrap_action_check is None:
+    cls = ACTION_WRAPPERS.get(action.get("name")) if isinstance(action, dict) else None
+    if cls is None:
         raise ValueError(f"action: unknown action parametrisation {action!r}")
-    return wrap_action_check.map_action(b, **action.get("kwargs", {}))
+    return cls.map_action(b, **action.get("kwargs", {}))
 
 
 class SDFGridExtractor(BaseFeaturesExtractor):
