@@ -27,7 +27,7 @@ try:
 except ImportError:  # pragma: no cover
     import _gpis_common as C
 
-KNOWN_MISS = {"warehouse2d"}      # recorded as missed in benchmarks/RESULTS.md (small clutter; see there)
+KNOWN_MISS = set()  # scenes whose check is recorded as missed in benchmarks/RESULTS.md (none since surface() keeps small objects)
 COLS = ["surface_rmse_m", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_m", "h_true_to_est_m",
         "near_rmse_m", "far_mae_m", "worst_corner_share", "worst_sparse_share", "worst_wall_share", "n_scans"]
 
