@@ -42,19 +42,10 @@ class _Rec(ev.Listener):
 
 
 def _gpis():
-    sys.path.insert(0, str(ROOT / "tests" / "gpis"))
-    import numpy as np
-    from scenes import room_path, scan_2d
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_gpis_coldstart import first_update_query
 
-    from polar_sim.gpis import GPISMap2D
-    ang = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
-    pose = room_path(4)[0]
-    r = scan_2d(pose, ang)
-    t0 = time.perf_counter()
-    m = GPISMap2D().update(ang, r, pose)
-    t1 = time.perf_counter()
-    m.query(np.random.default_rng(0).uniform(-1, 5, (1000, 2)))
-    t2 = time.perf_counter()
+    t0, t1, t2 = first_update_query()
     print(f"first update {t1 - t0:.2f} s, first query {t2 - t1:.2f} s", file=sys.stderr)
 
 
