@@ -1,9 +1,11 @@
 """Speed and memory of polar_sim.gpis against the targets of issue 3.
 
-Usage: python benchmarks/bench_gpis.py [--quick] [--legacy] [--out FILE]
+Usage: python benchmarks/bench_gpis.py [--quick] [--legacy] [--dataset gazebo1|intel_lab] [--out FILE]
 
-- 2D update over the gazebo1 scans (all 2879; --quick: the first 600): per-scan wall time and
-  thread CPU time (median, p99), and the last 10% of scans against the first 10%.
+- 2D update over the gazebo1 scans (all 2879; --quick: the first 600), or with
+  ``--dataset intel_lab`` over the Intel Research Lab's 910 scans of 180 beams (real; the laser
+  pose, ``sensor_offset=(0, 0)``; --quick: the first 300): per-scan wall time and thread CPU time
+  (median, p99), and the last 10% of scans against the first 10%.
 - 2D query: 1000 points, (a) uniform over the map's bounding box, (b) within 0.3 m of a sample.
 - Map memory after the 2D run (sum of the map's array bytes; tracemalloc's peak over a second,
   untimed pass).
@@ -32,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "gpis"))
 
 from scenes import intrinsics, orbit_poses, render_sphere, sphere_sdf  # noqa: E402
 
-from polar_sim.datasets import load_gazebo1  # noqa: E402
+from polar_sim.datasets import load_gazebo1, load_intel_lab  # noqa: E402
 from polar_sim.gpis import GPISMap2D, GPISMap3D  # noqa: E402
 
 
@@ -58,21 +60,31 @@ def _query_ms(m, pts, reps=50, warm_s=0.5):
     return 1e3 * np.median(w), 1e3 * np.median(c)
 
 
-def bench_2d(n_scans, legacy):
+def _scans_2d(dataset):
+    """(angles, ranges (n, m), poses (n, 3), sensor_offset (2,)) of a 2D log."""
+    if dataset == "intel_lab":
+        d = load_intel_lab()
+        return d["angles"], d["ranges"], d["poses"], (0.0, 0.0)       # laser poses
     g = load_gazebo1()
-    m = GPISMap2D(legacy=legacy, sensor_offset=g["sensor_offset"])   # base poses
-    m.update(g["thetas"], g["ranges"][0], g["poses"][0])         # compile numba kernels
+    return g["thetas"], g["ranges"], g["poses"], g["sensor_offset"]   # base poses
+
+
+def bench_2d(n_scans, legacy, dataset="gazebo1"):
+    A, R, P, offset = _scans_2d(dataset)
+    n_scans = min(n_scans, len(R))
+    m = GPISMap2D(legacy=legacy, sensor_offset=offset)
+    m.update(A, R[0], P[0])                                          # compile numba kernels
     m.reset()
     wall, cpu = [], []
     for k in range(n_scans):
-        w, c = _timed(m.update, g["thetas"], g["ranges"][k], g["poses"][k])
+        w, c = _timed(m.update, A, R[k], P[k])
         wall.append(w)
         cpu.append(c)
     # memory in a second pass: tracemalloc slows allocation-heavy code, so not while timing
-    m2 = GPISMap2D(legacy=legacy, sensor_offset=g["sensor_offset"])
+    m2 = GPISMap2D(legacy=legacy, sensor_offset=offset)
     tracemalloc.start()
     for k in range(n_scans):
-        m2.update(g["thetas"], g["ranges"][k], g["poses"][k])
+        m2.update(A, R[k], P[k])
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     del m2
@@ -169,9 +181,11 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="600 scans, 6 frames")
     ap.add_argument("--legacy", action="store_true", help="also benchmark legacy=True")
     ap.add_argument("--no-env", action="store_true", help="skip the GPISNav-v0 measurement")
+    ap.add_argument("--dataset", default="gazebo1", choices=["gazebo1", "intel_lab"],
+                    help="the 2D log of the update and query rows (default gazebo1, simulated; intel_lab is real)")
     ap.add_argument("--out", help="append the markdown table to this file")
     a = ap.parse_args(argv)
-    n2, n3 = (600, 6) if a.quick else (2879, 24)
+    n2, n3 = (300 if a.dataset == "intel_lab" else 600, 6) if a.quick else (2879, 24)
     modes = [False, True] if a.legacy else [False]
     lines = [f"command: `python benchmarks/bench_gpis.py {' '.join(argv or sys.argv[1:])}`".strip(),
              f"load average before: {os.getloadavg()[0]:.2f} (2 cores)", "",
@@ -179,9 +193,9 @@ def main(argv=None):
              "|---|---|---|---|---|"]
     for legacy in modes:
         mode = "legacy" if legacy else "default"
-        r = bench_2d(n2, legacy)
+        r = bench_2d(n2, legacy, a.dataset)
         lines += [
-            f"| 2D update, {r['n']} gazebo1 scans, ms | {mode} | {r['wall'][0]:.2f} / {r['wall'][1]:.2f}"
+            f"| 2D update, {r['n']} {a.dataset} scans, ms | {mode} | {r['wall'][0]:.2f} / {r['wall'][1]:.2f}"
             f" | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} | 8 / 30 |",
             f"| 2D update, last 10% / first 10% (median ratio) | {mode} | {r['late_early_wall']:.2f}"
             f" | {r['late_early_cpu']:.2f} | <= 1.5 |",
