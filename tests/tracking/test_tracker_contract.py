@@ -1,11 +1,13 @@
 """ObjectTracker follows the module contract (issue 17 item 1, polar_sim.params.Parameterised), and
 its results are bit for bit those of the code before the contract.
 
-The reference (``tracker_reference.json``) was recorded by ``python tests/tracking/test_tracker_contract.py``
-with the tracker as it was before the change (commit 49bebcb, constructor building the model and the
-filter): per frame the pose and covariance as exact float hex strings, SHA-1 digests of the
-mask, probability, raw probability and label maps, and the scalar outputs, for four configurations
-on synthetic RGB-D (recorded on one x86-64 machine; compared to within float round-off, see below).
+The reference (``tracker_reference.json``) is recorded from the tracker as it was before the change
+(commit 49bebcb, constructor building the model and the filter), checked out in a folder OLD:
+``PYTHONPATH=OLD python tests/tracking/test_tracker_contract.py``. Per frame it holds the pose and
+covariance as exact float hex strings, SHA-1 digests of the mask and label maps, moments of the
+probability and raw probability maps (:func:`_prob_stats`), and the scalar outputs, for four
+configurations on synthetic RGB-D (format 2, recorded on an x86-64 machine without AVX-512; compared
+to within float round-off, see below).
 """
 
 import hashlib
@@ -20,7 +22,7 @@ from polar_sim.tracking import ObjectTracker
 from polar_sim.tracking.synthetic import make_sequence
 
 REFERENCE = Path(__file__).with_name("tracker_reference.json")
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: (name, sequence options, tracker parameters, frames): the default at 640x480 (more candidate
 #: points than n_registration, so the weighted subsampling runs), the colour model, and the
 #: silhouette prior with the alpha-beta filter and the raw probability.
@@ -39,13 +41,23 @@ def _digest(a):
     return hashlib.sha1(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes()).hexdigest()
 
 
+def _prob_stats(a):
+    """Round-off-tolerant summary of a probability map: the sum, the sum of squares and the first
+    image moments (row and column weighted sums), as float hex; None stays None."""
+    if a is None:
+        return None
+    a = np.asarray(a, np.float64)
+    r, c = np.indices(a.shape[:2])
+    return _hex([a.sum(), (a * a).sum(), (a * r).sum(), (a * c).sum()])
+
+
 def _hex(a):
     return [float(v).hex() for v in np.asarray(a, float).ravel()]
 
 
 def _summary(r):
     return {"pose": _hex(r.pose), "covariance": _hex(r.covariance), "pose_filtered": _hex(r.pose_filtered),
-            "mask": _digest(r.mask), "prob": _digest(r.prob), "prob_raw": _digest(r.prob_raw),
+            "mask": _digest(r.mask), "prob": _prob_stats(r.prob), "prob_raw": _prob_stats(r.prob_raw),
             "labels": _digest(r.labels), "fitness": float(r.fitness).hex(), "inlier_rmse": float(r.inlier_rmse).hex(),
             "n_points": r.n_points, "lost": r.lost, "accepted": r.accepted, "roi": list(r.roi),
             "gamma": float(r.gamma).hex(), "iterations": r.iterations, "n_inliers": r.n_inliers,
@@ -71,17 +83,22 @@ def reference():
     return ref["cases"]
 
 
-# The floats are compared to within round-off, not bit for bit: on another CPU (another BLAS kernel)
-# the poses differ by 1e-18 to 7e-15 from the recording. The tolerances are far below any change of
-# behaviour (a changed correspondence moves a pose by ~1e-4). Discrete outputs (masks, labels, counts,
-# flags, ROIs) stay exact, and so do the probability maps, except in ww_640, where one frame's maps
-# changed with a 7e-15 change of the pose on the second machine tried.
+# The floats are compared to within round-off, not bit for bit: on another CPU (another BLAS kernel,
+# numpy's AVX-512 or AVX2 exp) the poses differ by 1e-18 to 7e-15 from the recording, and the
+# probability maps in their last bits (format 1 held SHA-1 digests of those maps; on a machine without
+# AVX-512 frames of h_320 and kdtree_320 differed, with the code of 49bebcb as with today's, which give
+# the same bits there). So the maps are compared by their moments. The tolerances are far below any
+# change of behaviour (a changed correspondence moves a pose by ~1e-4, a changed pixel a moment by
+# > 1e-5 of it). Discrete outputs (masks, labels, counts, flags, ROIs) stay exact. ww_640's
+# probability maps are not compared: on one machine a 7e-15 change of the pose changed one frame's maps.
 _FLOATS = {"pose": 1e-9, "covariance": 1e-9, "pose_filtered": 1e-9, "fitness": 1e-9, "inlier_rmse": 1e-9,
-           "gamma": 1e-9}
-_PROB_EXACT_EXCEPT = {"ww_640"}
+           "gamma": 1e-9, "prob": 1e-9, "prob_raw": 1e-9}
+_PROB_NOT_COMPARED = {"ww_640"}
 
 
 def _close(g, w, tol):
+    if g is None or w is None:
+        return g is None and w is None
     g = np.array([float.fromhex(x) for x in (g if isinstance(g, list) else [g])])
     w = np.array([float.fromhex(x) for x in (w if isinstance(w, list) else [w])])
     return g.shape == w.shape and np.allclose(g, w, rtol=tol, atol=tol)
@@ -92,7 +109,7 @@ def test_results_match_the_recorded_run_of_the_previous_code(reference, case):
     # every output of every frame equals the run recorded before the module contract (floats to round-off)
     got, want = _run(case), reference[case[0]]
     assert len(got) == len(want)
-    loose = {"prob", "prob_raw"} if case[0] in _PROB_EXACT_EXCEPT else set()
+    loose = {"prob", "prob_raw"} if case[0] in _PROB_NOT_COMPARED else set()
     for i, (g, w) in enumerate(zip(got, want)):
         assert g.keys() == w.keys()
         bad = {k for k in g if k not in loose and (not _close(g[k], w[k], _FLOATS[k]) if k in _FLOATS else g[k] != w[k])}
@@ -153,7 +170,7 @@ def test_set_params_checks_in_one_place_and_leaves_the_tracker_unchanged(small):
 
 
 def _record():
-    """Write the reference from the code now installed (run once, before a refactor)."""
+    """Write the reference from the code that ``polar_sim`` imports (run once, before a refactor)."""
     cases = {c[0]: _run(c) for c in CASES}
     tmp = REFERENCE.with_suffix(".tmp")
     tmp.write_text(json.dumps({"format_version": FORMAT_VERSION, "cases": cases}, indent=0, sort_keys=True))
