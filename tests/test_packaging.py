@@ -20,7 +20,14 @@ def test_packages_listed():
 
 # The installed package finds its MJCF scenes and experiments through importlib.resources.
 def test_scenes_are_package_data():
-    files = {p.name for p in resources.files("polar_sim.scenes").iterdir()}
+    import polar_sim
+
+    try:
+        scenes = resources.files("polar_sim.scenes")
+    except ModuleNotFoundError:   # a source checkout on PYTHONPATH shadows the installed package
+        raise AssertionError(f"polar_sim is imported from {polar_sim.__file__}, not from an install "
+                             "(scenes/ is mapped into the package by pip install); unset PYTHONPATH") from None
+    files = {p.name for p in scenes.iterdir()}
     assert {"rover_terrain.xml", "rover_flat.xml", "office2d.xml"} <= files
     exps = {p.name for p in resources.files("polar_sim.experiments").iterdir()}
     assert "sensors.py" in exps
