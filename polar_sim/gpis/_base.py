@@ -46,7 +46,7 @@ class GPISMapBase(Parameterised):
     #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
     #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
     PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                 "fusion": "published", "query_mode": "published"}
+                 "fusion": "published", "query_mode": "published", "train_cap": None}
     #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
     _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
                          "fusion": "published", "query_mode": "published", "scan_model": "published"}
@@ -319,7 +319,7 @@ class GPISMapBase(Parameterised):
             return
         R = self._TRAIN_R * self._hc()
         ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff,
-                                   tr.node_sample, tr.slot_coord, tr.pos)
+                                   tr.node_sample, tr.slot_coord, tr.pos, self._train_cap())
         nonempty = np.diff(ptr) > 0
         slots = slots[nonempty]
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
@@ -349,13 +349,16 @@ class GPISMapBase(Parameterised):
         """Default: retrain exactly the clusters whose training set changed."""
         if len(changed) == 0:
             return
-        R = self._TRAIN_R * self._hc()
-        w = 2.0 * self._hc()
-        reach = int(np.ceil(R / w - 0.5))
-        tr = self.tree_
-        slots = dirty_slots(np.ascontiguousarray(changed, np.float64), reach, tr.geo, tr.cgrid,
-                            tr.gshape, tr.goff, tr.node_sample.shape[0])
+        tr, g = self.tree_, self.gps_
+        self._sync_slot_arrays()
+        slots = dirty_slots(np.ascontiguousarray(changed, np.float64), self._TRAIN_R * self._hc(),
+                            self._train_cap(), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_coord,
+                            tr.node_sample.shape[0], g.gp_obs, g.gp_m, g.X, g.kinds)
         self._train(slots)
+
+    def _train_cap(self):
+        """Samples per local GP at most (0: no cap; the published retraining has none)."""
+        return 0 if (self.train_cap is None or self._pub("retrain")) else int(self.train_cap)
 
     # -- query ----------------------------------------------------------------------------------
     def _gp_query(self, pts):

@@ -42,6 +42,10 @@ def check_params(est, vec2=()):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"obs_skip: expected an integer >= 1, got {v!r}")
             out[k] = int(v)
+        elif k == "train_cap":
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
+                raise ValueError(f"train_cap: expected None or an integer >= 1, got {v!r}")
+            out[k] = None if v is None else int(v)
         elif k in _OPTIONAL and v is None:
             out[k] = None
         else:

@@ -171,18 +171,43 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_sample, node_internal, le
 
 
 @nb.njit(cache=True)
-def dirty_slots(pts, reach, geo, cgrid, gshape, goff, nslots):
-    """Sorted slots of the non-empty clusters within ``reach`` cells (per axis) of the cells
-    holding pts (n, d): the clusters whose training sets may contain those positions."""
+def _kept_radius2(s, cap, gp_obs, gp_m, X, kinds, c0):
+    """Squared distance from centre c0 to the farthest training sample of slot s's GP when the
+    GP holds exactly ``cap`` samples (its training set was capped, or just full); else inf."""
+    m = gp_m[s] if s < gp_m.shape[0] else 0
+    o = gp_obs[s] if s < gp_obs.shape[0] else 0
+    nv = 0
+    far = 0.0
+    while nv < m and (kinds[o + nv] >> 32) == 0:   # value observations come first, one per sample
+        d2 = 0.0
+        for k in range(c0.shape[0]):
+            e = X[o + nv, k] - c0[k]
+            d2 += e * e
+        far = max(far, d2)
+        nv += 1
+    return far if (cap > 0 and nv == cap) else np.inf
+
+
+@nb.njit(cache=True)
+def dirty_slots(pts, R, cap, geo, cgrid, gshape, goff, slot_coord, nslots, gp_obs, gp_m, X, kinds):
+    """Sorted slots of the non-empty clusters whose training set may hold one of pts (n, d).
+
+    A cluster's training set is its samples within R of its centre (spec §8.1), or with a cap
+    the ``cap`` nearest of them: a position counts when it lies within R of the centre and, for
+    a GP trained on a full set of ``cap`` samples, no farther than its farthest sample (a point
+    beyond it neither was nor would be kept). Ties count, so the test never misses a change."""
     n, dim = pts.shape
     w = geo[dim]
+    reach = int(np.ceil(R / w - 0.5))
     mark = np.zeros(nslots, np.bool_)
+    kept = np.full(nslots, -1.0)          # the kept radius^2 of each slot, computed once
     span = 2 * reach + 1
     total = 1
     for _ in range(dim):
         total *= span
     cc = np.empty(dim, np.int64)
     c0 = np.empty(dim, np.int64)
+    cen = np.empty(dim)
     for j in range(n):
         for k in range(dim):
             c0[k] = np.int64(np.floor((pts[j, k] - geo[k]) / w))
@@ -195,14 +220,28 @@ def dirty_slots(pts, reach, geo, cgrid, gshape, goff, nslots):
             if g < 0:
                 continue
             s = cgrid[g]
-            if s >= 0:
+            if s < 0 or mark[s]:
+                continue
+            d2 = 0.0
+            for k in range(dim):
+                cen[k] = geo[k] + (slot_coord[s, k] + 0.5) * w
+                e = pts[j, k] - cen[k]
+                d2 += e * e
+            if not d2 < R * R:
+                continue
+            if kept[s] < 0.0:
+                kept[s] = _kept_radius2(s, cap, gp_obs, gp_m, X, kinds, cen)
+            if d2 <= kept[s]:
                 mark[s] = True
     return np.nonzero(mark)[0].astype(np.int64)
 
 
 @nb.njit(cache=True)
-def gather_training(slots, R, geo, cgrid, gshape, goff, node_sample, slot_coord, pos):
-    """CSR of the samples within R of each cluster centre (spec §8.1, Q_R)."""
+def gather_training(slots, R, geo, cgrid, gshape, goff, node_sample, slot_coord, pos, cap=0):
+    """CSR of the samples within R of each cluster centre (spec §8.1, Q_R).
+
+    ``cap`` > 0 keeps only the ``cap`` samples nearest the centre (ties to the one gathered
+    first), in gathering order; 0 keeps them all."""
     dim = pos.shape[1]
     w = geo[dim]
     reach = int(np.ceil(R / w - 0.5))
@@ -245,6 +284,19 @@ def gather_training(slots, R, geo, cgrid, gshape, goff, node_sample, slot_coord,
                         out = o2
                     out[n] = i
                     n += 1
+        start = ptr[a]
+        if cap > 0 and n - start > cap:
+            d2s = np.empty(n - start)
+            for u in range(n - start):
+                d2 = 0.0
+                for k in range(dim):
+                    e = pos[out[start + u], k] - c0[k]
+                    d2 += e * e
+                d2s[u] = d2
+            keep = np.sort(np.argsort(d2s, kind="mergesort")[:cap])
+            chosen = out[start + keep]
+            out[start:start + cap] = chosen
+            n = start + cap
         ptr[a + 1] = n
     return ptr, out[:n]
 

@@ -54,6 +54,11 @@ class GPISMap3D(GPISMapBase):
         Default mode: a re-evaluated sample triggers retraining of the GPs that use it only once
         it has moved more than this (or its normal turned > 0.05 rad, or a noise changed > 2x)
         since they were trained; None = 0.0005 m; 0 = retrain on every change (as published).
+    train_cap : int or None, default=None
+        Default mode: each local GP trains on at most this many samples, the nearest its
+        cluster's centre among those within the training radius (4 h_c); None = all of them (as
+        published). Training costs O(m^3) in the m samples: the cap bounds the update time and
+        memory where surfaces crowd a cluster.
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
@@ -105,7 +110,7 @@ class GPISMap3D(GPISMapBase):
     _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
                "min_grad_noise", "map_noise", "obs_skip", "min_depth", "max_depth", "init_half",
                "cluster_half", "min_half", "max_half", "obs_scale", "obs_noise", "blend_near",
-               "blend_far", "surfel_radius", "free_res", "retrain_tol", "sample_spacing", "spacing_rule", "retrain",
+               "blend_far", "surfel_radius", "free_res", "retrain_tol", "train_cap", "sample_spacing", "spacing_rule", "retrain",
                "gp_noise", "fusion", "query_mode", "legacy")
 
     def __init__(self, *, map_scale=0.04, fbias=0.2, obs_var_thre=0.04, delx=0.001,
@@ -113,7 +118,7 @@ class GPISMap3D(GPISMapBase):
                  min_depth=0.4, max_depth=4.0, init_half=0.4, cluster_half=0.025,
                  min_half=0.00625, max_half=1.6, obs_scale=0.5, obs_noise=0.01,
                  blend_near=0.002, blend_far=0.006, surfel_radius=None, free_res=None,
-                 retrain_tol=None, sample_spacing=None, spacing_rule="strict", retrain="changed",
+                 retrain_tol=None, train_cap=None, sample_spacing=None, spacing_rule="strict", retrain="changed",
                  gp_noise="model", fusion="fixed", query_mode="faithful", legacy=False):
         self.map_scale = map_scale
         self.fbias = fbias
@@ -136,6 +141,7 @@ class GPISMap3D(GPISMapBase):
         self.surfel_radius = surfel_radius
         self.free_res = free_res
         self.retrain_tol = retrain_tol
+        self.train_cap = train_cap
         self.sample_spacing = sample_spacing
         self.spacing_rule = spacing_rule
         self.retrain = retrain

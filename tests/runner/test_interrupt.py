@@ -12,8 +12,12 @@ from polar_sim.runner.results import ResultsFile
 # A sweep of 8 trials, defined in a script so it can run in a subprocess. With "block", the third
 # trial sleeps until it is interrupted, so the test does not depend on how fast this machine is.
 SCRIPT = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
     from polar_sim.runner import Experiment, run_experiment
+
+    # A terminal's Ctrl-C raises KeyboardInterrupt; a parent such as a pytest-xdist worker may
+    # start this process with SIGINT ignored, which Python then keeps.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     started = []
 
