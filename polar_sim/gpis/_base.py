@@ -46,7 +46,7 @@ class GPISMapBase(Parameterised):
     #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
     #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
     PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                 "fusion": "published", "query_mode": "published", "train_cap": None}
+                 "fusion": "published", "query_mode": "published"}
     #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
     _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
                          "fusion": "published", "query_mode": "published", "scan_model": "published"}

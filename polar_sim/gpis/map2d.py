@@ -72,11 +72,13 @@ class GPISMap2D(GPISMapBase):
         Default mode: a re-evaluated sample triggers retraining of the GPs that use it only once
         it has moved more than this (or its normal turned > 0.05 rad, or a noise changed > 2x)
         since they were trained; None = 0.005 m; 0 = retrain on every change (as published).
-    train_cap : int or None, default=None
+    train_cap : int or None, default=32
         Default mode: each local GP trains on at most this many samples, the nearest its
-        cluster's centre among those within the training radius (4 h_c); None = all of them (as
-        published). Training costs O(m^3) in the m samples, so in cluttered rooms (the Intel
-        Lab: a median of 244, up to 450) the cap bounds the update time and memory.
+        cluster's centre among those within the training radius (4 h_c = 3.2 m); None = all of
+        them. The published retraining (``retrain="box"``) has no cap. Training costs O(m^3) in
+        the m samples: in cluttered rooms (the Intel Lab: a median of 244, up to 450) the cap
+        bounds the update time and memory. 32 was chosen on office2d's dev seeds, where it
+        leaves every accuracy figure unchanged (benchmarks/RESULTS.md).
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
@@ -171,7 +173,7 @@ class GPISMap2D(GPISMapBase):
                  sensor_offset=(0.0, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
                  min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
                  max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.05, blend_far=0.25,
-                 surfel_radius=None, free_res=None, retrain_tol=None, train_cap=None, sample_spacing=None,
+                 surfel_radius=None, free_res=None, retrain_tol=None, train_cap=32, sample_spacing=None,
                  range_noise=0.01, spacing_rule="strict", retrain="changed", gp_noise="model",
                  fusion="fixed", query_mode="faithful", scan_model="range", legacy=False):
         self.map_scale = map_scale

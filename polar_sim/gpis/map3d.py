@@ -56,9 +56,9 @@ class GPISMap3D(GPISMapBase):
         since they were trained; None = 0.0005 m; 0 = retrain on every change (as published).
     train_cap : int or None, default=None
         Default mode: each local GP trains on at most this many samples, the nearest its
-        cluster's centre among those within the training radius (4 h_c); None = all of them (as
-        published). Training costs O(m^3) in the m samples: the cap bounds the update time and
-        memory where surfaces crowd a cluster.
+        cluster's centre among those within the training radius (4 h_c); None = all of them. The
+        published retraining (``retrain="box"``) has no cap. Training costs O(m^3) in the m
+        samples: the cap bounds the update time and memory where surfaces crowd a cluster.
     sample_spacing : float or None, default=None
         Default mode: minimum distance between samples, enforced across cell borders (the
         published code checks only the cell chain, giving about half the intended spacing);
