@@ -87,7 +87,13 @@ def map_figure(z, *, mapper, title):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(1, 3, figsize=(20, 6.2))
-    ax[0].hist(z["cpu_ms"], bins=60, color="tab:blue")
+    # bins up to the 99.5th percentile, so that one slow first scan does not squeeze the rest
+    cpu = np.asarray(z["cpu_ms"])
+    top = float(np.percentile(cpu, 99.5))
+    ax[0].hist(np.minimum(cpu, top), bins=60, range=(0.0, top), color="tab:blue")
+    ax[0].axvline(np.median(cpu), color="k", lw=1, label=f"median {np.median(cpu):.2f} ms")
+    ax[0].legend(title=f"{int((cpu > top).sum())} scans above {top:.1f} ms (max {cpu.max():.0f}) in the last bin", fontsize=8,
+                 title_fontsize=8)
     ax[0].set(xlabel="update CPU time per scan (ms)", ylabel="scans", title=f"{mapper}: update time over the whole log (Fig 7.12a)")
     map_panel(ax[1], z, "SDF and zero level of the whole log (Fig 7.19)")
     im = ax[2].imshow(np.log10(np.maximum(z["var"], 1e-6)), origin="lower", cmap="magma",
