@@ -41,11 +41,14 @@ def test_ctrl_c_keeps_finished_rows(tmp_path):
                          stderr=subprocess.PIPE, text=True)
     csv = out / "results.csv"
     deadline = time.monotonic() + 300
-    while not (csv.exists() and len(csv.read_text().splitlines()) >= 3):   # two finished rows
-        assert p.poll() is None and time.monotonic() < deadline, p.communicate()[1][-2000:]
-        time.sleep(0.05)
-    p.send_signal(signal.SIGINT)                                           # then Ctrl-C
-    _, err = p.communicate(timeout=60)
+    try:
+        while not (csv.exists() and len(csv.read_text().splitlines()) >= 3):   # two finished rows
+            assert p.poll() is None and time.monotonic() < deadline, p.communicate()[1][-2000:]
+            time.sleep(0.05)
+        p.send_signal(signal.SIGINT)                                           # then Ctrl-C
+        _, err = p.communicate(timeout=60)
+    finally:
+        p.kill()          # a child that ignored Ctrl-C must not sleep on after a failed test
     assert p.returncode != 0 and "KeyboardInterrupt" in err
     kept = ResultsFile(csv).read()
     assert len(kept) == 2
