@@ -32,8 +32,8 @@ def _gp_inputs(m, s):
 
 
 def _expected(m, s, cap):
-    """Brute force: the samples within R of slot s's centre, the cap nearest (ties to the lower
-    distance only matter at exact equality, which a noisy scan does not produce)."""
+    """Brute force: the samples within R of slot s's centre, or the cap nearest of them. (How ties
+    in distance are broken would matter only at exact equality, which noisy scans do not give.)"""
     tr = m.tree_
     R = m._TRAIN_R * m._hc()
     pts = tr.pos[tr.alive()]
