@@ -43,24 +43,10 @@ def _cmd_list(args):
 
 
 def _env_ids():
-    """(id, first docstring line) of every registered polar_sim environment."""
-    import importlib
+    """(id, one-line summary) of every registered polar_sim environment."""
+    from polar_sim.envs import ENV_SUMMARIES
 
-    from polar_sim.envs import ENV_IDS
-
-    out = []
-    for env_id, spec in ENV_IDS.items():
-        entry = spec[0] if isinstance(spec, tuple) else spec
-        doc = ""
-        if isinstance(entry, str) and ":" in entry:
-            mod, _, attr = entry.partition(":")
-            try:
-                obj = getattr(importlib.import_module(mod), attr)
-                doc = (obj.__doc__ or "").strip().splitlines()[0] if obj.__doc__ else ""
-            except Exception:  # noqa: BLE001 - a listing must not fail on one broken env
-                doc = ""
-        out.append((env_id, doc))
-    return out
+    return list(ENV_SUMMARIES.items())
 
 
 def _cmd_render(args):

@@ -46,9 +46,14 @@ def test_run_quick(tmp_path):
 
 # list names the environment ids too.
 def test_list_names_envs(capsys):
+    from polar_sim.envs import ENV_IDS
+
     assert main(["list"]) == 0
     out = capsys.readouterr().out
-    assert "polar_sim/GPISNav-v0" in out and "environments" in out
+    assert "environments" in out and "## Description" not in out
+    lines = {ln.split()[0]: ln for ln in out.splitlines() if ln.strip().startswith("polar_sim/")}
+    assert set(lines) == set(ENV_IDS)
+    assert all(len(ln.split()) > 3 for ln in lines.values())   # each id with a summary
 
 
 # --set parses bare-word lists, JSON and plain strings, and rejects half-written JSON at once.

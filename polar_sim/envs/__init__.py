@@ -8,7 +8,7 @@ registers by itself, which is what ``spawn``/``forkserver`` vector-env workers n
 
 from gymnasium.envs.registration import register
 
-__all__ = ["ENV_IDS", "register_envs"]
+__all__ = ["ENV_IDS", "ENV_SUMMARIES", "register_envs"]
 
 _NAV = "polar_sim.envs.gpis_nav:GPISNavEnv"
 _LIDAR = "polar_sim.envs.lidar_nav:LidarNavEnv"
@@ -26,6 +26,21 @@ ENV_IDS = {
     "polar_sim/TabletopReach-v0": ("polar_sim.envs.tabletop_reach_v0:TabletopReachEnv", 300, {}),
     "polar_sim/ObjectTrack-v0": ("polar_sim.envs.object_track_v0:ObjectTrackEnv", 300, {}),
 }
+
+#: id -> one line for ``polar-sim list``: what the agent sees and where its pose comes from
+ENV_SUMMARIES = {
+    "polar_sim/LidarNav-v0": "navworld rooms to a goal; exact lidar, goal in the true robot frame (GPS+compass)",
+    "polar_sim/GPISNav-v0": "online GPIS map fused at the TRUE pose (GPS+compass variant), noise-free lidar",
+    "polar_sim/LidarNav-v1": "navworld rooms to a goal; noisy lidar and wheel odometry, goal in the start frame",
+    "polar_sim/GPISNav-v1": "online GPIS map at the ESTIMATED pose (ICP-G on the map), 3x3 rooms; noisy sensors",
+    "polar_sim/GPISNav-Rooms2-v1": "GPISNav-v1 on the 2x2-room tier",
+    "polar_sim/GPISNav-Room-v1": "GPISNav-v1 on the one-room-with-clutter tier (a memoryless policy can solve it)",
+    "polar_sim/RoverDrive-v0": "car-sized rover along a route over hills; raw camera image",
+    "polar_sim/GroundVO-v0": "RoverDrive-v0 with GroundVO monocular odometry as the robot's pose",
+    "polar_sim/TabletopReach-v0": "hand to a pre-grasp pose over a moving tabletop object; raw RGB-D",
+    "polar_sim/ObjectTrack-v0": "TabletopReach-v0 with the ObjectTracker's pose of the object",
+}
+assert set(ENV_SUMMARIES) == set(ENV_IDS)
 
 
 def register_envs():

@@ -70,6 +70,22 @@ def _rel(p, root):
     return p.relative_to(root) if p.is_relative_to(root) else p
 
 
+def _run_wall(config, fallback):
+    """Seconds over every invocation on a run folder (an interrupted one counts as unknown)."""
+    hist = config.get("history") or []
+    walls = [h.get("wall_s") for h in hist]
+    return sum(w for w in walls if w is not None) if walls and any(w is not None for w in walls) else fallback
+
+
+def _commits(config):
+    from polar_sim.runner.run import run_commits
+
+    def short(c):
+        return "unknown" if not c else c[:12] + ("+dirty" if c.endswith("+dirty") else "")
+
+    return ", ".join(short(c) for c in run_commits(config)) or "unknown"
+
+
 def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quick=False):
     """Write ``report.md`` and ``report.html`` for ``{name: RunResult}``; returns the .md path."""
     from polar_sim.runner.provenance import provenance
@@ -105,17 +121,21 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
     else:
         lines.append("(no experiment in this run states findings)")
     lines += ["", "## Experiments", "",
-              "| experiment | split (seeds) | trials | met | missed (recorded) | failed | trial errors | wall (s) | folder |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "Wall time sums every invocation on the experiment's folder (a run resumed after an "
+              "interruption keeps its finished trials); *trials from* names the commits that ran them.", "",
+              "| experiment | split (seeds) | trials | met | missed (recorded) | failed | trial errors | wall (s) "
+              "| trials from | folder |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in results.items():
         st = [c.status for c in r.checks]
         seeds = r.config.get("seeds", [])
         sd = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else (str(seeds[0]) if seeds else "")
         lines.append(f"| {name} | {r.config.get('split', '')} ({sd}) | {len(r.table)} | {st.count('pass')} | "
-                     f"{st.count('missed')} | {st.count('FAIL')} | {len(r.failures)} | {walls.get(name, 0):.0f} | "
+                     f"{st.count('missed')} | {st.count('FAIL')} | {len(r.failures)} | "
+                     f"{_run_wall(r.config, walls.get(name, 0)):.0f} | {_commits(r.config)} | "
                      f"{_rel(r.out_dir, out_dir)} |")
     for name, err in errors.items():
-        lines.append(f"| {name} | | | | | | **error**: {cell(err)} | {walls.get(name, 0):.0f} | {name} |")
+        lines.append(f"| {name} | | | | | | **error**: {cell(err)} | {walls.get(name, 0):.0f} | | {name} |")
     misses = [(n, c) for n, r in results.items() for c in r.checks if c.status != "pass"]
     if misses:
         lines += ["", "Not met:", "", "| experiment | check | status | figures |", "|---|---|---|---|"]

@@ -1,7 +1,9 @@
 """Running an experiment: trials in this process, on a local pool of worker processes or on Ray,
 rows written as they finish, then the summary, the figures, the checks and the findings.
 
-A run folder holds ``config.json`` (what was run, and where: version, commit, packages, machine),
+A run folder holds ``config.json`` (what was run, and where: version, commit, packages, machine;
+and ``history``, every invocation on the folder with its commit, so a run resumed at another commit
+says so),
 ``results.csv`` (one row per trial, appended as each finishes, so an interrupted run loses nothing
 and running again resumes it), ``trials/`` (per-trial artefacts), ``summary.md``, figures,
 ``checks.json`` and ``findings.json``. One folder holds one (split, size): running another size
@@ -31,7 +33,7 @@ from polar_sim.runner.experiment import Check, RunContext, TrialContext
 from polar_sim.runner.registry import get_experiment
 from polar_sim.runner.results import RESERVED, ResultsFile, trial_dir, trial_key
 
-__all__ = ["run_experiment", "RunResult", "default_out_dir"]
+__all__ = ["run_experiment", "RunResult", "default_out_dir", "run_commits"]
 
 logger = logging.getLogger(__name__)
 
@@ -281,18 +283,49 @@ def _check_methods(exp, grid):
             get_method(kind, value)   # raises ValueError listing the valid names
 
 
-def _prepare_folder(out_dir, config):
-    """Refuse a folder that holds another size or split (rows would mix); write config.json."""
+def _read_config(out_dir, config):
+    """The folder's earlier config.json, or ``{}``. Refuses a folder that holds another
+    experiment, size or split (rows would mix), and a corrupt config.json (left as it is)."""
     path = out_dir / "config.json"
-    if path.is_file():
-        try:
-            old = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
-        for key in ("experiment", "size", "split"):
-            if key in old and old[key] != config[key]:
-                raise ValueError(f"out: {out_dir} holds a run of {old.get('experiment')!r} with {key} "
-                                 f"{old[key]!r}, not {config[key]!r}; choose another --out")
+    if not path.is_file():
+        return {}
+    try:
+        old = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
+    for key in ("experiment", "size", "split"):
+        if key in old and old[key] != config[key]:
+            raise ValueError(f"out: {out_dir} holds a run of {old.get('experiment')!r} with {key} "
+                             f"{old[key]!r}, not {config[key]!r}; choose another --out")
+    return old
+
+
+def _history(old):
+    """The earlier invocations on a folder: a resumed run's rows may come from other commits,
+    so every invocation is kept (commit, start, wall time in s, and the trials it set out to run;
+    an interrupted one keeps wall time ``None``). A config.json written
+    before the history existed counts as one invocation."""
+    if "history" in old:
+        return list(old["history"])
+    if "provenance" in old:
+        pv = old["provenance"]
+        return [{"git_commit": pv.get("git_commit"), "started": pv.get("started"),
+                 "wall_s": old.get("wall_s"), "trials_todo": None}]
+    return []
+
+
+def run_commits(config):
+    """The distinct commits whose invocations ran trials into a run folder, in order
+    (``None`` for an unknown commit; an entry with an unknown trial count counts)."""
+    seen = []
+    for h in config.get("history", []):
+        if h.get("trials_todo") != 0 and h.get("git_commit") not in seen:
+            seen.append(h.get("git_commit"))
+    return seen
+
+
+def _write_config(out_dir, config):
+    path = out_dir / "config.json"
     tmp = path.with_name(".config.json.tmp")
     tmp.write_text(json.dumps(config, indent=2, default=str))
     os.replace(tmp, path)
@@ -360,8 +393,12 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
               "polar_sim": polar_sim.__version__, "provenance": provenance()}
     results = ResultsFile(out_dir / "results.csv")
     done = results.done_keys()            # reads (and checks) the file before anything is written
-    _prepare_folder(out_dir, config)
+    history = _history(_read_config(out_dir, config))
     todo = [(p, s) for p, s in points if trial_key(p, s) not in done]
+    this_run = {"git_commit": config["provenance"]["git_commit"], "started": config["provenance"]["started"],
+                "wall_s": None, "trials_todo": len(todo)}
+    config["history"] = history + [this_run]
+    _write_config(out_dir, config)
     if backend == "ray":
         runner = _run_ray
     else:
@@ -387,8 +424,8 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     if failures:
         checks.append(Check("every trial ran", False, f"{len(failures)} of {len(table)} trials failed; "
                                                       f"first: {failures[0]['error']}"))
-    config["wall_s"] = round(time.time() - t_start, 1)
-    _prepare_folder(out_dir, config)
+    config["wall_s"] = this_run["wall_s"] = round(time.time() - t_start, 1)
+    _write_config(out_dir, config)
     _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings)
     return RunResult(out_dir, table, checks, failures, findings, config)
 

@@ -159,6 +159,24 @@ def test_folder_guards(tmp_path):
     assert (bad / "results.csv").read_bytes() == before
 
 
+# A run resumed at another commit says so: config.json keeps every invocation, and the report
+# names the commits whose invocations ran trials (not one that only re-read finished rows).
+def test_resume_keeps_history(tmp_path, monkeypatch):
+    import polar_sim.runner.provenance as prov
+    from polar_sim.runner.reproduce import write_report
+    from polar_sim.runner.run import run_commits
+
+    for commit, seeds in (("a" * 40, [0]), ("b" * 40 + "+dirty", None), ("c" * 40, None)):
+        monkeypatch.setattr(prov, "git_commit", lambda c=commit: c)
+        res = run_experiment(TOY, out=tmp_path, overrides={"seed": seeds} if seeds else None, progress=False)
+    hist = json.loads((tmp_path / "config.json").read_text())["history"]
+    assert [h["trials_todo"] for h in hist] == [2, 2, 0]
+    assert all(h["wall_s"] is not None for h in hist)
+    assert run_commits(res.config) == ["a" * 40, "b" * 40 + "+dirty"]
+    report = write_report({"toy": res}, tmp_path).read_text()
+    assert "| aaaaaaaaaaaa, bbbbbbbbbbbb+dirty |" in report
+
+
 # Floats survive the CSV bit for bit, and each row says its split and size.
 def test_rows_round_trip_exactly(tmp_path):
     def trial(params, seed, ctx):
