@@ -45,20 +45,6 @@ TOUCH_OCCLUSION = 0.05
 #: Hand pixels within this many pixels (at 640 wide) of the target's full silhouette are counted.
 HAND_RADIUS_PX = 15
 VSD_EVERY = 10
-
-
-def quick_test_iou_miss(ctx):
-    """The IoU checks' recorded miss (benchmarks/RESULTS.md, issue 13): the quick size on ``test``.
-
-    Its ``mug_touch`` cut (seed 10,000, frames 80-125) has the palm hiding 82-85 % of the mug on 26
-    of its 45 frames (the spec's range is 0-70 %; the dev cut peaks at 68 %). Below 10 % coverage
-    (inliers per valid-depth pixel of the predicted silhouette, ``min_coverage``) the tracker
-    declares the object lost and reports no mask, and after 10 such frames it drops the appearance
-    term and registers the hand (fitness ~0.2), so IoU is 0 on those frames: ww 72.6 %, measured,
-    while the pose coasts and stays right (ADD(-S) 100 %). A method limit under near-total
-    occlusion, not of the quick size: the coverage counts the pixels the hand hides as expected
-    object pixels. The full size on ``test`` is met."""
-    return ctx.quick and ctx.split == "test"
 N_MODEL = 3000
 N_BINS = 15
 SCORING_VERSION = 2

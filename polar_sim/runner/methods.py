@@ -172,11 +172,11 @@ register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G o
 # -- vo (the ground experiments) --
 
 
-def _groundvo_factory(model, sampling):
+def _groundvo_factory(model, sampling, **fixed):
     def factory(K, camera_height, *, seed=0, **params):
         from polar_sim.ground import GroundVO
 
-        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **params)
+        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **{**fixed, **params})
 
     factory.__name__ = f"groundvo_{model}_{sampling}"
     return factory
@@ -200,11 +200,14 @@ def _w6_nocal(K, camera_height, *, seed=0, **params):
     from polar_sim.ground import GroundVO
 
     return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calibration="none",
-                    train_depth="off", decay_samples="off", **params)
+                    train_depth="off", decay_samples="off", ng_outlier_sigma=3.0, ng_outlier_history=False, **params)
 
 
 register_method("vo", "w6_nocal", _w6_nocal,
                 description="w6 as before issue 13: the spec's classifier training and no calibration of ground_prob")
+register_method("vo", "w6_ng6h", _groundvo_factory("6param", "weighted", ng_outlier_sigma=6.0, ng_outlier_history=True),
+                description="w6 with the stricter non-ground outlier rule (6 sigma, never-inlier tracks; issue 13, "
+                            "better on weakly textured ground, not the default)")
 register_method("vo", "mono", _held_scale_vo,
                 description="monocular baseline (VISO2-M analogue): GroundVO's estimator with the scale taken from "
                             "the true speed once and then held through the structure; needs speed_truth=")
@@ -223,6 +226,9 @@ TRACKERS = {
     "spatial-prior-0.1": ({"spatial_prior": True, "epsilon": 0.1}, "ablation: the silhouette prior softened to epsilon 0.1"),
     "alpha-beta": ({"motion": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
     "no-hold": ({"hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "lost-by-silhouette": ({"coverage": "silhouette"},
+                           "ablation: lost when too few inliers per pixel of the whole predicted silhouette, hidden "
+                           "pixels included (the rule before the visible-pixel coverage)"),
     "plain-icp": ({"appearance": "none", "registration": "plain"}, "baseline: robust ICP on every ROI point"),
 }
 

@@ -71,11 +71,14 @@ ROUTES = {
     "dev_gravel": RouteSpec("rover_terrain", 21, 1.1, 6.0, 10.0, "gravel"),
     "dev_grass": RouteSpec("rover_flat", 22, 1.1, 5.0, 10.0, "grass"),
     "dev_blotches": RouteSpec("rover_terrain", 23, 1.1, 6.0, 11.0, "blotches"),
+    "dev_uniform": RouteSpec("rover_flat", 24, 1.1, 5.0, 10.0, "uniform"),
 }
 
-#: Appearance families tuned on (dev) and those seen only in the test split.
-DEV_FAMILIES = ("speckle", "gravel", "grass", "blotches")
-TEST_ONLY_FAMILIES = ("uniform", "stripes", "checker")
+#: Appearance families tuned on (dev) and those seen only in the test split. ``uniform`` was
+#: test-only until its test failure (issue 13) was diagnosed on its own dev route, ``dev_uniform``;
+#: ``stripes`` and ``checker`` have never been used while tuning.
+DEV_FAMILIES = ("speckle", "gravel", "grass", "blotches", "uniform")
+TEST_ONLY_FAMILIES = ("stripes", "checker")
 
 #: The ``test`` split: seeds >= 10,000; one route of every family (the three test-only families
 #: never used while tuning), three of "random" appearances (every zone its own family, random sky and

@@ -26,7 +26,7 @@ from polar_sim.tracking.calibration import OnlineCalibration
 from polar_sim.tracking.icp import symmetry_directions, unobserved_directions, weighted_icp
 from polar_sim.tracking.model import ShapeModel, estimate_normals
 from polar_sim.tracking.motion import MotionFilter
-from polar_sim.tracking.visibility import disc, project_model, splat_silhouette
+from polar_sim.tracking.visibility import disc, project_model, splat_depth, splat_silhouette
 
 __all__ = ["ObjectTracker", "TrackResult", "APPEARANCE_VARIANTS"]
 
@@ -187,11 +187,19 @@ class ObjectTracker(Parameterised):
     min_inliers : int, default=50
         Drift guard: minimum inliers for learning.
     min_coverage : float, default=0.1
-        Inliers per valid-depth pixel of the predicted silhouette below which the frame counts as
-        lost (object occluded or out of view).
+        Inliers per expected pixel (see ``coverage``) below which the registration is not used and
+        the frame counts towards lost (object out of view, or the fit is elsewhere).
+    coverage : {"visible", "silhouette"}, default="visible"
+        Which pixels of the predicted silhouette (with valid depth) ``min_coverage`` counts as
+        expected: ``"visible"`` leaves out those where something is seen in front of the predicted
+        surface (by more than 3 sigma of depth noise and pose spread, at least 1 cm: a hand or
+        another object), so a mostly hidden object whose visible part fits is tracked, not lost;
+        ``"silhouette"`` counts them all (the behaviour before, which declares an object lost once
+        about 85 % of it is hidden).
     learn_coverage : float, default=0.25
-        Drift guard: the same coverage must reach this for the frame to train the appearance model
-        (a mostly hidden object gives labels too few and too uncertain to learn from).
+        Drift guard: inliers per valid-depth pixel of the whole predicted silhouette, hidden pixels
+        included, must reach this for the frame to train the appearance model (a mostly hidden
+        object gives labels too few and too uncertain to learn from).
     max_jump : (float, float), default=(0.5, 0.1)
         Largest accepted change from the prediction: rotation (rad) and centroid translation (m).
     max_mahalanobis : float, default=50
@@ -248,7 +256,8 @@ class ObjectTracker(Parameterised):
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
                  motion="ekf", spatial_prior=False, registration="weighted", correspondence="grid",
                  fps=30.0, n_registration=3000, tau_y=0.5, k_warm=5, epsilon=0.02, sigma_min_px=3.0,
-                 fitness_min=0.5, min_inliers=50, min_coverage=0.1, learn_coverage=0.25, max_jump=(0.5, 0.1),
+                 fitness_min=0.5, min_inliers=50, min_coverage=0.1, coverage="visible", learn_coverage=0.25,
+                 max_jump=(0.5, 0.1),
                  max_mahalanobis=50.0,
                  lost_after=10, lost_velocity_decay=0.5, decay=0.7, lr=1e-2, epochs=2, replay=10,
                  n_samples=500, max_iterations=30, em_refine=True, pose_prior=True, hold_unobserved=True,
@@ -271,6 +280,7 @@ class ObjectTracker(Parameterised):
         self.fitness_min = fitness_min
         self.min_inliers = min_inliers
         self.min_coverage = min_coverage
+        self.coverage = coverage
         self.learn_coverage = learn_coverage
         self.max_jump = max_jump
         self.max_mahalanobis = max_mahalanobis
@@ -305,6 +315,7 @@ class ObjectTracker(Parameterised):
         check_choice(self.motion, ("ekf", "alpha-beta", "none"), "motion")
         check_choice(self.registration, ("weighted", "plain"), "registration")
         check_choice(self.correspondence, ("grid", "kdtree"), "correspondence")
+        check_choice(self.coverage, ("visible", "silhouette"), "coverage")
         for name in ("spatial_prior", "em_refine", "pose_prior", "hold_unobserved", "calibrate", "debug_maps"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
@@ -456,6 +467,7 @@ class ObjectTracker(Parameterised):
         Pmap, pi, S = self._prediction_map(D, roi, T_bar, proj, sig_pos, lI, gamma)
         self.clock_.lap("depth_likelihood")
         res, n_sel, n_cand = self._register(D, roi, Pmap, T_bar, proj.vis, sig_pos)
+        at = (proj, sig_pos)  # the projection and pose spread that the silhouette S is of
         if res is not None and res.ok and self.em_refine:
             # a registration far outside the predicted spread was made with a prior centred on the
             # wrong place: redo the E-step at the registered pose with a tight spread, register again
@@ -469,6 +481,7 @@ class ObjectTracker(Parameterised):
                     res2, n_sel2, n_cand2 = self._register(D, roi, Pmap2, res.T, proj2.vis, sig2)
                     if res2 is not None and res2.ok:
                         res, n_sel, n_cand, Pmap, pi, S = res2, n_sel2, n_cand2, Pmap2, pi2, S2
+                        at = (proj2, sig2)
         self.clock_.lap("registration")
         # -- drift guard ----------------------------------------------------------------------
         measured = res is not None and res.ok and res.n_matched >= 6
@@ -476,14 +489,21 @@ class ObjectTracker(Parameterised):
         if measured:
             rot_jump = _rot_angle(T_bar[:3, :3].T @ res.T[:3, :3])
             tr_jump = float(np.linalg.norm(res.T[:3, 3] - T_bar[:3, 3]))
-            expected = max(int(np.count_nonzero(valid & (S > 0))), 1)
+            seen = valid & (S > 0)
+            expected = max(int(np.count_nonzero(seen)), 1)
             scale = n_cand / max(n_sel, 1)
             coverage = res.n_inliers * scale / expected
+            if self.coverage == "visible":
+                # an occluder is no evidence against the pose: count only the unhidden pixels
+                hidden = seen & self._in_front(D, roi, *at)
+                tracked = res.n_inliers * scale / max(expected - int(np.count_nonzero(hidden)), 1)
+            else:
+                tracked = coverage
             e = se3_log(inv_pose(T_bar) @ res.T)
             S_e = self.filter_.P_bar[:6, :6] + np.diag(self.filter_.floor)
             d2 = float(e @ np.linalg.solve(S_e, e))
             measured = (rot_jump < self.max_jump[0] and tr_jump < self.max_jump[1]
-                        and d2 < self.max_mahalanobis and coverage >= self.min_coverage)
+                        and d2 < self.max_mahalanobis and tracked >= self.min_coverage)
         if not measured:
             return self._coast(T_bar, roi, gamma, D=D, Pmap=Pmap, pi=pi, lI=lI, n_points=n_sel, res=res)
         good_fit = res.fitness >= self.fitness_min and res.n_inliers >= self.min_inliers
@@ -551,6 +571,17 @@ class ObjectTracker(Parameterised):
             logit = logit + np.float32(gamma) * lI
         logit = np.clip(logit, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32)
         return (0.5 * (1.0 + np.tanh(0.5 * logit))).astype(np.float32), pi, S
+
+    def _in_front(self, D, roi, proj, sig_pos):
+        """(h, w) bool: valid depth nearer than the model's surface (splatted from the visible
+        points of ``proj``, its projection at a pose) by more than 3 sigma of depth noise and pose
+        spread ``sig_pos`` (m), and at least 1 cm."""
+        m, f = self.model_, float(self.K_[0, 0])
+        r = int(max(1, np.ceil(f * m.spacing / proj.z_mean)))
+        Z = splat_depth(proj.uv[proj.vis], proj.Pc[proj.vis, 2], r, roi)
+        sig_d = 0.0012 + 0.0019 * (D - 0.4) ** 2
+        band = np.maximum(3.0 * np.sqrt(sig_d * sig_d + sig_pos * sig_pos), 0.01)
+        return (D > 0) & (D < Z - band)
 
     def _register(self, D, roi, Pmap, T_init, vis, sig_pos):
         """Select the highly probable points and run the weighted ICP from T_init (spec 3.5).

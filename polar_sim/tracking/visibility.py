@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["Projection", "project_model", "splat_silhouette", "disc"]
+__all__ = ["Projection", "project_model", "splat_silhouette", "splat_depth", "disc"]
 
 _DISCS: dict = {}
 #: z-buffer resolution relative to the image (spec 3.2: half resolution)
@@ -131,3 +131,22 @@ def splat_silhouette(uv, z_mean, f, spacing, roi):
     # closed silhouette back by half the local radius (one pixel where the samples are dense)
     ds = cv2.distanceTransform(1 - S, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return ((ds <= np.maximum(1.0, 0.5 * np.where(e < big, e, 0))) & (D > 0) | (S > 0)).astype(np.uint8)
+
+
+def splat_depth(uv, z, r, roi):
+    """Predicted depth (h, w) float32 of visible points ``uv`` (n, 2) at depths ``z`` (n,), m, in
+    ``roi`` = (x0, y0, x1, y1): each point is a disc of radius ``r`` px, the nearest one winning
+    (a min filter, as the z-buffer above); ``inf`` where no disc reaches."""
+    x0, y0, x1, y1 = roi
+    h, w = y1 - y0, x1 - x0
+    Z = np.full((max(h, 0), max(w, 0)), np.inf, np.float32)
+    if len(uv) == 0 or h <= 0 or w <= 0:
+        return Z
+    iu = np.rint(uv[:, 0]).astype(np.int64) - x0
+    iv = np.rint(uv[:, 1]).astype(np.int64) - y0
+    ok = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+    Z[:] = 1e6
+    np.minimum.at(Z, (iv[ok], iu[ok]), np.asarray(z, np.float32)[ok])
+    Z = cv2.erode(Z, disc(max(1, int(r))), borderType=cv2.BORDER_CONSTANT, borderValue=1e6)
+    Z[Z >= 1e6] = np.inf
+    return Z

@@ -114,7 +114,10 @@ def test_bad_input_raises_and_leaves_the_estimator_unchanged(corridor):
                                       (dict(camera_height=0.0), "camera_height"),
                                       (dict(camera_height=-1.0), "camera_height"),
                                       (dict(model="9param"), "model"), (dict(sampling="greedy"), "sampling"),
-                                      (dict(compat="paper"), "compat"), (dict(downsample=3), "downsample")])
+                                      (dict(compat="paper"), "compat"), (dict(downsample=3), "downsample"),
+                                      (dict(ng_outlier_sigma=0.0), "ng_outlier_sigma"),
+                                      (dict(ng_outlier_sigma=float("nan")), "ng_outlier_sigma"),
+                                      (dict(ng_outlier_history="yes"), "ng_outlier_history")])
 def test_bad_parameters_raise_value_error(corridor, kw, match):
     # K not 3x3, non-positive camera height, unknown choices: ValueError naming the argument.
     args = dict(K=corridor["K"], camera_height=1.0)

@@ -130,7 +130,7 @@ def test_constructor_only_stores_its_parameters(small):
     assert set(vars(tr)) == set(ObjectTracker._param_names())
     assert tr.model_points is P and tr.K is seq.K and tr.model_normals is N
     p = tr.get_params()
-    assert p["appearance"] == "Su" and p["tau_y"] == 0.6 and p["motion"] == "ekf" and len(p) == 35
+    assert p["appearance"] == "Su" and p["tau_y"] == 0.6 and p["motion"] == "ekf" and len(p) == 36
 
 
 def test_learned_state_appears_on_the_first_frame_and_reset_removes_it(small):

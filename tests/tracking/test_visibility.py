@@ -70,3 +70,17 @@ def test_points_behind_camera_or_outside_image_are_invisible():
     K = np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]])
     pr = project_model(P, N, np.eye(3), np.zeros(3), K, (480, 640), 0.005)
     assert pr.vis.tolist() == [False, False, True]
+
+
+def test_splat_depth_keeps_the_nearest_disc():
+    # two points 2 px apart at 0.5 and 0.8 m, discs of radius 3 px: where the discs overlap the
+    # nearer depth wins, each disc holds its own depth elsewhere, and no disc reaches -> inf
+    from polar_sim.tracking.visibility import splat_depth
+
+    uv = np.array([[10.0, 10.0], [12.0, 10.0], [-50.0, 10.0]])  # the last one is outside the ROI
+    Z = splat_depth(uv, np.array([0.5, 0.8, 0.1]), 3, (0, 0, 30, 20))
+    assert Z.shape == (20, 30) and Z.dtype == np.float32
+    assert Z[10, 10] == Z[10, 12] == np.float32(0.5)   # both centres lie in the near disc
+    assert Z[10, 15] == np.float32(0.8)                 # 3 px right of the far point only
+    assert Z[10, 7] == np.float32(0.5) and np.isinf(Z[10, 20]) and np.isinf(Z[0, 0])
+    assert np.isinf(splat_depth(uv[:0], np.zeros(0), 3, (0, 0, 30, 20))).all()
