@@ -96,7 +96,7 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
     pk = ", ".join(f"{k} {v}" for k, v in prov["packages"].items())
     m = prov["machine"]
     lines = ["# polar_sim: reproducing the dissertation's findings", "",
-             (f"**Size: quick** (the CI size: one or a few seeds and a reduced grid per experiment). These are "
+             ("**Size: quick** (the CI size: one or a few seeds and a reduced grid per experiment). These are "
               "not the full figures: those are in `docs/results/` and `benchmarks/RESULTS.md`; "
               "`polar-sim reproduce` without `--quick` runs the full size." if quick else
               "**Size: full** (every seed and grid point each experiment declares)."), "",
