@@ -226,7 +226,7 @@ def demo_env(out: Path):
     """One GPISNav-v0 episode: the SDF navigator drives to the goal on the online map."""
     import gymnasium as gym
 
-    import polar_sim  # noqa: F401  (registers the ids)
+    import polar_sim.envs  # noqa: F401  (registers the ids)
     from polar_sim.envs.policies import SDFNavigator
 
     env = gym.make("polar_sim/GPISNav-v0", sdf_source="gpis", render_mode="rgb_array", rooms=2, room_size=4.0,
