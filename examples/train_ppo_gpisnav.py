@@ -243,7 +243,7 @@ def main():
     if not args.skip_start_eval:
         evaluate_now(0)
     model.learn(total_timesteps=args.steps, callback=Evaluate(), progress_bar=False)
-    if rows[-1]["steps"] != model.num_timesteps:
+    if not rows or rows[-1]["steps"] != model.num_timesteps:
         evaluate_now(model.num_timesteps)
     train_wall, train_cpu = time.perf_counter() - t_wall, time.process_time() - t_cpu
     save_policy(out / "policy.npz", model, recipe, ObsNormaliser.from_vecnormalize(venv))

@@ -74,6 +74,18 @@ def test_training_script_loop(tmp_path):
     assert (tmp_path / "run" / "policy.npz").exists() and (tmp_path / "docs" / "ppo_gpisnav_room_stencil.png").exists()
 
 
+# With no checkpoint inside the run (--skip-start-eval, --eval-every beyond --steps) the final
+# policy is still scored, once, at the step count it reached.
+def test_training_script_without_checkpoints(tmp_path):
+    cmd = [sys.executable, str(ROOT / "examples" / "train_ppo_gpisnav.py"), "--tier", "room", "--steps", "512",
+           "--envs", "1", "--eval-every", "100000", "--skip-start-eval", "--curve-episodes", "1",
+           "--test-episodes", "1", "--baselines", "", "--pose-source", "truth", "--out", str(tmp_path / "run")]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env={**os.environ, "MUJOCO_GL": "egl"})
+    assert out.returncode == 0, out.stderr[-3000:]
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert [r["steps"] for r in summary["curve"]] == [summary["steps"]] and summary["steps"] >= 512
+
+
 # ForwardDriveAction maps the policy's action exactly: v = m + (1 - m)(b0 + 1)/2, omega = b1,
 # after clipping b to the box; the env receives that action.
 def test_forward_drive_action_mapping_is_exact():
