@@ -71,18 +71,26 @@ def demo_gpis(out: Path):
     known = var.reshape(X.shape) < 0.2
     near = known.ravel() & (true >= 0) & (true < 0.3)  # the free side, which the lidar sees
     free = known.ravel() & (true > 0.3) & (true < 2.0)
+    # Where no ray has looked (behind walls, the far side of an object seen from one side) the map's
+    # variance is its prior (1 + map_noise) and its distance only an extrapolation: drawn in colour it
+    # reads as wedges and teardrops of "inside". Such cells are greyed out, as the variance says.
+    unseen = var.reshape(X.shape) >= 1.0
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.5))
-    for a, field, title in ((ax[0], d, "GPIS distance (online map)"), (ax[1], true, "exact SDF")):
+    for a, field, title in ((ax[0], d, "GPIS distance (online map; grey: never observed)"), (ax[1], true, "exact SDF")):
         im = a.imshow(np.clip(field.reshape(X.shape), -0.5, 2.5), origin="lower", extent=[x0, x1, y0, y1],
                       cmap="viridis")
-        a.contour(X, Y, field.reshape(X.shape), levels=[0.0], colors="w", linewidths=0.8)
+        if a is ax[0]:
+            a.imshow(np.where(unseen, 1.0, np.nan), origin="lower", extent=[x0, x1, y0, y1], cmap="Greys",
+                     vmin=0.0, vmax=2.0, interpolation="nearest")
+        shown = np.where(unseen, np.nan, field.reshape(X.shape)) if a is ax[0] else field.reshape(X.shape)
+        a.contour(X, Y, shown, levels=[0.0], colors="w", linewidths=0.8)
         a.plot(path[:, 0], path[:, 1], color="orange", lw=1.5)
         a.set_title(title)
         a.set_xlabel("x [m]")
         a.set_ylabel("y [m]")
         a.set_aspect("equal")
     fig.colorbar(im, ax=ax, shrink=0.8, label="signed distance [m] (clipped to -0.5..2.5; white: zero level)")
-    fig.suptitle("office2d after 150 lidar scans (orange: the robot's path)")
+    fig.suptitle("office2d after 150 lidar scans, simulated (orange: the robot's path; grey: variance at its prior)")
     fig.savefig(out / "gpis_office2d.png", dpi=90, bbox_inches="tight")
     plt.close(fig)
     med = float(np.median(np.abs(d[near] - true[near])))
