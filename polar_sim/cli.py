@@ -159,7 +159,8 @@ def _cmd_reproduce(args):
 
     results, report = reproduce(args.out, quick=args.quick, split=args.split, only=args.only,
                                 workers=_positive_int(args.workers, "--workers", 1024), backend=args.backend,
-                                address=args.address, trial_timeout=_timeout(args.trial_timeout))
+                                address=args.address, trial_timeout=_timeout(args.trial_timeout),
+                                report_only=args.report_only)
     for name, res in results.items():
         c = [x.status for x in res.checks]
         print(f"{name}: {c.count('pass')} met, {c.count('missed')} missed (recorded), {c.count('FAIL')} failed, "
@@ -283,6 +284,8 @@ def build_parser():
     s.add_argument("--quick", action="store_true", help="the CI size of every experiment")
     s.add_argument("--out", default="polar_sim_out/reproduce")
     s.add_argument("--only", nargs="*", help="a subset of experiments")
+    s.add_argument("--report-only", action="store_true",
+                   help="run nothing: write the report from the finished run folders in --out")
     sweep_options(s)
     s.set_defaults(func=_cmd_reproduce)
 

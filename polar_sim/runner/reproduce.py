@@ -26,14 +26,19 @@ __all__ = ["reproduce", "write_report", "markdown_to_html"]
 
 
 def reproduce(out, *, quick=False, split=None, only=None, workers=1, backend="local", address=None,
-              trial_timeout=None, progress=True):
+              trial_timeout=None, progress=True, report_only=False):
     """Run every experiment (or ``only`` these) into ``out/<name>`` and write the report.
 
     ``split`` (``"dev"`` or ``"test"``) applies to the experiments that declare it; the others run
     their default split, which the report states. Returns ``({name: RunResult}, report_path)``.
     An experiment that raises is reported as an error and the others still run.
+
+    ``report_only=True`` runs nothing: it reads the finished run folders ``out/<name>`` back
+    (:func:`~polar_sim.runner.run.load_run`; their ``trials/`` are not needed) and writes the report
+    from them, e.g. for runs made over several sessions or on several machines. A folder that is
+    missing, unfinished, or of another size or split is reported as an error.
     """
-    from polar_sim.runner.run import run_experiment
+    from polar_sim.runner.run import load_run, run_experiment
 
     root = Path(out)
     names = list(only) if only else list_experiments()
@@ -45,6 +50,18 @@ def reproduce(out, *, quick=False, split=None, only=None, workers=1, backend="lo
         exp = get_experiment(name)
         sp = split if (split in exp.splits) else None
         t = time.time()
+        if report_only:
+            try:
+                r = load_run(root / name, name)
+                want = ("quick" if quick else "full", exp.pick_split(sp))
+                if (r.config.get("size"), r.config.get("split")) != want:
+                    raise ValueError(f"out: {root / name} holds the {r.config.get('size')} size on the "
+                                     f"{r.config.get('split')} split, not {want[0]} on {want[1]}")
+                results[name] = r
+                walls[name] = _run_wall(r.config, 0.0)
+            except ValueError as exc:
+                errors[name] = str(exc)
+            continue
         try:
             results[name] = run_experiment(name, quick=quick, split=sp, out=root / name, workers=workers,
                                            backend=backend, address=address, trial_timeout=trial_timeout,
@@ -54,7 +71,8 @@ def reproduce(out, *, quick=False, split=None, only=None, workers=1, backend="lo
             (root / name).mkdir(parents=True, exist_ok=True)
             (root / name / "error.txt").write_text(traceback.format_exc())
         walls[name] = time.time() - t
-    report = write_report(results, root, errors=errors, walls=walls, wall_s=time.time() - t0, quick=quick)
+    wall_s = sum(walls.values()) if report_only else time.time() - t0
+    report = write_report(results, root, errors=errors, walls=walls, wall_s=wall_s, quick=quick, assembled=report_only)
     if errors:
         # Errors become failed runs so that the exit code says so.
         from polar_sim.runner.experiment import Check
@@ -86,8 +104,11 @@ def _commits(config):
     return ", ".join(short(c) for c in run_commits(config)) or "unknown"
 
 
-def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quick=False):
-    """Write ``report.md`` and ``report.html`` for ``{name: RunResult}``; returns the .md path."""
+def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quick=False, assembled=False):
+    """Write ``report.md`` and ``report.html`` for ``{name: RunResult}``; returns the .md path.
+
+    ``assembled``: the runs were read back from their folders, not run by this invocation (the
+    provenance then says so, and the wall time is the sum of the runs' own)."""
     from polar_sim.runner.provenance import provenance
 
     out_dir = Path(out_dir)
@@ -108,7 +129,10 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
              f"- machine: {m['platform']}, {m['cpu']}, {m['cpus']} CPUs, {m['memory_gib']} GiB, "
              f"load {m['load_average_1min']:.2f}" if m.get("load_average_1min") is not None else
              f"- machine: {m['platform']}, {m['cpu']}, {m['cpus']} CPUs, {m['memory_gib']} GiB",
-             f"- finished {prov['started']}" + (f", wall time {wall_s / 60:.1f} min" if wall_s is not None else ""),
+             (f"- assembled {prov['started']} from finished run folders (`--report-only`): the runs' own commits "
+              "are in the experiments table; wall time summed over their invocations"
+              if assembled else f"- finished {prov['started']}")
+             + (f", wall time {wall_s / 60:.1f} min" if wall_s is not None else ""),
              ""]
     findings = [(name, f) for name, r in results.items() for f in r.findings]
     lines += ["## Findings", "",

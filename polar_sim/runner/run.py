@@ -33,7 +33,7 @@ from polar_sim.runner.experiment import Check, RunContext, TrialContext
 from polar_sim.runner.registry import get_experiment
 from polar_sim.runner.results import RESERVED, ResultsFile, trial_dir, trial_key
 
-__all__ = ["run_experiment", "RunResult", "default_out_dir", "run_commits"]
+__all__ = ["run_experiment", "load_run", "RunResult", "default_out_dir", "run_commits"]
 
 logger = logging.getLogger(__name__)
 
@@ -427,6 +427,51 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     config["wall_s"] = this_run["wall_s"] = round(time.time() - t_start, 1)
     _write_config(out_dir, config)
     _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings)
+    return RunResult(out_dir, table, checks, failures, findings, config)
+
+
+def load_run(out, name=None):
+    """The :class:`RunResult` of a finished run folder, read back without running or summarising.
+
+    Reads ``config.json``, ``results.csv``, ``checks.json`` and ``findings.json`` as the run wrote
+    them; the per-trial artefacts (``trials/``) are not needed, so a folder can be shared or
+    committed without them. ``name`` (optional; a name or an :class:`Experiment`) is the experiment
+    the folder must hold, by default the one its ``config.json`` names. A folder
+    that is not a finished run (a file missing or corrupt, or trials of its grid still to run)
+    raises ``ValueError`` naming the folder and what is missing; it is read only, never changed.
+    """
+    from polar_sim.runner.experiment import Finding
+
+    out_dir = Path(out)
+    need = ["config.json", "results.csv", "checks.json", "findings.json"]
+    missing = [f for f in need if not (out_dir / f).is_file()]
+    if missing:
+        raise ValueError(f"out: {out_dir} is not a finished run folder (no {', '.join(missing)})")
+    try:
+        config = json.loads((out_dir / "config.json").read_text())
+        raw_checks = json.loads((out_dir / "checks.json").read_text())
+        raw_findings = json.loads((out_dir / "findings.json").read_text())
+        checks = [Check(c["name"], bool(c["passed"]), c.get("detail", ""), bool(c.get("known_miss", False)))
+                  for c in raw_checks]
+        findings = [Finding(**f) for f in raw_findings]
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"out: {out_dir} holds a corrupt config.json, checks.json or findings.json ({exc})") from None
+    exp = get_experiment(config.get("experiment") if name is None else name)
+    if config.get("experiment") != exp.name:
+        raise ValueError(f"out: {out_dir} holds a run of {config.get('experiment')!r}, not {exp.name!r}")
+    points = exp.points(config["size"], config["split"], config.get("overrides") or None)
+    keys = {trial_key(p, s) for p, s in points}
+    table = [r for r in ResultsFile(out_dir / "results.csv").read() if r.get("trial_key") in keys]
+    todo = len(keys - {r["trial_key"] for r in table})
+    if todo:
+        raise ValueError(f"out: {out_dir} is not finished: {todo} of {len(keys)} trials of its grid have not run "
+                         "(run the experiment into it again to resume)")
+    # config.json is rewritten without wall_s when an invocation starts, and gets it back only once
+    # the summary, checks and findings are written: without it the last invocation was interrupted.
+    if config.get("wall_s") is None or not (out_dir / "summary.md").is_file():
+        raise ValueError(f"out: {out_dir} was interrupted before its summary was written "
+                         "(run the experiment into it again to summarise)")
+    failures = [r for r in table if r.get("status") != "ok"]
     return RunResult(out_dir, table, checks, failures, findings, config)
 
 

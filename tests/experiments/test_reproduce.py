@@ -68,3 +68,18 @@ def test_reproduce_quick_gpis_worlds(tmp_path):
     # the CLI on the same folder resumes (no trial runs again) and exits 0 by default, 2 with --strict
     assert main(["reproduce", "--quick", "--only", *GPIS, "--out", str(tmp_path)]) == 0
     assert main(["reproduce", "--quick", "--strict", "--only", *GPIS, "--out", str(tmp_path)]) == 2
+    # --report-only reads the finished folders back, their trials/ removed, and runs nothing: the
+    # same experiments and findings tables; a size the folders do not hold is an error per experiment
+    import shutil
+
+    for name in GPIS:
+        shutil.rmtree(tmp_path / name / "trials")
+    again, report2 = reproduce(tmp_path, quick=True, only=GPIS, progress=False, report_only=True)
+    md2 = report2.read_text()
+    assert "assembled" in md2 and not (tmp_path / GPIS[0] / "trials").exists()
+    assert [r[:7] for r in _table(md2, "| experiment | split (seeds) | trials |")] == \
+        [r[:7] for r in _table(md, "| experiment | split (seeds) | trials |")]
+    assert _table(md2, "| source | published | ours | verdict |") == found
+    assert main(["reproduce", "--quick", "--report-only", "--only", *GPIS, "--out", str(tmp_path)]) == 0
+    full, _ = reproduce(tmp_path, quick=False, only=GPIS, progress=False, report_only=True)
+    assert all(not r.passed and "holds the quick size" in r.checks[0].detail for r in full.values())

@@ -200,3 +200,40 @@ def test_known_miss_status(tmp_path):
     res = run_experiment(exp, out=tmp_path, progress=False)
     assert res.passed and not res.strict_passed and [c.status for c in res.checks] == ["pass", "missed"]
     assert "| recorded miss | missed |" in (tmp_path / "summary.md").read_text()
+
+
+# A finished folder reads back as the run returned it, without its trials/ (so it can be shared
+# or committed without them); an unfinished, interrupted or corrupt one is refused and left as is.
+def test_load_run(tmp_path):
+    import shutil
+
+    from polar_sim.runner.run import load_run
+
+    res = run_experiment(TOY, out=tmp_path, progress=False)
+    shutil.rmtree(tmp_path / "trials")
+    back = load_run(tmp_path, TOY)
+    assert back.table == res.table and back.checks == res.checks and back.findings == res.findings
+    assert back.config == json.loads((tmp_path / "config.json").read_text()) and back.passed
+    with pytest.raises(ValueError, match="holds a run of 'toy'"):
+        load_run(tmp_path, "sensors")
+
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    lines = (tmp_path / "results.csv").read_text().splitlines(keepends=True)
+    (tmp_path / "results.csv").write_text("".join(lines[:-1]))          # one trial not run
+    with pytest.raises(ValueError, match="1 of 4 trials"):
+        load_run(tmp_path, TOY)
+    (tmp_path / "results.csv").write_bytes(before["results.csv"])
+    cfg = json.loads(before["config.json"])
+    del cfg["wall_s"]                                                     # an interrupted invocation
+    (tmp_path / "config.json").write_text(json.dumps(cfg))
+    with pytest.raises(ValueError, match="interrupted"):
+        load_run(tmp_path, TOY)
+    (tmp_path / "config.json").write_bytes(before["config.json"])
+    (tmp_path / "checks.json").write_text("[{")
+    with pytest.raises(ValueError, match="corrupt"):
+        load_run(tmp_path, TOY)
+    (tmp_path / "checks.json").write_bytes(before["checks.json"])
+    (tmp_path / "findings.json").unlink()
+    with pytest.raises(ValueError, match="no findings.json"):
+        load_run(tmp_path, TOY)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(set(before) - {"findings.json"})
