@@ -91,8 +91,11 @@ def reference():
 # change of behaviour (a changed correspondence moves a pose by ~1e-4, a changed pixel a moment by
 # > 1e-5 of it). Discrete outputs (masks, labels, counts, flags, ROIs) stay exact. ww_640's
 # probability maps are not compared: on one machine a 7e-15 change of the pose changed one frame's maps.
+# The maps' moments get 1e-7: on an AVX-512 machine (2026-12-04) they differ from the recording by up
+# to 2.0e-9 relative (h_320, kdtree_320; poses, masks and labels identical), still 100x below the
+# 1e-5 of one changed pixel.
 _FLOATS = {"pose": 1e-9, "covariance": 1e-9, "pose_filtered": 1e-9, "fitness": 1e-9, "inlier_rmse": 1e-9,
-           "gamma": 1e-9, "prob": 1e-9, "prob_raw": 1e-9}
+           "gamma": 1e-9, "prob": 1e-7, "prob_raw": 1e-7}
 _PROB_NOT_COMPARED = {"ww_640"}
 
 
