@@ -459,6 +459,9 @@ def load_run(out, name=None):
     exp = get_experiment(config.get("experiment") if name is None else name)
     if config.get("experiment") != exp.name:
         raise ValueError(f"out: {out_dir} holds a run of {config.get('experiment')!r}, not {exp.name!r}")
+    if "size" not in config or "split" not in config:
+        raise ValueError(f"out: {out_dir}'s config.json names no size or split (written by an older polar_sim); "
+                         "run the experiment into a new folder")
     points = exp.points(config["size"], config["split"], config.get("overrides") or None)
     keys = {trial_key(p, s) for p, s in points}
     table = [r for r in ResultsFile(out_dir / "results.csv").read() if r.get("trial_key") in keys]

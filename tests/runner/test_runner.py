@@ -228,6 +228,10 @@ def test_load_run(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps(cfg))
     with pytest.raises(ValueError, match="interrupted"):
         load_run(tmp_path, TOY)
+    del cfg["size"]                                                       # an older folder's config
+    (tmp_path / "config.json").write_text(json.dumps({**cfg, "wall_s": 1.0}))
+    with pytest.raises(ValueError, match="no size or split"):
+        load_run(tmp_path, TOY)
     (tmp_path / "config.json").write_bytes(before["config.json"])
     (tmp_path / "checks.json").write_text("[{")
     with pytest.raises(ValueError, match="corrupt"):
