@@ -275,8 +275,8 @@ def build_parser():
     s.add_argument("--size", default=None, help="a size the experiment declares: quick or full (default)")
     s.add_argument("--out", default=None, help="run folder (default polar_sim_out/runs/NAME/TIMESTAMP); reused to resume")
     s.add_argument("--set", nargs="*", metavar="KEY=VALUE",
-                   help="override grid axes or seeds: --set spacing_m=[0.5,1.0] scene=[office2d] seed=3 "
-                        "method=mypkg.mymod:MyLocalizer")
+                   help="override grid axes, protocol params or seeds: --set spacing_m=[0.5,1.0] scene=[office2d] "
+                        "seed=3 method=mypkg.mymod:MyLocalizer (polar-sim list shows each experiment's)")
     sweep_options(s)
     s.set_defaults(func=_cmd_run)
 

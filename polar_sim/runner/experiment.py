@@ -126,11 +126,14 @@ def _check_array_name(name):
 
 @dataclasses.dataclass(frozen=True)
 class TrialContext:
-    """What a trial gets besides its parameters: its artefact folder, the size and the split."""
+    """What a trial gets besides its parameters: its artefact folder, the size, the split and the
+    run's protocol parameters (``params``: durations, frame counts, resolutions; see
+    :class:`Experiment`)."""
 
     out_dir: Path
     size: str = "full"
     split: str = "dev"
+    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def quick(self) -> bool:
@@ -145,12 +148,13 @@ class TrialContext:
 
 @dataclasses.dataclass(frozen=True)
 class RunContext:
-    """What ``summarize``, ``checks`` and ``findings`` get: the run folder, size and split, and
-    access to each row's saved arrays."""
+    """What ``summarize``, ``checks`` and ``findings`` get: the run folder, size, split and
+    protocol parameters, and access to each row's saved arrays."""
 
     out_dir: Path
     size: str = "full"
     split: str = "dev"
+    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def quick(self) -> bool:
@@ -189,12 +193,22 @@ class Experiment:
     grid : mapping of str to list
         The parameter grid; the trials are its Cartesian product times the seeds.
     trial : callable ``(params, seed, ctx: TrialContext) -> dict``
-    splits : mapping of split name to ``{"seeds": iterable of int, "grid": {axis: values}}``
+    splits : mapping of split name to ``{"seeds": iterable of int, "grid": {axis: values}, "params": {...}}``
         ``dev`` (tuning) and ``test`` (held out: seeds >= 10,000, families never tuned on).
-    sizes : mapping of size name to ``{"n_seeds": int, "grid": {axis: values}}``
+    sizes : mapping of size name to ``{"n_seeds": int, "grid": {axis: values}, "params": {...}}``
         ``quick`` (the CI size) and ``full``.
+    params : mapping of str to JSON value
+        The protocol's fixed settings (drive length, frames, resolution, strides) at the full size;
+        a split's or size's ``"params"`` override them, and ``--set KEY=VALUE`` overrides a run's.
+        Trials and summaries read them as ``ctx.params``; a run folder records them in
+        ``config.json`` and refuses to be resumed with other values. Unlike grid axes they are
+        not swept and are not part of a trial's key.
     methods : mapping of axis name to plug-in kind
         Axes whose values are methods (``polar_sim.runner.methods``); checked before any trial.
+    choices : mapping of axis name to a list, or to a callable returning one
+        The values other axes accept (scenes, routes, sequences); a ``--set`` value outside them
+        is refused before any trial, with the valid ones listed. A callable is called only then
+        (it may import the simulator).
     summarize : callable ``(table, ctx: RunContext) -> str`` (markdown), optional
     checks : callable ``(table, ctx: RunContext) -> list[Check]``, optional
     findings : callable ``(table, ctx: RunContext) -> list[Finding]``, optional
@@ -209,28 +223,39 @@ class Experiment:
     splits: Mapping[str, Mapping] = dataclasses.field(default_factory=lambda: {"dev": {"seeds": [0]}})
     sizes: Mapping[str, Mapping] = dataclasses.field(default_factory=lambda: {"quick": {}, "full": {}})
     methods: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    choices: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     summarize: Callable[[list, RunContext], str] | None = None
     checks: Callable[[list, RunContext], list] | None = None
     findings: Callable[[list, RunContext], list] | None = None
     default_split: str | None = None
+    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         for split, spec in self.splits.items():
-            bad = set(spec) - {"seeds", "grid"}
+            bad = set(spec) - {"seeds", "grid", "params"}
             if bad or "seeds" not in spec:
-                raise ValueError(f"{self.name}: split {split!r} must give 'seeds' (and optionally 'grid'); got {sorted(spec)}")
+                raise ValueError(f"{self.name}: split {split!r} must give 'seeds' (and optionally 'grid' and "
+                                 f"'params'); got {sorted(spec)}")
         for size, spec in self.sizes.items():
-            bad = set(spec) - {"n_seeds", "grid"}
+            bad = set(spec) - {"n_seeds", "grid", "params"}
             if bad:
-                raise ValueError(f"{self.name}: size {size!r} takes 'n_seeds' and 'grid', not {sorted(bad)}")
+                raise ValueError(f"{self.name}: size {size!r} takes 'n_seeds', 'grid' and 'params', not {sorted(bad)}")
+        clash = set(self.params) & (set(self.grid) | {"seed"})
+        if clash:
+            raise ValueError(f"{self.name}: params {sorted(clash)} are also grid axes (or 'seed')")
+        for where, spec in [(f"split {k}", v) for k, v in self.splits.items()] + [(f"size {k}", v) for k, v in self.sizes.items()]:
+            unknown = set(spec.get("params", {})) - set(self.params)
+            if unknown:
+                raise ValueError(f"{self.name}: {where} overrides unknown params {sorted(unknown)}")
         for where, g in [("grid", {"": self.grid})] + [(f"split {k}", {"": v.get("grid", {})}) for k, v in self.splits.items()] \
                 + [(f"size {k}", {"": v.get("grid", {})}) for k, v in self.sizes.items()]:
             unknown = set(g[""]) - set(self.grid)
             if unknown:
                 raise ValueError(f"{self.name}: {where} overrides unknown axes {sorted(unknown)}")
-        unknown = set(self.methods) - set(self.grid)
-        if unknown:
-            raise ValueError(f"{self.name}: methods names axes not in the grid: {sorted(unknown)}")
+        for field in ("methods", "choices"):
+            unknown = set(getattr(self, field)) - set(self.grid)
+            if unknown:
+                raise ValueError(f"{self.name}: {field} names axes not in the grid: {sorted(unknown)}")
         if self.default_split is not None and self.default_split not in self.splits:
             raise ValueError(f"{self.name}: default_split {self.default_split!r} is not a split")
 
@@ -267,8 +292,10 @@ class Experiment:
                 if not seeds:
                     raise ValueError(f"seed: {self.name}: --set seed={value!r} gives no seeds to run")
                 continue
+            if key in self.params:
+                continue  # a protocol parameter: resolve_params
             if key not in self.grid:
-                valid = ", ".join(sorted(self.grid)) + ", seed"
+                valid = ", ".join(sorted(self.grid) + ["seed"] + sorted(self.params))
                 raise ValueError(f"{self.name}: unknown parameter {key!r}; valid: {valid}")
             grid[key] = _as_list(value)
         for key, values in grid.items():
@@ -283,6 +310,23 @@ class Experiment:
             raise ValueError(f"{self.name}: no seeds to run (split {split!r}, size {size!r})")
         return grid, seeds
 
+    def resolve_params(self, size="full", split=None, overrides=None) -> dict:
+        """The protocol parameters of one run: ``params``, then the split's, the size's, then
+        ``overrides`` (``--set``) for the keys that are params."""
+        size, split = self.pick_size(size), self.pick_split(split)
+        out = dict(self.params)
+        out.update(self.splits[split].get("params", {}))
+        out.update(self.sizes[size].get("params", {}))
+        for key, v in (overrides or {}).items():
+            if key in self.params:
+                out[key] = _like(v, self.params[key], f"{self.name}: param {key!r}")
+        for key, v in out.items():
+            try:
+                json.dumps(v)
+            except TypeError:
+                raise ValueError(f"{self.name}: value {v!r} of param {key!r} is not JSON-serialisable") from None
+        return out
+
     def points(self, size="full", split=None, overrides=None):
         """The list of ``(params, seed)`` trials of one run, in a fixed order."""
         grid, seeds = self.resolve(size, split, overrides)
@@ -292,6 +336,20 @@ class Experiment:
 
     def seeds_of(self, split) -> list:
         return [int(s) for s in self.splits[self.pick_split(split)]["seeds"]]
+
+
+def _like(value, default, what):
+    """``value`` (a ``--set`` override) if it has the type of the param's ``default`` (an int for a
+    float is fine; a one-element list of a scalar is unwrapped, as ``--set`` may give one)."""
+    if isinstance(value, list) and len(value) == 1 and not isinstance(default, list):
+        value = value[0]
+    num = (int, float)
+    ok = (isinstance(default, bool) and isinstance(value, bool)) or \
+         (isinstance(default, num) and not isinstance(default, bool) and isinstance(value, num) and not isinstance(value, bool)) or \
+         (default is None) or (not isinstance(default, (bool, int, float)) and isinstance(value, type(default)))
+    if not ok:
+        raise ValueError(f"{what}: expected a value like the default {default!r}, got {value!r}")
+    return float(value) if isinstance(default, float) else value
 
 
 def _as_seed(s):

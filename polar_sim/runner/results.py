@@ -89,8 +89,17 @@ class ResultsFile:
                              "--out (it was left as it is)") from None
         return rows
 
-    def done_keys(self):
-        return {r["trial_key"] for r in self.read() if r.get("status") == "ok"}
+    def done_keys(self, size=None, split=None):
+        """The keys of the finished trials. With ``size`` and ``split``, a file holding rows of
+        another size or split (a folder whose config.json was lost) raises ``ValueError``
+        instead: a trial's key does not include them, so its rows would mix."""
+        rows = self.read()
+        if size is not None or split is not None:
+            other = sorted({(r.get("size"), r.get("split")) for r in rows} - {(size, split)}, key=str)
+            if other:
+                raise ValueError(f"results: {self.path} holds rows of size/split {other[0][0]}/{other[0][1]}, not "
+                                 f"{size}/{split}; choose another --out (it was left as it is)")
+        return {r["trial_key"] for r in rows if r.get("status") == "ok"}
 
     def append(self, row):
         rows = self.read()

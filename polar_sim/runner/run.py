@@ -82,7 +82,7 @@ def _error_row(params, seed, size, split, error, elapsed):
     return row
 
 
-def _execute(exp, params, seed, tdir, size, split):
+def _execute(exp, params, seed, tdir, size, split, run_params=None):
     """Run one trial (in this process or a worker). ``exp`` is an Experiment or a registered
     name (workers re-import registered experiments by name). Returns the result row."""
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -92,7 +92,7 @@ def _execute(exp, params, seed, tdir, size, split):
     t0 = time.perf_counter()
     row = _base_row(params, seed, size, split)
     try:
-        metrics = exp.trial(dict(params), int(seed), TrialContext(tdir, size, split))
+        metrics = exp.trial(dict(params), int(seed), TrialContext(tdir, size, split, dict(run_params or {})))
         if not isinstance(metrics, dict):
             raise TypeError(f"trial returned {type(metrics).__name__}, expected a dict of metrics")
         clash = set(metrics) & (set(params) | RESERVED)
@@ -117,9 +117,9 @@ def _portable(exp):
 
 
 # -- backends -------------------------------------------------------------------------------------
-def _run_serial(exp, todo, out_dir, size, split, workers, timeout, address):
+def _run_serial(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
     for p, s in todo:
-        yield _execute(exp, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split)
+        yield _execute(exp, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params)
 
 
 def _worker_main(conn):
@@ -157,7 +157,7 @@ class _Worker:
         self.conn.close()
 
 
-def _run_pool(exp, todo, out_dir, size, split, workers, timeout, address):
+def _run_pool(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
     # spawn: a forked child of a parent that holds a GL context deadlocks.
     ctx = mp.get_context("spawn")
     portable = _portable(exp)
@@ -168,7 +168,7 @@ def _run_pool(exp, todo, out_dir, size, split, workers, timeout, address):
             for w in pool:
                 if w.task is None and queue:
                     p, s = queue.pop(0)
-                    w.conn.send((portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split))
+                    w.conn.send((portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params))
                     w.task = (p, s, time.monotonic())
             busy = [w for w in pool if w.task]
             wait_s = 1.0 if timeout is None else max(0.05, min(w.task[2] + timeout for w in busy) - time.monotonic())
@@ -240,7 +240,7 @@ def _check_reachable(address, timeout=5.0):
                          "start it with `ray start --head` or check the address") from None
 
 
-def _run_ray(exp, todo, out_dir, size, split, workers, timeout, address):
+def _run_ray(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
     ray = _ray_init(workers, address)
     remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
     portable = _portable(exp)
@@ -252,7 +252,7 @@ def _run_ray(exp, todo, out_dir, size, split, workers, timeout, address):
         while queue or pending:
             while queue and len(pending) < in_flight:
                 p, s = queue.pop(0)
-                ref = remote.remote(portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split)
+                ref = remote.remote(portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params)
                 pending[ref] = (p, s, time.monotonic())
             done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0 if timeout is not None else None)
             for ref in done:
@@ -275,12 +275,19 @@ def _run_ray(exp, todo, out_dir, size, split, workers, timeout, address):
 
 
 # -- the run --------------------------------------------------------------------------------------
-def _check_methods(exp, grid):
+def _check_axes(exp, grid):
+    """Method axes name known methods or importable factories; axes with ``choices`` hold only
+    those values. Raises ``ValueError`` listing the valid ones, before any trial runs."""
     from polar_sim.runner.methods import get_method
 
     for axis, kind in exp.methods.items():
         for value in grid[axis]:
             get_method(kind, value)   # raises ValueError listing the valid names
+    for axis, valid in exp.choices.items():
+        valid = list(valid() if callable(valid) else valid)
+        bad = [v for v in grid[axis] if v not in valid]
+        if bad:
+            raise ValueError(f"{axis}: {exp.name} has no {axis} {bad[0]!r}; valid: {', '.join(map(str, valid))}")
 
 
 def _read_config(out_dir, config):
@@ -293,7 +300,8 @@ def _read_config(out_dir, config):
         old = json.loads(path.read_text())
     except json.JSONDecodeError:
         raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
-    for key in ("experiment", "size", "split"):
+    for key in ("experiment", "size", "split", "params"):
+        # a folder written before params existed has none to compare, and its trials' keys decide
         if key in old and old[key] != config[key]:
             raise ValueError(f"out: {out_dir} holds a run of {old.get('experiment')!r} with {key} "
                              f"{old[key]!r}, not {config[key]!r}; choose another --out")
@@ -370,7 +378,8 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     size = exp.pick_size(size or ("quick" if quick else "full"))
     split = exp.pick_split(split)
     grid, seeds = exp.resolve(size, split, overrides)
-    _check_methods(exp, grid)
+    run_params = exp.resolve_params(size, split, overrides)
+    _check_axes(exp, grid)
     points = exp.points(size, split, overrides)
     out_dir = Path(out) if out is not None else default_out_dir(exp.name)
     if out_dir.exists() and not out_dir.is_dir():
@@ -389,11 +398,11 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     t_start = time.time()
     config = {"experiment": exp.name, "description": exp.description, "size": size, "split": split,
               "quick": size == "quick", "overrides": overrides or {}, "n_trials": len(points),
-              "grid": grid, "seeds": seeds, "backend": backend, "workers": int(workers),
+              "grid": grid, "params": run_params, "seeds": seeds, "backend": backend, "workers": int(workers),
               "polar_sim": polar_sim.__version__, "provenance": provenance()}
     results = ResultsFile(out_dir / "results.csv")
-    done = results.done_keys()            # reads (and checks) the file before anything is written
-    history = _history(_read_config(out_dir, config))
+    history = _history(_read_config(out_dir, config))   # another size, split or params: refused
+    done = results.done_keys(size, split)  # reads (and checks) the file before anything is written
     todo = [(p, s) for p, s in points if trial_key(p, s) not in done]
     this_run = {"git_commit": config["provenance"]["git_commit"], "started": config["provenance"]["started"],
                 "wall_s": None, "trials_todo": len(todo)}
@@ -406,7 +415,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     bar = tqdm(total=len(points), initial=len(points) - len(todo), desc=exp.name, unit="trial",
                disable=not progress)
     try:
-        for row in runner(exp, todo, out_dir, size, split, int(workers), trial_timeout, address):
+        for row in runner(exp, todo, out_dir, size, split, run_params, int(workers), trial_timeout, address):
             results.append(row)
             bar.update(1)
             if row["status"] != "ok":
@@ -417,7 +426,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     table = [r for r in results.read() if r.get("trial_key") in keys]
     ok_rows = [r for r in table if r.get("status") == "ok"]
     failures = [r for r in table if r.get("status") != "ok"]
-    rctx = RunContext(out_dir, size, split)
+    rctx = RunContext(out_dir, size, split, run_params)
     body = exp.summarize(ok_rows, rctx) if (exp.summarize and ok_rows) else ""
     checks = list(exp.checks(ok_rows, rctx)) if (exp.checks and ok_rows) else []
     findings = list(exp.findings(ok_rows, rctx)) if (exp.findings and ok_rows) else []
@@ -426,7 +435,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
                                                       f"first: {failures[0]['error']}"))
     config["wall_s"] = this_run["wall_s"] = round(time.time() - t_start, 1)
     _write_config(out_dir, config)
-    _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings)
+    _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings, run_params)
     return RunResult(out_dir, table, checks, failures, findings, config)
 
 
@@ -482,11 +491,13 @@ def _cell(text):
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings):
+def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, findings, run_params=None):
     seed_txt = f"{seeds[0]}" if len(seeds) == 1 else f"{seeds[0]}..{seeds[-1]} ({len(seeds)})"
+    proto = ("Protocol at this size: " + ", ".join(f"`{k}={json.dumps(v)}`" for k, v in run_params.items()) + "."
+             if run_params else "")
     lines = [f"# {exp.name}", "", exp.description, "",
              f"{len(ok_rows)} trials, **{split}** split (seeds {seed_txt}), {size} size, polar_sim "
-             f"{polar_sim.__version__}.", "", body, "", "## Checks", "", "| check | result | figures |", "|---|---|---|"]
+             f"{polar_sim.__version__}.", "", proto, "", body, "", "## Checks", "", "| check | result | figures |", "|---|---|---|"]
     lines += [f"| {_cell(c.name)} | {c.status if c.status != 'FAIL' else '**FAIL**'} | {_cell(c.detail)} |"
               for c in checks]
     if findings:

@@ -159,6 +159,54 @@ def test_folder_guards(tmp_path):
     assert (bad / "results.csv").read_bytes() == before
 
 
+# Sizes are data: protocol params resolve from the experiment, then the size, then --set; the
+# trial and the summary read them (also in a worker process), config.json records them, and a
+# folder refuses to resume with other values. A results.csv whose config.json was lost refuses
+# rows of another size (a trial's key holds neither, so they would mix).
+def _params_trial(params, seed, ctx):
+    return {"frames": ctx.params["frames"], "res": ctx.params["res"]}
+
+
+PARAMS_EXP = Experiment("params_toy", "", grid={"a": [1, 2]}, trial=_params_trial, splits={"dev": {"seeds": [0]}},
+                        params={"frames": 300, "res": 0.05}, sizes={"quick": {"params": {"frames": 30}}, "full": {}})
+
+
+def test_sizes_as_params(tmp_path):
+    assert PARAMS_EXP.resolve_params("full") == {"frames": 300, "res": 0.05}
+    assert PARAMS_EXP.resolve_params("quick", overrides={"res": [1]}) == {"frames": 30, "res": 1.0}
+    with pytest.raises(ValueError, match="param 'frames': expected a value like the default 300"):
+        PARAMS_EXP.resolve_params("full", overrides={"frames": "many"})
+    with pytest.raises(ValueError, match="unknown parameter 'nope'; valid: a, seed, frames, res"):
+        PARAMS_EXP.resolve("full", overrides={"nope": 1})
+    with pytest.raises(ValueError, match="overrides unknown params"):
+        Experiment("bad", "", grid={"a": [1]}, trial=_params_trial, sizes={"quick": {"params": {"x": 1}}})
+    with pytest.raises(ValueError, match="also grid axes"):
+        Experiment("bad", "", grid={"a": [1]}, trial=_params_trial, params={"a": 1})
+    res = run_experiment(PARAMS_EXP, out=tmp_path / "q", quick=True, workers=2, progress=False)
+    assert [r["frames"] for r in res.table] == [30, 30]
+    assert json.loads((tmp_path / "q" / "config.json").read_text())["params"] == {"frames": 30, "res": 0.05}
+    assert "`frames=30`" in (tmp_path / "q" / "summary.md").read_text()
+    with pytest.raises(ValueError, match="with params"):
+        run_experiment(PARAMS_EXP, out=tmp_path / "q", quick=True, overrides={"frames": 60}, progress=False)
+    (tmp_path / "q" / "config.json").unlink()
+    before = (tmp_path / "q" / "results.csv").read_bytes()
+    with pytest.raises(ValueError, match="holds rows of size/split quick/dev, not full/dev"):
+        run_experiment(PARAMS_EXP, out=tmp_path / "q", progress=False)
+    assert (tmp_path / "q" / "results.csv").read_bytes() == before
+
+
+# An axis with declared choices refuses another value before any trial runs (a typo in
+# --set scene=[...] used to start a sweep whose every trial failed).
+def test_axis_choices(tmp_path):
+    exp = Experiment("choice_toy", "", grid={"scene": ["a"]}, trial=_params_trial, splits={"dev": {"seeds": [0]}},
+                     choices={"scene": lambda: ["a", "b"]})
+    with pytest.raises(ValueError, match="scene: choice_toy has no scene 'moon'; valid: a, b"):
+        run_experiment(exp, out=tmp_path / "c", overrides={"scene": ["moon"]}, progress=False)
+    assert not (tmp_path / "c").exists()
+    with pytest.raises(ValueError, match="choices names axes not in the grid"):
+        Experiment("bad", "", grid={"a": [1]}, trial=_params_trial, choices={"scene": ["a"]})
+
+
 # A run resumed at another commit says so: config.json keeps every invocation, and the report
 # names the commits whose invocations ran trials (not one that only re-read finished rows).
 def test_resume_keeps_history(tmp_path, monkeypatch):
