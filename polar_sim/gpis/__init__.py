@@ -1,7 +1,7 @@
 """polar_sim.gpis: online Gaussian Process Implicit Surface mapping (GPisMap), 2D and 3D.
 
 ``GPISMap2D`` fuses planar laser scans (quadtree), ``GPISMap3D`` depth images and 3D lidar
-(octree). Both answer ``query(points) -> (sdf, grad, var)``; see ``specs/gpis.md`` for the
+(octree). Both answer ``query(points) -> (sdf, grad, var)``; see ``docs/specs/gpis.md`` for the
 algorithm and the README ("Online GPIS mapping") for usage.
 """
 

@@ -1,7 +1,7 @@
 """Self-supervised ground segmentation and monocular visual odometry with scale from the ground.
 
 Reimplements B. Lee, K. Daniilidis, D. D. Lee, *Online Self-Supervised Monocular Visual Odometry for
-Ground Vehicles* (ICRA 2015) from the spec ``shared/specs/ground.md``; numpy/OpenCV/numba only.
+Ground Vehicles* (ICRA 2015) from the spec ``docs/specs/ground.md``; numpy/OpenCV/numba only.
 
 >>> from polar_sim.ground import GroundVO
 >>> vo = GroundVO(K, camera_height, model="6param", sampling="weighted")   # doctest: +SKIP

@@ -1,4 +1,4 @@
-"""Self-supervised object segmentation and 6-DoF tracking under touch occlusion (specs/tracking.md).
+"""Self-supervised object segmentation and 6-DoF tracking under touch occlusion (docs/specs/tracking.md).
 
 ``ObjectTracker(model_points, K, initial_pose, **params).process(rgb, depth)`` returns a
 :class:`TrackResult` with the pose (T_cam_obj), the target mask, the prediction map, the labels O
