@@ -204,10 +204,11 @@ def _w6_nocal(K, camera_height, *, seed=0, **params):
 
 
 register_method("vo", "w6_nocal", _w6_nocal,
-                description="w6 as before issue 13: the spec's classifier training and no calibration of ground_prob")
+                description="w6 with the spec's classifier training (no depth limit, plain decay by alpha) "
+                            "and uncalibrated ground_prob: the earlier behaviour, for comparison")
 register_method("vo", "w6_ng6h", _groundvo_factory("6param", "weighted", ng_outlier_sigma=6.0, ng_outlier_history=True),
-                description="w6 with the stricter non-ground outlier rule (6 sigma, never-inlier tracks; issue 13, "
-                            "better on weakly textured ground, not the default)")
+                description="w6 with the stricter non-ground outlier rule (6 sigma, never-inlier tracks): "
+                            "better on weakly textured ground, not the default")
 register_method("vo", "mono", _held_scale_vo,
                 description="monocular baseline (VISO2-M analogue): GroundVO's estimator with the scale taken from "
                             "the true speed once and then held through the structure; needs speed_truth=")
