@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["markdown_table", "group_rows", "fmt", "cell", "savefig", "write_csv_table"]
+__all__ = ["markdown_table", "nonempty_columns", "is_empty", "group_rows", "fmt", "cell", "savefig", "write_csv_table"]
 
 
 def fmt(x, digits=4):
@@ -32,8 +32,34 @@ def cell(x):
     return fmt(x).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown_table(rows, columns, headers=None):
-    """A markdown table of ``rows`` (dicts) restricted to ``columns``; ``|`` in cells is escaped."""
+def is_empty(x):
+    """True for a value a table cell would show as nothing: None, an empty string or NaN."""
+    if x is None or (isinstance(x, str) and not x.strip()):
+        return True
+    return isinstance(x, (float, np.floating)) and math.isnan(x)
+
+
+def nonempty_columns(rows, columns, headers=None):
+    """``columns`` (and their ``headers``) without those that are empty (:func:`is_empty`) in every
+    row: a quick run's table shows only what exists at its size (e.g. no 100 m KITTI segment on a
+    60 m route). With no rows, or when every column is empty, nothing is dropped."""
+    headers = list(headers or columns)
+    keep = [i for i, c in enumerate(columns) if any(not is_empty(r.get(c)) for r in rows)]
+    if not keep:
+        return list(columns), headers
+    return [columns[i] for i in keep], [headers[i] for i in keep]
+
+
+def markdown_table(rows, columns, headers=None, *, drop_empty=True):
+    """A markdown table of ``rows`` (dicts) restricted to ``columns``; ``|`` in cells is escaped.
+
+    ``drop_empty``: leave out the columns that are empty (None, "" or NaN) in every row.
+    """
+    if headers is not None and len(headers) != len(columns):
+        raise ValueError(f"headers: expected {len(columns)} headers, one per column, got {len(headers)}")
+    rows = list(rows)
+    if drop_empty:
+        columns, headers = nonempty_columns(rows, list(columns), headers)
     headers = headers or columns
     out = ["| " + " | ".join(cell(h) for h in headers) + " |", "|" + "---|" * len(columns)]
     for r in rows:
@@ -42,7 +68,7 @@ def markdown_table(rows, columns, headers=None):
 
 
 def write_csv_table(rows, columns, path):
-    """The same table as CSV."""
+    """The same table as CSV, every column kept: a data file keeps one schema at every size."""
     import csv
 
     with open(path, "w", newline="") as fh:
