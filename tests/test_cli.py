@@ -140,3 +140,65 @@ def test_markdown_to_html_inlines_images(tmp_path):
     cv2.imwrite(str(tmp_path / "fig.png"), np.zeros((4, 4, 3), np.uint8))
     html = markdown_to_html("# T\n\n![fig](fig.png)\n\n| a | b |\n|---|---|\n| x \\| y | 2 |\n", base=tmp_path)
     assert "data:image/png;base64," in html and "<td>x | y</td>" in html
+
+
+def _toy_experiment():
+    from polar_sim.runner import Experiment
+
+    seqs = [f"sequence_{i:02d}_with_a_long_name" for i in range(12)]
+    return Experiment(name="toy", description="a toy", grid={"sequence": seqs[:6], "method": ["ww", "h"], "n": [1, 2]},
+                      methods={"method": "tracker"}, trial=lambda p, s, c: {},
+                      splits={"dev": {"seeds": range(3)}, "test": {"seeds": range(10_000, 10_005), "grid": {"sequence": seqs},
+                                                             "params": {"stride": 3}}},
+                      sizes={"quick": {"n_seeds": 1, "grid": {"sequence": seqs[:1]}, "params": {"duration_s": 20.0}},
+                             "full": {}},
+                      params={"duration_s": 60.0, "stride": 2, "label": "a b", "scale": [0.5, 1.0]})
+
+
+# list shows, under each experiment, its grid axes and protocol params in the syntax --set takes,
+# what the quick size and the other split change, and cuts long lists unless asked for one experiment.
+def test_describe_experiment_lists_set_keys():
+    from polar_sim.cli import _parse_overrides, describe_experiment
+
+    exp = _toy_experiment()
+    lines = describe_experiment(exp)
+    text = "\n".join(lines)
+    assert lines[0].startswith("grid:") and "method=[ww, h] (tracker methods)" in text and "n=[1, 2]" in text
+    assert "seed 10000..10004 (test split)" in text
+    assert "sequence=[sequence_00_with_a_long_name, " in text and "... 12 values]" in text   # cut
+    (params,) = [ln for ln in lines if ln.startswith("params:")]
+    assert params.split(None, 1)[1] == 'duration_s=60.0; stride=3; label="a b"; scale=[0.5, 1.0]'
+    (quick,) = [ln for ln in lines if ln.startswith("quick:")]
+    assert quick.split(None, 1)[1] == "duration_s=20.0; sequence=[sequence_00_with_a_long_name]; seed 10000"
+    (dev,) = [ln for ln in lines if ln.startswith("dev:")]
+    assert "stride=2" in dev and "sequence=[sequence_00" in dev and dev.endswith("seed 0..2")
+    # in full, nothing is cut, and every KEY=VALUE shown is --set syntax that gives back the value
+    sections = {}
+    for ln in describe_experiment(exp, full=True):   # "label:  a; b;" then continuation lines
+        if ln[:1] != " ":
+            label, ln = ln.split(None, 1)
+        sections[label] = sections.get(label, "") + " " + ln.strip()
+    assert set(sections) == {"grid:", "params:", "quick:", "dev:"}
+    shown = sections["grid:"] + ";" + sections["params:"]
+    assert "... 12 values" not in shown and "sequence_11_with_a_long_name" in shown
+    items = [it.strip().split(" (")[0] for it in shown.split(";") if "=" in it]
+    got = _parse_overrides(items)
+    assert got == {"sequence": [f"sequence_{i:02d}_with_a_long_name" for i in range(12)], "method": ["ww", "h"],
+                   "n": [1, 2], "duration_s": 60.0, "stride": 3, "label": "a b", "scale": [0.5, 1.0]}
+    assert exp.resolve_params("full", "test", got) == {k: got[k] for k in exp.params}
+
+
+# `polar-sim list` puts a grid line under every experiment; `polar-sim list NAME` shows one in full.
+def test_list_shows_grid_under_each_experiment(capsys):
+    from polar_sim.runner import list_experiments
+
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    for name in list_experiments():
+        (i,) = [i for i, ln in enumerate(out) if ln.startswith(f"  {name} ")]
+        assert out[i + 1].strip().startswith("grid:"), (name, out[i + 1])
+    assert any("spacing_m=[0.1, 0.25, 0.5, 1.0]" in ln for ln in out)
+    assert main(["list", "surface_vs_rate"]) == 0
+    one = capsys.readouterr().out
+    assert one.startswith("surface_vs_rate: ") and "grid:" in one and "quick:" in one and "scenes:" not in one
+    assert main(["list", "nope"]) == 1 and "valid:" in capsys.readouterr().err
