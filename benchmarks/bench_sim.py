@@ -10,11 +10,8 @@ import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
 from polar_sim.sim import World  # noqa: E402
-from polar_sim.sim.robots import RAY_GROUPS  # noqa: E402
+from polar_sim.sim.sensors import bare_multiray  # noqa: E402
 
 
 def rate(fn, seconds):
@@ -44,14 +41,7 @@ def paired_rates(fa, fb, seconds, rounds=5):
 
 def raw_multiray(w, name):
     """The bare mj_multiRay call a lidar scan needs, with directions precomputed in world axes."""
-    spec = w.lidar_spec(name)
-    sid = w.model.site(spec.site).id
-    R = w.data.site_xmat[sid].reshape(3, 3)
-    vec = (spec.directions @ R.T).ravel()
-    org = w.data.site_xpos[sid].copy()
-    n = len(spec.directions)
-    gid, dist = np.zeros(n, np.int32), np.zeros(n)
-    return lambda: mujoco.mj_multiRay(w.model, w.data, org, vec, RAY_GROUPS, 1, -1, gid, dist, None, n, spec.max_range)
+    return bare_multiray(w.model, w.data, w.lidar_spec(name))
 
 
 def main():
@@ -77,7 +67,7 @@ def main():
         rows.append((f"rover_terrain camera {W}x{H} rgb+depth+labels", f"{fps:.1f} frames/s", "", ""))
     # Physics only: World.step without sensors, counted in physics steps (timestep 4 ms).
     n_ctrl = rate(lambda: w.step((6.0, 0.08)), T)
-    rows.append(("rover_terrain World.step, physics only", f"{n_ctrl * w._substeps:.0f} physics steps/s",
+    rows.append(("rover_terrain World.step, physics only", f"{n_ctrl * round(w.dt / w.model.opt.timestep):.0f} physics steps/s",
                  f"{n_ctrl:.0f} World.step/s (dt = {w.dt} s)", f"{n_ctrl * w.dt:.0f}x real time"))
     print(f"load: {os.getloadavg()[0]:.2f}")
     print("| what | measured | reference | ratio |\n|---|---|---|---|")

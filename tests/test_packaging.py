@@ -1,5 +1,6 @@
 """Packaging: every package directory is listed in pyproject, and the scenes ship as package data."""
 
+import ast
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -33,10 +34,54 @@ def test_scenes_are_package_data():
     assert "sensors.py" in exps
 
 
-# No module outside polar_sim/sim imports mujoco (the modules run on plain numpy).
-def test_layering():
-    for p in (ROOT / "polar_sim").rglob("*.py"):
-        if "sim" in p.relative_to(ROOT / "polar_sim").parts[:1]:
+def mujoco_imports(path):
+    """(line, statement) of every import of mujoco in a Python file: ``import mujoco[.x]``,
+    ``from mujoco[.x] import ...`` and ``importlib.import_module("mujoco...")`` / ``__import__``,
+    found in its syntax tree (so strings and comments that mention them do not count)."""
+    tree = ast.parse(Path(path).read_text(), str(path))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, f"import {a.name}") for a in node.names if a.name.split(".")[0] == "mujoco"]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
+                and node.module.split(".")[0] == "mujoco":
+            out.append((node.lineno, f"from {node.module} import ..."))
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str) and node.args[0].value.split(".")[0] == "mujoco":
+            f = node.func
+            name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+            if name in ("import_module", "__import__"):
+                out.append((node.lineno, f"{name}({node.args[0].value!r})"))
+    return out
+
+
+def _python_files():
+    """Every .py file of the repository but those under polar_sim/sim/ (and hidden or build folders)."""
+    skip = {".git", "build", "dist", "__pycache__", ".venv", "venv", "node_modules"}
+    for p in sorted(ROOT.rglob("*.py")):
+        rel = p.relative_to(ROOT)
+        if any(part in skip or part.startswith(".") or part.endswith(".egg-info") for part in rel.parts[:-1]):
             continue
-        text = p.read_text()
-        assert "import mujoco" not in text and "from mujoco" not in text, p
+        if rel.parts[:2] == ("polar_sim", "sim"):
+            continue
+        yield p
+
+
+# Nothing outside polar_sim/sim/ imports mujoco: not the modules, the metrics, the envs, the runner,
+# nor the experiments, benchmarks, examples or tests (they go through polar_sim.sim).
+def test_layering():
+    files = list(_python_files())
+    tops = {p.relative_to(ROOT).parts[0] for p in files}
+    assert {"polar_sim", "experiments", "benchmarks", "examples", "tests"} <= tops, tops   # the scan sees them all
+    bad = [f"{p.relative_to(ROOT)}:{line}: {stmt}" for p in files for line, stmt in mujoco_imports(p)]
+    assert not bad, ("only polar_sim/sim/ may import mujoco; use the polar_sim.sim API (or add a function "
+                     "there) in:\n  " + "\n  ".join(bad))
+
+
+# The scan finds every form of the import, and ignores strings and comments that mention one.
+def test_layering_scan_detects(tmp_path):
+    p = tmp_path / "x.py"
+    p.write_text("import os, mujoco.viewer as v\nfrom mujoco import mj_step\nimport importlib\n"
+                 "importlib.import_module('mujoco')\n__import__('mujoco.renderer')\ndef f():\n    import mujoco\n"
+                 "s = 'import mujoco'  # import mujoco\nfrom mujocox import y\nfrom .mujoco import z\n")
+    assert [ln for ln, _ in mujoco_imports(p)] == [1, 2, 4, 5, 7]

@@ -20,7 +20,7 @@ from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
 
 __all__ = [
     "CameraFrame", "LidarScan", "LidarScan3D", "LidarSpec", "RangeNoise", "DepthNoise",
-    "parse_lidars", "Lidar", "CameraRig", "intrinsics", "MAX_LIDAR_RAYS",
+    "parse_lidars", "Lidar", "bare_multiray", "CameraRig", "intrinsics", "MAX_LIDAR_RAYS",
 ]
 
 #: Most rays one declared lidar may cast per scan (a 3D lidar's rows x cols included).
@@ -294,6 +294,26 @@ class Lidar:
         if self.spec.kind == "lidar2d":
             return LidarScan(self.spec.angles.copy(), r, T, float(data.time))
         return LidarScan3D(self.spec.directions.copy(), r, T, float(data.time))
+
+
+def bare_multiray(model, data, spec: LidarSpec):
+    """A zero-argument callable that makes only the ``mj_multiRay`` call one scan of ``spec`` needs,
+    from the sensor's pose at the time of this call (directions rotated to world axes once, here).
+
+    The floor a :meth:`Lidar.scan` is measured against (``benchmarks/bench_sim.py``): no range
+    clipping, noise or result objects; the distances are discarded.
+    """
+    sid = model.site(spec.site).id
+    R = data.site_xmat[sid].reshape(3, 3)
+    vec = (spec.directions @ R.T).ravel()
+    org = data.site_xpos[sid].copy()
+    n = len(spec.directions)
+    gid, dist = np.zeros(n, np.int32), np.zeros(n)
+
+    def cast():
+        mujoco.mj_multiRay(model, data, org, vec, RAY_GROUPS, 1, -1, gid, dist, None, n, spec.max_range)
+
+    return cast
 
 
 class CameraRig:
