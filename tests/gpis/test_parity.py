@@ -1,4 +1,5 @@
-"""Legacy mode against the published GPisMap outputs (shared/data/gpismap, spec §12)."""
+"""Legacy mode against the published GPisMap outputs, shipped in ``polar_sim/data/gpismap/`` (read
+through ``polar_sim.datasets.data_path``; how they were produced: ``docs/specs/gpis.md`` section 12)."""
 
 import numpy as np
 import pytest
