@@ -3,8 +3,9 @@ out of the registry). The work is in the library: routes are recordings from the
 (``polar_sim.sim.rover_sequences.load_route``), VOs are ``vo`` plug-ins
 (``polar_sim.runner.methods``) replayed by ``polar_sim.ground.replay``, integration is
 ``polar_sim.ground.integration``, scores are ``polar_sim.metrics``. What stays here is the protocol:
-the route lists per split and size, and the RANSAC candidate sets of spec §8.2 (derived arrays
-through ``polar_sim.sim.sequences.cached_arrays``).
+the route lists per split, the size-dependent protocol values (``ROUTE_PARAMS``, ``QUICK_PARAMS``),
+and the RANSAC candidate sets of the success-rate and scale experiments (derived arrays through
+``polar_sim.sim.sequences.cached_arrays``).
 """
 
 from __future__ import annotations
@@ -21,10 +22,17 @@ DEV_FAMILY_ROUTES = ("dev_speckle", "dev_gravel", "dev_grass", "dev_blotches", "
 TEST_ROUTES = ("test_speckle", "test_gravel", "test_grass", "test_uniform", "test_stripes", "test_checker",
                "test_blotches", "test_random_0", "test_random_1", "test_random_2", "test_default_0", "test_default_1")
 
-#: The CI (``quick``) routes: the first 120 frames of one route per split, shared by all experiments so
-#: each is recorded once per cache (about 20 s).
+#: The CI (``quick``) routes: the first 120 frames (54 m on dev, 65 m on test) of one route per split,
+#: shared by all experiments so each is recorded once per cache (about 20 s). The ``route`` axis
+#: value ``"quick"`` names the split's quick route.
 QUICK_FRAMES = 120
 QUICK_ROUTE = {"dev": "terrain_00", "test": "test_random_0"}
+
+#: Protocol parameters of the experiments that drive a route (``Experiment.params``, overridable with
+#: ``--set``): ``max_frames``, the frames of each route replayed (null = the whole route). The quick
+#: size cuts every route to ``QUICK_FRAMES`` (``QUICK_PARAMS``, its ``sizes["quick"]["params"]``).
+ROUTE_PARAMS = {"max_frames": None}
+QUICK_PARAMS = {"max_frames": QUICK_FRAMES}
 
 #: RANSAC configurations of the candidate-set experiments: (model, lambda); lambda only matters for 6param.
 CONFIGS = {"2p": ("2param", 0.1), "6p_lam1": ("6param", 1.0), "6p_lam0.1": ("6param", 0.1),
@@ -104,7 +112,7 @@ _MEMO = {}
 
 
 def candidate_set(routes, frames=None, n_pick=None):
-    """The RANSAC candidate sets of spec §8.2 over ``routes``: a list of per-frame dicts (route, frame,
+    """The RANSAC candidate sets over ``routes``: a list of per-frame dicts (route, frame,
     u, v, dbar, prob, label, speed_cd, speed, h), cached as derived arrays (kind
     ``"ground_candidates"``, keyed by the routes, length, frames per route and the sources' hash) and
     memoised per process, so every trial of the RANSAC experiments shares one pass."""
@@ -159,28 +167,51 @@ def model_label(config):
     return "2-parameter" if model == "2param" else f"6-parameter, λ = {lam:g}"
 
 
+def route_choices():
+    """The values the ``route`` axis accepts: ``"quick"`` (the split's quick route) and every dev and
+    test route (``polar_sim.sim.rover_sequences.SPLITS``)."""
+    from polar_sim.sim.rover_sequences import SPLITS
+
+    return ["quick", *SPLITS["dev"], *SPLITS["test"]]
+
+
 def route_of(params, ctx):
     """The route name of a trial: the axis value, or the split's quick route for ``"quick"``."""
     return QUICK_ROUTE[ctx.split] if params["route"] == "quick" else params["route"]
 
 
+def max_frames(ctx):
+    """The run's ``max_frames`` param: None (the whole route) or a positive int."""
+    n = ctx.params["max_frames"]
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+        raise ValueError(f"max_frames: expected a positive number of frames or null (the whole route), got {n!r}")
+    return n
+
+
 def load(params, ctx):
-    """The trial's recording (cut to the quick length at the quick size) and its truth."""
+    """The trial's recording (its first ``max_frames`` frames, a run param) and its truth."""
     from polar_sim.sim.rover_sequences import load_route, route_truth
 
-    rec = load_route(route_of(params, ctx), max_frames=QUICK_FRAMES if ctx.quick else None)
+    rec = load_route(route_of(params, ctx), max_frames=max_frames(ctx))
     return rec, route_truth(rec)
 
 
-def table(rows, cols):
-    """A markdown table without the columns that are empty (None/NaN) in every row: a quick route is
-    shorter than a 100 m KITTI segment, and its report shows only what exists at that length."""
-    from polar_sim.runner.report import markdown_table
+def table(rows, cols, why=None):
+    """A markdown table without the columns that are empty (None, "" or NaN) in every row, followed by
+    one line naming the columns left out and why (``why``: {column: reason}; a column without one is
+    "empty in every row"). A route under 100 m, for example, has no 100 m KITTI segment."""
+    from polar_sim.runner.report import markdown_table, nonempty_columns
 
-    def empty(c):
-        return all(r.get(c) is None or (isinstance(r.get(c), float) and not np.isfinite(r[c])) for r in rows)
-
-    return markdown_table(rows, [c for c in cols if not empty(c)])
+    rows, cols = list(rows), list(cols)
+    keep, _ = nonempty_columns(rows, cols)
+    gone = [c for c in cols if c not in keep]
+    out = markdown_table(rows, keep, drop_empty=False)
+    if rows and gone:
+        reasons = {}
+        for c in gone:
+            reasons.setdefault((why or {}).get(c, "empty in every row"), []).append(f"`{c}`")
+        out += "\n\nNot shown: " + "; ".join(f"{', '.join(cs)} ({r})" for r, cs in reasons.items()) + "."
+    return out
 
 
 def family_names(rec):

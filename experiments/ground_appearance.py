@@ -8,10 +8,11 @@ image, and the reliability statistics (15 bins, every 2nd pixel) for the expecte
 (ECE). "Settled" frames are >= 5 s after the start and outside [-40 m, +10 m] of every zone boundary
 (the new texture is visible on the far ground from 40 m before; zones meet along the edges of 20 m
 ground tiles). Per family the settled frames of all its zones are pooled; the worst family is the
-headline. Methods: ``w6``, ``u6``, and ``w6_nocal`` (w6 before the calibration of issue 13).
-Splits: ``dev`` the four default-look routes of issue 5 plus one route of each dev family (speckle,
-gravel, grass, blotches); ``test`` the twelve held-out routes (seeds >= 10,000; uniform, stripes and
-checker never used while tuning). Quick: the split's quick route, 120 frames, w6.
+headline. Methods: ``w6``, ``u6``, and ``w6_nocal`` (w6 without the calibration of P(ground), the 30 m
+training limit and the evidence-weighted decay: the earlier behaviour).
+Splits: ``dev`` four default-look routes plus one route of each dev family (speckle, gravel, grass,
+blotches, uniform); ``test`` the twelve held-out routes (seeds >= 10,000; stripes and checker never
+used while tuning). Quick: the split's quick route cut to ``max_frames`` = 120 frames, w6.
 """
 
 import numpy as np
@@ -22,6 +23,8 @@ from polar_sim.runner.report import savefig
 
 TARGET_IOU, TARGET_ECE = 0.85, 0.05
 WARMUP_S, BEFORE_M, AFTER_M = 5.0, 40.0, 10.0
+#: Families whose IoU miss is recorded in benchmarks/RESULTS.md (full size, test split).
+RECORDED_IOU_MISSES = ("uniform", "stripes", "checker")
 DEV_ROUTES = ("terrain_00", "terrain_04", "flat_00", "flat_02") + G.DEV_FAMILY_ROUTES
 
 
@@ -111,7 +114,9 @@ def summarize(table, ctx):
         lines += [G.table(rows, ["method", "family", "frames", "iou_mean", "ece", "p_ground", "p_nonground"]), ""]
     cols = ["route", "method", "families", "n_settled", "iou_settled_mean", "iou_settled_p10", "share_settled_ge_target",
             "ece_settled", "iou_transition_mean", "iou_all_mean"]
-    lines += ["Per route:", "", G.table(sorted(table, key=lambda r: (r["route"], r["method"])), cols), ""]
+    why = {"iou_transition_mean": f"no frame within [−{BEFORE_M:.0f} m, +{AFTER_M:.0f} m] of a zone boundary after the "
+                                  f"first {WARMUP_S:.0f} s"}
+    lines += ["Per route:", "", G.table(sorted(table, key=lambda r: (r["route"], r["method"])), cols, why), ""]
     for m, rs in rels.items():
         fig, ax = plt.subplots(figsize=(5.2, 4.6))
         plot_reliability(list(rs.values()), list(rs), ax=ax,
@@ -131,13 +136,14 @@ def checks(table, ctx):
     allb = sum(f[2] for f in fams.values())
     ece = pooled_reliability(*allb).ece
     worst_ece = max(fams, key=lambda k: pooled_reliability(*fams[k][2]).ece)
-    q = " (quick: one zone of one route)" if ctx.quick else ""
-    return [Check(f"w6 settled IoU ≥ {TARGET_IOU} on every family ({ctx.split}){q}", fams[worst][1] >= TARGET_IOU,
-                  f"worst {worst}: {fams[worst][1]:.3f}",
-                  # recorded in benchmarks/RESULTS.md at full size: uniform, stripes and checker miss it
-                  known_miss=not ctx.quick),
-            Check(f"w6 ECE of P(ground) ≤ {TARGET_ECE} ({ctx.split}, settled frames pooled){q}", ece <= TARGET_ECE,
-                  f"{ece:.4f}; worst family {worst_ece}: {pooled_reliability(*fams[worst_ece][2]).ece:.4f}")]
+    missed = sorted(k for k, f in fams.items() if not f[1] >= TARGET_IOU)
+    n = f" ({len(fams)} famil{'ies' if len(fams) != 1 else 'y'} with settled frames)"
+    return [Check(f"w6 settled IoU ≥ {TARGET_IOU} on every family ({ctx.split})", not missed,
+                  f"worst {worst}: {fams[worst][1]:.3f}{n}" + (f"; below: {', '.join(missed)}" if missed else ""),
+                  # a miss only on families recorded as missing it is known; any other family is a regression
+                  known_miss=bool(missed) and set(missed) <= set(RECORDED_IOU_MISSES)),
+            Check(f"w6 ECE of P(ground) ≤ {TARGET_ECE} ({ctx.split}, settled frames pooled)", ece <= TARGET_ECE,
+                  f"{ece:.4f}{n}; worst family {worst_ece}: {pooled_reliability(*fams[worst_ece][2]).ece:.4f}")]
 
 
 EXPERIMENT = Experiment(
@@ -147,6 +153,9 @@ EXPERIMENT = Experiment(
     grid={"route": list(DEV_ROUTES), "method": ["w6", "u6", "w6_nocal"]},
     methods={"method": "vo"},
     splits={"dev": {"seeds": [0]}, "test": {"seeds": [10_000], "grid": {"route": list(G.TEST_ROUTES)}}},
-    sizes={"quick": {"n_seeds": 1, "grid": {"route": ["quick"], "method": ["w6"]}}, "full": {}},
+    choices={"route": G.route_choices},
+    params=dict(G.ROUTE_PARAMS),
+    sizes={"quick": {"n_seeds": 1, "grid": {"route": ["quick"], "method": ["w6"]}, "params": dict(G.QUICK_PARAMS)},
+           "full": {}},
     trial=trial, summarize=summarize, checks=checks,
 )

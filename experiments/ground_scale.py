@@ -1,4 +1,4 @@
-"""ground_scale: scale error ΔV_mean of the raw RANSAC speed, weighted vs uniform sampling (spec §8.4).
+"""ground_scale: scale error ΔV_mean of the raw RANSAC speed, weighted vs uniform sampling.
 
 The candidate sets and re-fitting protocol of ``ground_success`` (one online w6 pass per route collects
 the RANSAC candidates and their learned P(ground); every condition re-fits RANSAC on the same
@@ -112,6 +112,7 @@ EXPERIMENT = Experiment(
     description="scale error ΔV_mean (Laplace scale of the raw RANSAC speed error): weighted vs uniform sampling",
     grid={"data": ["dev10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(G.ITERATIONS)},
     splits={"dev": {"seeds": range(10)}, "test": {"seeds": range(10_000, 10_010), "grid": {"data": ["test12"]}}},
+    choices={"data": ["quick", *G.DATASETS]},
     sizes={"quick": {"n_seeds": 5, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "n_iter": [1, 4, 16, 55]}},
            "full": {}},
     trial=trial, summarize=summarize, checks=checks, findings=findings,

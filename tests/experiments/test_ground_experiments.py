@@ -58,7 +58,9 @@ def test_ground_odometry_quick(tmp_path, split):
     np.testing.assert_allclose(metrics.read_kitti(w6 / "w6_kitti.txt"), z["est"], atol=1e-12)
     assert row["oracle_t_pct_scaled"] <= row["t_pct_scaled"]
     summary = (tmp_path / "summary.md").read_text()
-    assert "nan" not in summary and "t_pct_scaled" in summary
+    assert "nan" not in summary and "| t_pct_scaled |" in summary and "| t_pct |" not in summary
+    assert "Not shown: `t_pct`, `r_degm` (no 100 m KITTI segment on routes under 100 m)." in summary
+    assert res.config["params"] == {"max_frames": 120}
 
 
 class ConstantSpeedVO:
