@@ -3,16 +3,17 @@
 registry).
 
 - Splits and sizes as data: ``dev`` is the 16 tabletop sequences at seed 0 (the ones every earlier
-  result was tuned and recorded on) plus the 4 ``dev_appearance`` sequences of issue 13; ``test``
-  is the held-out suite (:data:`polar_sim.sim.tabletop_sequences.TEST_SEQUENCES`) at seed 10,000.
-  The quick size tracks 40-50-frame cuts of ``mug_touch`` and ``drill_lift`` at 320x240 (seed 0 on
-  dev, 10,000 on test).
+  result was tuned and recorded on) plus the 4 ``dev_appearance`` sequences; ``test`` is the
+  held-out suite (:data:`polar_sim.sim.tabletop_sequences.TEST_SEQUENCES`) at seed 10,000. The
+  protocol's params (:data:`PARAMS`): ``span`` "all" tracks every frame of a sequence, "ci" its
+  CI cut (:data:`CI_CUTS`); ``width`` x ``height`` is the image size. The quick size tracks the
+  40-50-frame CI cuts of ``mug_touch`` and ``drill_lift`` at 320x240 (seed 0 on dev, 10,000 on test).
 - :func:`track` runs a ``tracker`` plug-in (:mod:`polar_sim.runner.methods`) over a recording from
   the one cache (:func:`polar_sim.sim.tabletop_sequences.cached_sequence`) and scores every frame
   with :mod:`polar_sim.metrics`. Runs of built-in methods are memoised in the same cache (kind
   ``tracks``), keyed by the code of the tracker and the metrics, so the experiments that score the
   same runs (variants, segmentation, ablation) run each tracker once.
-- :func:`summarize_run` reduces the per-frame arrays to one result row.
+- :func:`summarize_run` reduces the per-frame arrays to one result row with :mod:`polar_sim.metrics`.
 """
 
 from __future__ import annotations
@@ -32,11 +33,16 @@ DEV = list_sequences("dev") + list_sequences("dev_appearance")
 TEST = list_sequences("test")
 SPLITS = {"dev": {"seeds": list(SPLIT_SEEDS["dev"]), "grid": {"sequence": DEV}},
           "test": {"seeds": list(SPLIT_SEEDS["test"]), "grid": {"sequence": TEST}}}
-#: CI cuts (first frame, end frame) at 320x240: the palm coming down and resting on the mug, the
-#: drill grasped and lifted (20-30 frames before the hand arrives, so the appearance is learned).
-QUICK_CUTS = {"mug_touch": (80, 125), "drill_lift": (90, 140)}
-QUICK_SIZE, FULL_SIZE = (320, 240), (640, 480)
-SIZES = {"quick": {"n_seeds": 1, "grid": {"sequence": list(QUICK_CUTS)}}, "full": {}}
+#: The values the ``sequence`` axis accepts (``--set sequence=[...]``): every dev and test sequence.
+CHOICES = {"sequence": functools.partial(list_sequences, "all")}
+#: CI cuts (first frame, end frame): the palm coming down and resting on the mug, the drill grasped
+#: and lifted (20-30 frames before the hand arrives, so the appearance is learned); other
+#: sequences are cut to their first 40 frames.
+CI_CUTS = {"mug_touch": (80, 125), "drill_lift": (90, 140)}
+#: The protocol at the full size (``--set span=ci`` etc. overrides a run's).
+PARAMS = {"span": "all", "width": 640, "height": 480}
+QUICK_PARAMS = {"span": "ci", "width": 320, "height": 240}
+SIZES = {"quick": {"n_seeds": 1, "grid": {"sequence": list(CI_CUTS)}, "params": QUICK_PARAMS}, "full": {}}
 VARIANTS = ["h", "su", "sw", "wu", "ww"]
 #: ICG (Stoiber et al., CVPR 2022): 1.3 ms per frame on one CPU core.
 ICG_MS = 1.3
@@ -93,19 +99,22 @@ def model(obj, n=N_MODEL):
     return np.asarray(P, float), np.asarray(mesh.face_normals[face], float)
 
 
-def cut_of(name, quick):
-    """(first frame, end frame, width, height) tracked for sequence ``name``."""
+def cut_of(name, params):
+    """(first frame, end frame, width, height) tracked for sequence ``name`` under the run's
+    ``params`` (:data:`PARAMS`)."""
     from polar_sim.sim.tabletop_sequences import sequence_spec
 
-    if quick:
-        return (*QUICK_CUTS.get(name, (0, 40)), *QUICK_SIZE)
-    return (0, sequence_spec(name).frames, *FULL_SIZE)
+    span = params["span"]
+    if span not in ("all", "ci"):
+        raise ValueError(f"span: expected 'all' (every frame) or 'ci' (the CI cut), got {span!r}")
+    start, end = CI_CUTS.get(name, (0, 40)) if span == "ci" else (0, sequence_spec(name).frames)
+    return start, end, int(params["width"]), int(params["height"])
 
 
-def recording(name, seed, quick):
-    """The cached recording (a lazy reader) and the cut of ``name`` at the size."""
-    start, end, w, h = cut_of(name, quick)
-    return cached_sequence(name, seed, end if quick else None, width=w, height=h), start, end
+def recording(name, seed, params):
+    """The cached recording (a lazy reader, recorded up to the cut's end) and the cut of ``name``."""
+    start, end, w, h = cut_of(name, params)
+    return cached_sequence(name, seed, end, width=w, height=h), start, end
 
 
 @functools.lru_cache(maxsize=1)
@@ -118,7 +127,8 @@ def _source_hash():
     import polar_sim
 
     root = Path(polar_sim.__file__).parent
-    h = hashlib.sha1(f"{SCORING_VERSION}{inspect.getsource(_run)}{inspect.getsource(_bins)}".encode())
+    code = inspect.getsource(_run) + inspect.getsource(metrics.reliability_counts)
+    h = hashlib.sha1(f"{SCORING_VERSION}{code}".encode())
     files = [*(root / "tracking").glob("*.py"), *(root / "metrics" / f for f in ("pose.py", "segmentation.py",
                                                                                   "calibration.py"))]
     for p in sorted(files):
@@ -127,23 +137,24 @@ def _source_hash():
 
 
 def _bins(prob, truth, valid):
-    """Reliability sums per bin (3, N_BINS): count, sum of P, sum of truth (pooled ECE adds them)."""
-    r = metrics.reliability(prob, truth, n_bins=N_BINS, valid=valid)
-    return np.stack([r.count, r.count * np.nan_to_num(r.confidence), r.count * np.nan_to_num(r.frequency)])
+    """Reliability counts (3, N_BINS) of one frame: count, sum of P, sum of truth per bin."""
+    return np.stack(metrics.reliability_counts(prob, truth, n_bins=N_BINS, valid=valid))
 
 
-def pooled_ece(bins):
-    """ECE of reliability sums (..., 3, N_BINS) added over the leading axes."""
-    b = np.asarray(bins).reshape(-1, 3, N_BINS).sum(axis=0)
-    return float(np.abs(b[2] - b[1]).sum() / max(b[0].sum(), 1))
+def ece(bins):
+    """Expected calibration error of reliability counts (..., 3, N_BINS) added over the leading
+    axes (frames, runs); NaN without any pixel (no P(target) map)."""
+    c, p, y = np.asarray(bins, dtype=np.float64).reshape(-1, 3, N_BINS).sum(axis=0)
+    return metrics.pooled_reliability(c, p, y).ece if c.sum() else float("nan")
 
 
-def track(name, seed, method, *, quick, on_frame=None, stop=None, tracker_kw=None):
-    """Run tracker ``method`` over sequence ``name`` and score every frame: (arrays, meta)."""
+def track(name, seed, method, *, params, on_frame=None, stop=None, tracker_kw=None):
+    """Run tracker ``method`` over the cut of sequence ``name`` (``params``: :data:`PARAMS`) and
+    score every frame: (arrays, meta)."""
     from polar_sim.runner.methods import get_method
     from polar_sim.sim import sequences
 
-    rec, start, end = recording(name, seed, quick)
+    rec, start, end = recording(name, seed, params)
     end = end if stop is None else min(end, int(stop))
     memo = on_frame is None and tracker_kw is None and ":" not in method and os.environ.get("POLAR_SIM_TRACK_MEMO", "1") != "0"
     from polar_sim.runner.methods import TRACKERS
@@ -212,34 +223,36 @@ def _run(rec, start, end, factory, kw, on_frame):
     return out
 
 
-def _rate(x):
-    x = np.asarray(x)
-    return float(x.mean()) if x.size else float("nan")
+def trial(params, seed, ctx):
+    """The trial of ``tracking_variants``, ``_segmentation`` and ``_ablation``: track the sequence
+    with the method, save the per-frame arrays, return one row."""
+    a, meta = track(params["sequence"], seed, params["method"], params=ctx.params)
+    trial_arrays(ctx, a, meta)
+    return summarize_run(a, meta)
 
 
 def summarize_run(a, meta):
     """One result row from the per-frame arrays of :func:`track`."""
-    d = meta["diameter"]
+    d, iou = meta["diameter"], a["iou"]
     e = a["adds"] if meta["symmetry"] != "none" else a["add"]   # ADD(-S): ADD-S for revolved objects
     touch = a["in_contact"] & (a["occlusion"] > TOUCH_OCCLUSION)
     cpu = a["cpu_ms"][1:] if len(a["cpu_ms"]) > 1 else a["cpu_ms"]   # first frame: JIT and caches
     hn, ht = a["hand_near"][a["in_contact"]].sum(), a["hand_near_tgt"][a["in_contact"]].sum()
+    precision, recall = metrics.pooled_precision_recall(a["n_tp"], a["n_pred"], a["n_gt"])
     drift = metrics.static_rotation_drift(a["pose_gt"], a["pose"])
     return {
         "object": meta["object"], "appearance": meta["appearance"], "diameter_cm": round(100 * d, 2),
         "symmetry": meta["symmetry"], "frames": int(len(e)),
-        "add_ok": _rate(e < 0.1 * d), "add_strict_ok": _rate(a["add"] < 0.1 * d),
+        "add_ok": metrics.add_success_rate(e, d), "add_strict_ok": metrics.add_success_rate(a["add"], d),
         "add_mean_mm": float(1000 * np.mean(e)), "add_auc": float(metrics.pose_auc(e, 0.1)),
-        "s5cm5deg": _rate((a["trans"] < 0.05) & (a["rot"] < np.deg2rad(5.0))),
-        "iou_ok": _rate(a["iou"] > 0.5), "iou_mean": float(np.mean(a["iou"])),
-        "iou_auc": float(metrics.iou_success_curve(a["iou"])[2]),
-        "precision": float(a["n_tp"].sum() / a["n_pred"].sum()) if a["n_pred"].sum() else 1.0,
-        "recall": float(a["n_tp"].sum() / a["n_gt"].sum()) if a["n_gt"].sum() else 1.0,
+        "s5cm5deg": metrics.success_5cm5deg_rate(a["rot"], a["trans"]),
+        "iou_ok": metrics.iou_success_rate(iou), "iou_mean": float(np.mean(iou)),
+        "iou_auc": float(metrics.iou_success_curve(iou)[2]), "precision": precision, "recall": recall,
         "touch_frames": int(a["in_contact"].sum()), "hand_px_touch": int(hn), "hand_tgt_px_touch": int(ht),
-        "hand_as_target": float(ht / hn) if hn else float("nan"),
-        "occl_frames": int(touch.sum()), "occl_add_ok": _rate((e < 0.1 * d)[touch]),
-        "occl_iou_ok": _rate((a["iou"] > 0.5)[touch]), "occlusion_max": float(a["occlusion"].max()),
-        "ece": pooled_ece(a["cal_bins"]), "ece_raw": pooled_ece(a["raw_bins"]),
+        "hand_as_target": metrics.pooled_occluder_as_target(a["hand_near"], a["hand_near_tgt"], where=a["in_contact"]),
+        "occl_frames": int(touch.sum()), "occl_add_ok": metrics.add_success_rate(e, d, where=touch),
+        "occl_iou_ok": metrics.iou_success_rate(iou, where=touch), "occlusion_max": float(a["occlusion"].max()),
+        "ece": ece(a["cal_bins"]), "ece_raw": ece(a["raw_bins"]),
         "static_frames": int(drift.frames.sum()), "drift_deg": float(np.rad2deg(drift.max_drift)),
         "lost": int(a["lost"].sum()), "first_loss": int(metrics.frames_until_loss(e, 0.3 * d)),
         "ar_mssd": float(metrics.ar_mssd(a["mssd"], d)), "ar_mspd": float(metrics.ar_mspd(a["mspd"], meta["width"])),
@@ -259,15 +272,6 @@ def trial_arrays(ctx, a, meta):
                     occlusion=a["occlusion"])
 
 
-def spearman(x, y):
-    """Spearman rank correlation (NaN for fewer than 3 values or a constant input)."""
-    from scipy.stats import spearmanr
-
-    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:   # undefined for constant inputs
-        return float("nan")
-    return float(spearmanr(x, y).statistic)
-
-
 def cost_vs_size(table, ctx, method):
     """CPU ms per frame of ``method`` (all frames of the table) against the object's and the ROI's pixels."""
     cpu, roi, tgt = [], [], []
@@ -276,20 +280,22 @@ def cost_vs_size(table, ctx, method):
         cpu.append(z["cpu_ms"][1:]), roi.append(z["roi_px"][1:]), tgt.append(z["target_px"][1:])
     cpu, roi, tgt = map(np.concatenate, (cpu, roi, tgt))
     slope, icpt = np.polyfit(tgt / 1e4, cpu, 1) if np.ptp(tgt) > 0 else (float("nan"), float(np.median(cpu)))
-    return dict(frames=len(cpu), rho_target=spearman(tgt, cpu), rho_roi=spearman(roi, cpu), slope=slope, icpt=icpt,
-                q=np.percentile(cpu, [50, 95]), cpu=cpu, tgt=tgt)
+    return dict(frames=len(cpu), rho_target=metrics.spearman(tgt, cpu), rho_roi=metrics.spearman(roi, cpu),
+                slope=slope, icpt=icpt, q=np.percentile(cpu, [50, 95]), cpu=cpu, tgt=tgt)
 
 
 def by(table, key, value):
     return [r for r in table if r[key] == value]
 
 
+def col(rows, key):
+    """Column ``key`` of result rows as floats (an empty cell, None, as NaN)."""
+    return np.array([np.nan if r[key] is None else r[key] for r in rows], float)
+
+
 def pooled(rows, num, den="frames"):
-    """Frame-weighted mean of a per-run rate over rows (the rate over all frames pooled)."""
-    w = np.array([r[den] for r in rows], float)
-    v = np.array([r[num] for r in rows], float)
-    ok = np.isfinite(v) & (w > 0)
-    return float((v[ok] * w[ok]).sum() / w[ok].sum()) if ok.any() else float("nan")
+    """A per-run rate pooled over rows, weighted by their frames (the rate over all frames)."""
+    return metrics.pooled_rate(col(rows, num), col(rows, den))
 
 
 def group(table, split):
@@ -304,16 +310,16 @@ def rate_rows(table, key, order):
         rs = by(table, key, v)
         if not rs:
             continue
-        hn = sum(r["hand_px_touch"] for r in rs)
         rows.append({
             key: v, "sequences": len(rs), "frames": int(sum(r["frames"] for r in rs)),
             "add_ok": pooled(rs, "add_ok"), "add_ok_seqmin": float(np.min([r["add_ok"] for r in rs])),
             "add_strict_ok": pooled(rs, "add_strict_ok"), "add_auc": pooled(rs, "add_auc"),
             "s5cm5deg": pooled(rs, "s5cm5deg"), "iou_ok": pooled(rs, "iou_ok"), "iou_mean": pooled(rs, "iou_mean"),
-            "hand_as_target": sum(r["hand_tgt_px_touch"] for r in rs) / hn if hn else float("nan"),
+            "hand_as_target": metrics.pooled_occluder_as_target([r["hand_px_touch"] for r in rs],
+                                                                [r["hand_tgt_px_touch"] for r in rs]),
             "occl_frames": int(sum(r["occl_frames"] for r in rs)),
             "occl_add_ok": pooled(rs, "occl_add_ok", "occl_frames"), "occl_iou_ok": pooled(rs, "occl_iou_ok", "occl_frames"),
-            "drift_deg_max": float(np.nanmax([np.nan if r["drift_deg"] is None else r["drift_deg"] for r in rs] + [np.nan])), "lost": int(sum(r["lost"] for r in rs)),
+            "drift_deg_max": float(np.nanmax([*col(rs, "drift_deg"), np.nan])), "lost": int(sum(r["lost"] for r in rs)),
             "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rs])),
         })
     return rows

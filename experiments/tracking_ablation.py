@@ -2,10 +2,10 @@
 
 The full method (``ww``, every default) beside configurations that switch one part (spec 7.4):
 ``shape-only`` (appearance off), ``no-motion`` (the prediction is the last pose), ``spatial-prior``
-(the blurred predicted silhouette as the prior pi, the spec's form with epsilon 0.02, off by default
-since issue 13) and ``spatial-prior-0.1`` (the same prior softened to epsilon 0.1),
+(the blurred predicted silhouette as the prior pi, the spec's form with epsilon 0.02; off by default,
+as chosen on dev) and ``spatial-prior-0.1`` (the same prior softened to epsilon 0.1),
 ``alpha-beta`` (the spec's fallback filter), ``no-hold`` (velocity integrated along directions the
-points do not constrain, as before issue 13) and ``plain-icp`` (robust ICP on every ROI point, no
+points do not constrain, the tracker's earlier behaviour) and ``plain-icp`` (robust ICP on every ROI point, no
 appearance, no label weighting). Not run: oracle-mask ICP, appearance without shape and learned
 visibility (no such switch), and ICG/M3T (not installable here).
 
@@ -31,9 +31,7 @@ ORDER = C.VARIANTS + ABLATIONS
 
 
 def trial(params, seed, ctx):
-    a, meta = C.track(params["sequence"], seed, params["method"], quick=ctx.quick)
-    C.trial_arrays(ctx, a, meta)
-    return {**C.summarize_run(a, meta), "what": "ablation" if params["method"] in ABLATIONS else "variant"}
+    return {**C.trial(params, seed, ctx), "what": "ablation" if params["method"] in ABLATIONS else "variant"}
 
 
 def summarize(table, ctx):
@@ -114,6 +112,8 @@ EXPERIMENT = Experiment(
                 "no hold of unobserved directions, plain ICP) against the variants, under occlusion by touch",
     grid={"sequence": C.DEV, "method": ORDER},
     methods={"method": "tracker"},
+    choices=C.CHOICES,
+    params=C.PARAMS,
     splits=C.SPLITS,
     sizes=C.SIZES,
     trial=trial, summarize=summarize, checks=checks, findings=findings,

@@ -29,12 +29,6 @@ ORDER = C.VARIANTS + ["shape-only"]
 HAND_MAX, ECE_MAX = 0.05, 0.05
 
 
-def trial(params, seed, ctx):
-    a, meta = C.track(params["sequence"], seed, params["method"], quick=ctx.quick)
-    C.trial_arrays(ctx, a, meta)
-    return C.summarize_run(a, meta)
-
-
 def _bins(rows, ctx, key):
     return np.sum([ctx.arrays(r)[key].sum(axis=0) for r in rows], axis=0)
 
@@ -55,7 +49,7 @@ def _rows(table, ctx):
                                          "occl_iou_ok", "hand_as_target")},
                     "precision": C.pooled(rs, "precision"), "recall": C.pooled(rs, "recall"),
                     "hand_worst": f"{worst['sequence']} {100 * worst['hand_as_target']:.1f} %" if worst else "",
-                    "ece": C.pooled_ece(_bins(rs, ctx, "cal_bins")), "ece_raw": C.pooled_ece(_bins(rs, ctx, "raw_bins"))})
+                    "ece": C.ece(_bins(rs, ctx, "cal_bins")), "ece_raw": C.ece(_bins(rs, ctx, "raw_bins"))})
     return out
 
 
@@ -94,14 +88,11 @@ def summarize(table, ctx):
     ax[1].set(ylabel="% of hand pixels labelled target", title="the hand while touching")
     ax[1].legend(fontsize=7, ncol=2)
     ww = C.by(head, "method", ref)
-
-    def rel(key):
-        b = _bins(ww, ctx, key)
-        with np.errstate(invalid="ignore"):
-            return metrics.Reliability(np.linspace(0, 1, C.N_BINS + 1), b[0].astype(np.int64), b[1] / b[0], b[2] / b[0],
-                                       C.pooled_ece(b), float("nan"), int(b[0].sum()))
-    metrics.plot_reliability([rel("cal_bins"), rel("raw_bins")], ["P(target), calibrated", "raw prediction map"],
-                             ax=ax[2], title=f"{ref}, ROI pixels ({ctx.split})")
+    rels = [_bins(ww, ctx, k) for k in ("cal_bins", "raw_bins")]
+    if all(b[0].sum() for b in rels):   # a method without a P(target) map has no reliability diagram
+        metrics.plot_reliability([metrics.pooled_reliability(*b) for b in rels],
+                                 ["P(target), calibrated", "raw prediction map"], ax=ax[2],
+                                 title=f"{ref}, ROI pixels ({ctx.split})")
     fig.tight_layout()
     return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_segmentation")])
 
@@ -135,7 +126,9 @@ EXPERIMENT = Experiment(
                 "(ECE, reliability) of P(target)",
     grid={"sequence": C.DEV, "method": ORDER},
     methods={"method": "tracker"},
+    choices=C.CHOICES,
+    params=C.PARAMS,
     splits=C.SPLITS,
     sizes=C.SIZES,
-    trial=trial, summarize=summarize, checks=checks, findings=findings,
+    trial=C.trial, summarize=summarize, checks=checks, findings=findings,
 )

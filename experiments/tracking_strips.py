@@ -12,7 +12,7 @@ frame shows, on the same crop:
 5. the final mask (cyan) with the true visible outline (green).
 
 Each trial writes ``strip.png``; the summary stacks them into ``tracking_strips.png`` and six into
-``tracking_strips_readme.png``. The quick size draws the strip of the 320x240 ``mug_touch`` cut.
+``tracking_strips_readme.png``. The quick size draws the strip of the 320x240 ``mug_touch`` CI cut.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ README_SEQUENCES = ["mug_touch", "drill_lift", "box_turn", "can_fast", "skin_box
 
 def trial(params, seed, ctx):
     name, method = params["sequence"], params["method"]
-    rec, start, end = C.recording(name, seed, ctx.quick)
+    rec, start, end = C.recording(name, seed, ctx.params)
     values = {k: rec.stack(k) for k in ("occlusion", "in_contact", "T_cam_obj")}
     k = pictures.pick_frame(values, start, end)
     keep = {}
@@ -45,7 +45,7 @@ def trial(params, seed, ctx):
         if i == k:
             keep.update(fr=fr, r=r)
 
-    C.track(name, seed, method, quick=ctx.quick, on_frame=grab, stop=k + 1, tracker_kw={"debug_maps": True})
+    C.track(name, seed, method, params=ctx.params, on_frame=grab, stop=k + 1, tracker_kw={"debug_maps": True})
     fr, r = keep["fr"], keep["r"]
     K, obj, d = np.array(rec.meta["K"], float), rec.meta["object"], float(rec.meta["diameter"])
     P, _ = C.model(obj)
@@ -88,7 +88,9 @@ EXPERIMENT = Experiment(
                 "prediction, prediction map, final mask",
     grid={"sequence": C.DEV, "method": ["ww"]},
     methods={"method": "tracker"},
+    choices=C.CHOICES,
+    params=C.PARAMS,
     splits=C.SPLITS,
-    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": ["mug_touch"]}}, "full": {}},
+    sizes={"quick": {"n_seeds": 1, "grid": {"sequence": ["mug_touch"]}, "params": C.QUICK_PARAMS}, "full": {}},
     trial=trial, summarize=summarize, checks=checks,
 )

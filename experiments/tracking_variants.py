@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_table
 
@@ -26,12 +27,9 @@ except ImportError:  # pragma: no cover
 #: distinct = asymmetric and non-convex; cuboid = flat faces; revolved = symmetric about an axis
 SHAPE = {"drill": "distinct", "mug": "distinct", "bracket": "distinct", "blocks": "distinct", "box": "cuboid",
          "cube": "cuboid", "bottle": "revolved", "can": "revolved"}
-
-
-def trial(params, seed, ctx):
-    a, meta = C.track(params["sequence"], seed, params["method"], quick=ctx.quick)
-    C.trial_arrays(ctx, a, meta)
-    return C.summarize_run(a, meta)
+SHAPE_NOT_TESTED = ("distinctness of shape is not measured (the summary's shape labels are set by hand; the objects "
+                    "record only whether they are revolved, which makes the score ADD-S, so those groups are not "
+                    "comparable)")
 
 
 def _ref(table):
@@ -41,11 +39,13 @@ def _ref(table):
 
 
 def _size_rows(table):
-    """Fig. 5.8: one row per sequence of ww (not pooled over variants), with the object's size and shape."""
+    """Fig. 5.8: one row per sequence of ww (not pooled over variants), with the object's size and
+    shape, and the Spearman correlation of diameter with ADD(-S) AUC over them (NaN when undefined)."""
     rows = [{"sequence": r["sequence"], "object": r["object"], "diameter_cm": r["diameter_cm"],
-             "shape": SHAPE.get(r["object"], "?"), "add_ok": r["add_ok"], "add_auc": r["add_auc"],
-             "iou_ok": r["iou_ok"]} for r in C.by(table, "method", _ref(table))]
-    return sorted(rows, key=lambda r: -r["diameter_cm"])
+             "shape": SHAPE.get(r["object"], "?"), "symmetry": r["symmetry"], "add_ok": r["add_ok"],
+             "add_auc": r["add_auc"], "iou_ok": r["iou_ok"]} for r in C.by(table, "method", _ref(table))]
+    rows = sorted(rows, key=lambda r: -r["diameter_cm"])
+    return rows, metrics.spearman(C.col(rows, "diameter_cm"), C.col(rows, "add_auc"))
 
 
 def summarize(table, ctx):
@@ -68,8 +68,7 @@ def summarize(table, ctx):
     pcols = ["sequence", "object", "appearance"] + [f"{m}_{v}" for m in ("add", "iou") for v in C.VARIANTS
                                                     if any(f"{m}_{v}" in p for p in prow)]
     write_csv_table(prow, pcols, ctx.out_dir / "tracking_variants_sequences.csv")
-    srows = _size_rows(table)
-    rho = C.spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
+    srows, rho = _size_rows(table)
     cost = C.cost_vs_size(table, ctx, _ref(table))
     lines = [f"Split **{ctx.split}**, {len(seqs)} sequences at {table[0]['width']} px wide, seeds "
              f"{sorted({r['seed'] for r in table})}. The pooled rows use {len({r['sequence'] for r in head})} "
@@ -79,7 +78,8 @@ def summarize(table, ctx):
              "### Per sequence", "", markdown_table(prow, pcols), "",
              "### Object size and shape (ww, one point per sequence, as Fig. 5.8)", "",
              markdown_table(srows, list(srows[0])), "",
-             f"Spearman correlation of diameter with ADD(-S) AUC over the {len(srows)} sequences: {fmt(rho)}.", "",
+             f"Spearman correlation of diameter with ADD(-S) AUC over the {len(srows)} sequences: {fmt(rho)}"
+             + ("." if np.isfinite(rho) else " (undefined for fewer than 3 sequences or a constant input)."), "",
              "### Speed", "",
              f"{_ref(table)}, {cost['frames']} frames: CPU ms per frame median {cost['q'][0]:.1f}, 95th percentile "
              f"{cost['q'][1]:.1f} ({1000 / cost['q'][0]:.0f} frames/s; ICG takes {C.ICG_MS} ms). Spearman "
@@ -109,15 +109,16 @@ def checks(table, ctx):
     out = [Check(f"{m}: ADD(-S) < 0.1 d on >= 95 % of frames", ww["add_ok"] >= 0.95,
                  f"{100 * ww['add_ok']:.1f} % (lowest sequence {100 * ww['add_ok_seqmin']:.1f} %)"),
            Check(f"{m}: IoU > 0.5 on >= 95 % of frames", ww["iou_ok"] >= 0.95, f"{100 * ww['iou_ok']:.1f} %")]
-    if not ctx.quick:   # 300-frame rests and speed at 640x480 (the quick size: 45-frame cuts at 320x240)
+    if ctx.params["span"] == "all":   # the 300-frame rests are in the whole sequences, not the CI cuts
+        out.append(Check(f"{m}: an object at rest drifts <= 2 deg in rotation over 300 frames",
+                         ww["drift_deg_max"] <= 2.0, f"largest drift {ww['drift_deg_max']:.2f} deg",
+                         # recorded in benchmarks/RESULTS.md: mug_touch_random, the hand's points pull the
+                         # (observable) rotation while the palm hides 85 % of the mug
+                         known_miss=True))
+    if (ctx.params["width"], ctx.params["height"]) == (640, 480):   # the speed target is set at 640x480
         ms = ww["cpu_ms_median"]
-        out += [Check(f"{m}: an object at rest drifts <= 2 deg in rotation over 300 frames", ww["drift_deg_max"] <= 2.0,
-                      f"largest drift {ww['drift_deg_max']:.2f} deg",
-                      # recorded in benchmarks/RESULTS.md: mug_touch_random, the hand's points pull the
-                      # (observable) rotation while the palm hides 85 % of the mug
-                      known_miss=True),
-                Check(f"{m} >= 30 frames/s at 640x480 on one thread (CPU time)", 1000 / ms >= 30,
-                      f"{1000 / ms:.0f} frames/s ({ms:.1f} ms, median of the sequences' medians)")]
+        out.append(Check(f"{m} >= 30 frames/s at 640x480 on one thread (CPU time)", 1000 / ms >= 30,
+                         f"{1000 / ms:.0f} frames/s ({ms:.1f} ms, median of the sequences' medians)"))
     return out
 
 
@@ -126,16 +127,22 @@ def findings(table, ctx):
     if len(vr) < 4:
         return []
     lo, hi = min(r["add_ok"] for r in vr), max(r["add_ok"] for r in vr)
-    srows = _size_rows(table)
-    rho = C.spearman([r["diameter_cm"] for r in srows], [r["add_auc"] for r in srows])
+    srows, rho = _size_rows(table)
+    n, ok = len(srows), bool(np.isfinite(rho))
+    size = f"Spearman(diameter, ADD(-S) AUC) = {fmt(rho)} over {n} sequences" if ok else (
+        f"Spearman(diameter, ADD(-S) AUC) undefined over {n} sequences ({len(set(C.col(srows, 'diameter_cm')))} "
+        f"diameters, {len(set(C.col(srows, 'add_auc')))} AUC values)")
     return [Finding("Ch. 5, Fig. 5.6", "the four implementations perform similarly",
                     f"ADD(-S) < 0.1 d {100 * lo:.1f}-{100 * hi:.1f} % over Su, Sw, Wu, Ww ({ctx.split})",
                     "held" if hi - lo <= 0.03 else "partly held",
                     "simulated tabletop sequences, hand-crafted multi-scale features instead of a CNN"),
             Finding("Ch. 5, Fig. 5.8", "larger objects of distinct shape show higher success rates",
-                    f"Ww per sequence: Spearman(diameter, ADD AUC) = {fmt(rho)} over {len(srows)} sequences",
-                    "held" if rho > 0.3 else "partly held" if rho > 0 else "not held",
-                    "per sequence for Ww, as in Fig. 5.8; our objects are simulated meshes")]
+                    f"Ww, one point per sequence: {size}; shape not tested",
+                    ("held" if rho > 0.3 else "partly held" if rho > 0 else "not held") if ok
+                    else "not tested the same way",
+                    ("the verdict is on size alone; " if ok else "a rank correlation needs >= 3 sequences of "
+                     "different diameters and AUCs, so this run does not test size; ") + SHAPE_NOT_TESTED +
+                    "; per sequence for Ww, as in Fig. 5.8; simulated meshes")]
 
 
 EXPERIMENT = Experiment(
@@ -144,7 +151,9 @@ EXPERIMENT = Experiment(
                 "size and shape, and speed at 640x480",
     grid={"sequence": C.DEV, "method": C.VARIANTS},
     methods={"method": "tracker"},
+    choices=C.CHOICES,
+    params=C.PARAMS,
     splits=C.SPLITS,
     sizes=C.SIZES,
-    trial=trial, summarize=summarize, checks=checks, findings=findings,
+    trial=C.trial, summarize=summarize, checks=checks, findings=findings,
 )

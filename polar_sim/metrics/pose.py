@@ -1,4 +1,5 @@
 """Pose metrics: ADD, ADD-S, 5 cm / 5 deg, AUC, success rates and the BOP errors VSD, MSSD, MSPD.
+The rates of a run over selected frames, their pooling over runs, and a rank correlation are at the end.
 
 Conventions: poses are 4x4 ``T_cam_obj`` (object to camera), one pose (4, 4) or a stack (n, 4, 4);
 model points (m, 3) in the object frame, metres; errors in metres (ADD, ADD-S, MSSD), pixels
@@ -46,6 +47,10 @@ __all__ = [
     "BOP_VSD_THETAS",
     "BOP_MSSD_FRACTIONS",
     "BOP_MSPD_PIXELS",
+    "add_success_rate",
+    "success_5cm5deg_rate",
+    "pooled_rate",
+    "spearman",
 ]
 
 #: BOP19 VSD misalignment tolerances tau (fractions of the diameter) and correctness thresholds.
@@ -451,3 +456,70 @@ def ar_mssd(mssd_errors, diameter, fractions=BOP_MSSD_FRACTIONS):
 def ar_mspd(mspd_errors, image_width, pixels=BOP_MSPD_PIXELS):
     """AR_MSPD: recall averaged over thresholds pixels * image_width / 640."""
     return bop_recall(mspd_errors, np.asarray(pixels) * as_positive_float(image_width, "image_width") / 640.0)
+
+
+# -- rates of a run, pooled over runs -------------------------------------------------------
+def _selected(flags, where, name):
+    """Boolean flags (n,) of the frames selected by ``where`` (n,) bool (every frame if None)."""
+    f = np.asarray(flags)
+    if f.dtype != bool or f.ndim != 1:
+        raise ValueError(f"{name}: expected a 1-D boolean array, got {f.dtype} {f.shape}")
+    if where is None:
+        return f
+    w = np.asarray(where)
+    if w.dtype != bool or w.shape != f.shape:
+        raise ValueError(f"where: expected a boolean array of shape {f.shape}, got {w.dtype} {w.shape}")
+    return f[w]
+
+
+def _rate(flags):
+    return float(flags.mean()) if flags.size else float("nan")
+
+
+def add_success_rate(errors, diameter, k=0.1, *, where=None):
+    """Fraction of the frames selected by ``where`` (n,) bool (all if None) whose ADD or ADD-S
+    error (n,) m is below ``k * diameter``; NaN when no frame is selected.
+
+    As :func:`add_success`, for a subset of a run's frames, e.g. those of occlusion by touch."""
+    e = as_float_array(errors, "errors")
+    if e.ndim != 1 or np.isnan(e).any() or (e < 0).any():
+        raise ValueError(f"errors: expected a 1-D array of non-negative errors (inf allowed), got shape {e.shape}")
+    d = as_positive_float(diameter, "diameter")
+    as_positive_float(k, "k")
+    return _rate(_selected(e < k * d, where, "errors"))
+
+
+def success_5cm5deg_rate(rotation, translation, *, where=None, max_translation=0.05, max_rotation=np.deg2rad(5.0)):
+    """Fraction of the frames selected by ``where`` with translation error (n,) m below 5 cm and
+    rotation error (n,) rad below 5 deg (:func:`success_5cm5deg` from per-frame errors); NaN
+    when no frame is selected."""
+    r, t = as_float_array(rotation, "rotation"), as_float_array(translation, "translation")
+    if r.ndim != 1 or t.shape != r.shape:
+        raise ValueError(f"rotation, translation: expected two 1-D arrays of one length, got {r.shape} and {t.shape}")
+    return _rate(_selected((t < max_translation) & (r < max_rotation), where, "rotation"))
+
+
+def pooled_rate(rates, weights):
+    """Weighted mean of per-run rates (k,): the rate over every frame of the runs when ``weights``
+    (k,) are their frame counts. Runs with a NaN rate or a weight of 0 are left out; NaN if none
+    is left."""
+    v, w = as_float_array(rates, "rates"), as_float_array(weights, "weights")
+    if v.ndim != 1 or w.shape != v.shape:
+        raise ValueError(f"rates, weights: expected two 1-D arrays of one length, got {v.shape} and {w.shape}")
+    if (w < 0).any():
+        raise ValueError("weights: expected weights >= 0")
+    ok = np.isfinite(v) & (w > 0)
+    return float((v[ok] * w[ok]).sum() / w[ok].sum()) if ok.any() else float("nan")
+
+
+def spearman(x, y):
+    """Spearman rank correlation of x and y (n,) (ties take their mean rank); NaN for fewer than
+    3 pairs or a constant input, where it is undefined."""
+    from scipy.stats import spearmanr
+
+    a, b = as_float_array(x, "x"), as_float_array(y, "y")
+    if a.ndim != 1 or b.shape != a.shape:
+        raise ValueError(f"x, y: expected two 1-D arrays of one length, got {a.shape} and {b.shape}")
+    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
+        return float("nan")
+    return float(spearmanr(a, b).statistic)

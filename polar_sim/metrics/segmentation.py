@@ -1,5 +1,5 @@
 """Segmentation metrics: IoU and its success rate, precision/recall, occluder-as-target fraction,
-ROC AUC of probability maps.
+ROC AUC of probability maps; the rates of a run from per-frame scores (:func:`mask_frame_scores`).
 
 Masks are boolean arrays (H, W) or stacks (n, H, W). Rates are fractions in [0, 1].
 """
@@ -17,6 +17,9 @@ __all__ = [
     "roc_auc",
     "near_mask",
     "mask_frame_scores",
+    "iou_success_rate",
+    "pooled_precision_recall",
+    "pooled_occluder_as_target",
 ]
 
 
@@ -156,3 +159,56 @@ def mask_frame_scores(pred, truth, occluder=None, within=None):
         near = o & _as_mask(within, "within", p.shape) if within is not None else o
         out["hand_near"], out["hand_near_tgt"] = int(near.sum()), int(np.logical_and(p, near).sum())
     return out
+
+
+# -- rates of a run from per-frame scores ---------------------------------------------------
+def _where(where, n):
+    if where is None:
+        return np.ones(n, bool)
+    w = np.asarray(where)
+    if w.dtype != bool or w.shape != (n,):
+        raise ValueError(f"where: expected a boolean array of shape ({n},), got {w.dtype} {w.shape}")
+    return w
+
+
+def _counts(x, name):
+    c = np.asarray(x)
+    if c.ndim != 1 or c.dtype.kind not in "iu" or (c < 0).any():
+        raise ValueError(f"{name}: expected a 1-D array of pixel counts >= 0, got {c.dtype} {c.shape}")
+    return c.astype(np.int64, copy=False)
+
+
+def iou_success_rate(ious, threshold=0.5, *, where=None):
+    """Fraction of the frames selected by ``where`` (n,) bool (all if None) whose IoU (n,) exceeds
+    ``threshold``; NaN when no frame is selected (:func:`iou_success` for a subset of a run)."""
+    v = np.asarray(ious, dtype=np.float64)
+    if v.ndim != 1 or np.isnan(v).any():
+        raise ValueError(f"ious: expected a 1-D array without NaN, got shape {v.shape}")
+    ok = (v > threshold)[_where(where, len(v))]
+    return float(ok.mean()) if ok.size else float("nan")
+
+
+def pooled_precision_recall(n_tp, n_pred, n_gt):
+    """Precision and recall pooled over frames from per-frame pixel counts (n,) of true
+    positives, predicted and true pixels: sum n_tp / sum n_pred and sum n_tp / sum n_gt; 1 when
+    nothing is predicted, or nothing is true (as :func:`precision_recall`)."""
+    tp, npred, ngt = _counts(n_tp, "n_tp"), _counts(n_pred, "n_pred"), _counts(n_gt, "n_gt")
+    if npred.shape != tp.shape or ngt.shape != tp.shape:
+        raise ValueError(f"n_tp, n_pred, n_gt: expected one length, got {tp.shape}, {npred.shape}, {ngt.shape}")
+    if (tp > npred).any() or (tp > ngt).any():
+        raise ValueError("n_tp: more true positives than predicted or true pixels")
+    t, p, g = tp.sum(), npred.sum(), ngt.sum()
+    return (float(t / p) if p else 1.0), (float(t / g) if g else 1.0)
+
+
+def pooled_occluder_as_target(n_occluder, n_occluder_target, *, where=None):
+    """Fraction of occluder (hand) pixels labelled target, pooled over the frames (or runs)
+    selected by ``where``: sum n_occluder_target / sum n_occluder from counts (n,) such as
+    :func:`mask_frame_scores`' ``hand_near`` and ``hand_near_tgt``. NaN if no occluder pixel is
+    counted (as :func:`occluder_as_target`)."""
+    n, nt = _counts(n_occluder, "n_occluder"), _counts(n_occluder_target, "n_occluder_target")
+    if nt.shape != n.shape or (nt > n).any():
+        raise ValueError(f"n_occluder_target: expected {n.shape} counts <= n_occluder, got {nt.shape}")
+    w = _where(where, len(n))
+    h = n[w].sum()
+    return float(nt[w].sum() / h) if h else float("nan")

@@ -98,8 +98,8 @@ def test_tracking_strips_quick(tmp_path):
 @pytest.mark.slow
 def test_track_is_deterministic():
     C = _common()
-    a1, _ = C.track("drill_lift", 0, "ww", quick=True, stop=100, tracker_kw={})
-    a2, _ = C.track("drill_lift", 0, "ww", quick=True, stop=100, tracker_kw={})
+    a1, _ = C.track("drill_lift", 0, "ww", params=C.QUICK_PARAMS, stop=100, tracker_kw={})
+    a2, _ = C.track("drill_lift", 0, "ww", params=C.QUICK_PARAMS, stop=100, tracker_kw={})
     for k in a1:
         if k not in ("cpu_ms", "wall_ms", "load"):
             assert np.array_equal(a1[k], a2[k], equal_nan=True), k
@@ -119,3 +119,85 @@ def test_tracking_summaries_with_some_methods(tmp_path):
     assert "every variant run (h)" in check.name and check.status == "pass", check
     only = _run("tracking_ablation", tmp_path / "only", overrides={"method": ["no-motion"], "sequence": ["drill_lift"]})
     assert only.checks == [] and (tmp_path / "only" / "tracking_ablation.png").is_file()
+
+
+# The size is data: the quick size tracks the CI cuts at 320x240, the full size every frame at
+# 640x480; a span other than "all" or "ci" is refused, and a sequence outside the registry is refused
+# before any trial runs.
+def test_sizes_and_sequence_choices(tmp_path):
+    from polar_sim.runner.registry import get_experiment
+
+    C = _common()
+    exp = get_experiment("tracking_variants")
+    quick, full = exp.resolve_params("quick"), exp.resolve_params("full")
+    assert (quick, full) == ({"span": "ci", "width": 320, "height": 240}, {"span": "all", "width": 640, "height": 480})
+    assert C.cut_of("mug_touch", quick) == (80, 125, 320, 240) and C.cut_of("box_turn", quick) == (0, 40, 320, 240)
+    assert C.cut_of("mug_touch", full) == (0, 450, 640, 480)
+    with pytest.raises(ValueError, match="span"):
+        C.cut_of("mug_touch", {**full, "span": "half"})
+    with pytest.raises(ValueError, match="sequence: tracking_variants has no sequence 'moon'; valid: mug_touch"):
+        run_experiment("tracking_variants", quick=True, out=tmp_path / "x", overrides={"sequence": ["moon"]},
+                       progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def _rows(diameters, aucs, method="ww"):
+    """Result rows of one method, one per sequence, with the fields the summaries read."""
+    return [{"sequence": f"s{i}", "method": method, "object": "box", "symmetry": "none", "diameter_cm": d,
+             "frames": 100, "add_ok": 1.0, "add_strict_ok": 1.0, "add_auc": a, "s5cm5deg": 1.0, "iou_ok": 1.0,
+             "iou_mean": 0.9, "hand_px_touch": 10, "hand_tgt_px_touch": 1, "occl_frames": 5, "occl_add_ok": 1.0,
+             "occl_iou_ok": None, "drift_deg": 3.0, "lost": 0, "cpu_ms_median": 20.0}
+            for i, (d, a) in enumerate(zip(diameters, aucs))]
+
+
+# Fig. 5.8 per sequence for ww: with fewer than 3 sequences (or one size) the rank correlation is
+# undefined and the verdict is "not tested the same way", saying why; with 4 sequences whose AUC
+# rises with the diameter it is 1 and "held", on size alone (shape distinctness is not measured).
+def test_size_finding_verdicts(tmp_path):
+    from polar_sim.experiments import tracking_variants as V
+    from polar_sim.runner import RunContext
+
+    ctx = RunContext(tmp_path, "quick", "test", {"span": "ci", "width": 320, "height": 240})
+
+    def size_finding(d, a):
+        table = [r for m in ("su", "sw", "wu", "ww") for r in _rows(d, a, m)]
+        (fig56, fig58) = V.findings(table, ctx)
+        assert fig56.verdict == "held" and "shape" in fig58.note and "not measured" in fig58.note
+        return fig58
+
+    f = size_finding([10.0, 20.0], [0.5, 0.9])
+    assert f.verdict == "not tested the same way" and "undefined over 2 sequences" in f.ours
+    assert ">= 3 sequences" in f.note
+    f = size_finding([10.0, 10.0, 10.0], [0.5, 0.7, 0.9])
+    assert f.verdict == "not tested the same way" and "(1 diameters, 3 AUC values)" in f.ours
+    f = size_finding([5.0, 10.0, 20.0, 30.0], [0.2, 0.5, 0.6, 0.9])
+    assert f.verdict == "held" and "= 1 over 4 sequences" in f.ours
+    assert size_finding([5.0, 10.0, 20.0, 30.0], [0.9, 0.6, 0.5, 0.2]).verdict == "not held"
+
+
+# The drift check needs the whole sequences (their 300-frame rests) and the speed check is set at
+# 640x480: both follow the run's params, not its size's name.
+def test_variant_checks_follow_the_params(tmp_path):
+    from polar_sim.experiments import tracking_variants as V
+    from polar_sim.runner import RunContext
+
+    table = _rows([10.0, 20.0], [0.5, 0.9])
+
+    def extra(**params):
+        ctx = RunContext(tmp_path, "full", "test", {"span": "all", "width": 640, "height": 480, **params})
+        return [("drift" if "drifts" in c.name else "speed") for c in V.checks(table, ctx)[2:]]
+
+    assert extra() == ["drift", "speed"]
+    assert extra(span="ci") == ["speed"] and extra(width=320, height=240) == ["drift"]
+    assert extra(span="ci", width=320, height=240) == []
+
+
+# The pooled ECE of per-frame reliability counts: |sum of truth - sum of P| per bin over the pixels,
+# NaN for a run without any P(target) pixel (it used to read 0).
+def test_pooled_ece_of_a_run():
+    C = _common()
+    b = np.zeros((2, 3, C.N_BINS))
+    assert np.isnan(C.ece(b))
+    b[0, :, 1] = (2, 0.2, 0.0)      # two pixels at P = 0.1, both background
+    b[1, :, 13] = (3, 2.7, 3.0)     # three at P = 0.9, all target
+    assert C.ece(b) == pytest.approx(0.5 / 5, abs=1e-15)
