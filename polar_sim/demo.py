@@ -75,29 +75,46 @@ def demo_gpis(out: Path):
     # variance is its prior (1 + map_noise) and its distance only an extrapolation: drawn in colour it
     # reads as wedges and teardrops of "inside". Such cells are greyed out, as the variance says.
     unseen = var.reshape(X.shape) >= 1.0
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.5))
-    for a, field, title in ((ax[0], d, "GPIS distance (online map; grey: never observed)"), (ax[1], true, "exact SDF")):
-        im = a.imshow(np.clip(field.reshape(X.shape), -0.5, 2.5), origin="lower", extent=[x0, x1, y0, y1],
-                      cmap="viridis")
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from polar_sim.sim.pictures import colorbar_beside, save_figure
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 5.2), gridspec_kw={"wspace": 0.3})
+    for a, field, title in ((ax[0], d, "online GPIS map: its signed distance"), (ax[1], true, "exact SDF of the scene")):
+        im = a.imshow(field.reshape(X.shape), origin="lower", extent=[x0, x1, y0, y1], cmap="viridis",
+                      vmin=-0.5, vmax=2.5)
         if a is ax[0]:
             a.imshow(np.where(unseen, 1.0, np.nan), origin="lower", extent=[x0, x1, y0, y1], cmap="Greys",
                      vmin=0.0, vmax=2.0, interpolation="nearest")
         shown = np.where(unseen, np.nan, field.reshape(X.shape)) if a is ax[0] else field.reshape(X.shape)
         a.contour(X, Y, shown, levels=[0.0], colors="w", linewidths=0.8)
         a.plot(path[:, 0], path[:, 1], color="orange", lw=1.5)
+        a.plot(*path[0], "o", color="orange", ms=6)
         a.set_title(title)
         a.set_xlabel("x [m]")
         a.set_ylabel("y [m]")
         a.set_aspect("equal")
-    fig.colorbar(im, ax=ax, shrink=0.8, label="signed distance [m] (clipped to -0.5..2.5; white: zero level)")
-    fig.suptitle("office2d after 150 lidar scans, simulated (orange: the robot's path; grey: variance at its prior)")
-    fig.savefig(out / "gpis_office2d.png", dpi=90, bbox_inches="tight")
-    plt.close(fig)
+        colorbar_beside(fig, a, im, "signed distance [m] (clipped to -0.5..2.5)")
+    fig.legend(handles=[Line2D([], [], color="orange", lw=1.5, marker="o", markevery=[0],
+                               label="robot path (dot: start), 0.8 m/s, 150 scans"),
+                        Line2D([], [], color="w", lw=1.5, path_effects=_outlined(), label="zero level: the surface"),
+                        Patch(color="0.6", label="never observed (map variance at its prior): not scored")],
+               loc="lower center", ncol=3, fontsize=9, frameon=False, bbox_to_anchor=(0.5, -0.06))
+    fig.suptitle("office2d, simulated 2D lidar (1 cm noise): the GPIS map built online beside the exact SDF")
+    save_figure(fig, out / "gpis_office2d.png")
     med = float(np.median(np.abs(d[near] - true[near])))
     mae = float(np.mean(np.abs(d[free] - true[free])))
     return [f"office2d, 150 scans: {len(m.samples()['points'])} surface samples; |SDF error| median "
             f"{100 * med:.1f} cm within 0.3 m of walls, mean {100 * mae:.1f} cm 0.3-2 m from walls "
             "(exact SDF from the scene; the gpis_accuracy experiment scores the observed area) (gpis_office2d.png)"]
+
+
+def _outlined():
+    """Path effects that draw a thin dark outline round a white line (so it shows on a white legend)."""
+    from matplotlib import patheffects
+
+    return [patheffects.Stroke(linewidth=3, foreground="0.3"), patheffects.Normal()]
 
 
 def demo_ground(out: Path):
@@ -118,7 +135,8 @@ def demo_ground(out: Path):
             errs.append(e.speed_raw - float(speeds[i - 1]))
             ious.append(classifier_iou(e.ground_prob, f["ground_mask"]))
     last = rec[len(rec) - 1]
-    _ground_figure(out / "ground_prob.png", last["rgb"], e.ground_prob, last["ground_mask"], len(rec) - 1)
+    _ground_figure(out / "ground_prob.png", last["rgb"], e.ground_prob, last["ground_mask"], len(rec) - 1,
+                   float(np.mean(ious)))
     est = vo.trajectory()
     gt = rec.stack("T_world_cam")
     T0 = np.linalg.inv(gt[0])
@@ -131,21 +149,21 @@ def demo_ground(out: Path):
             "the first frames, so this is not the KITTI 100-800 m figure of the README's Results) (ground_prob.png)"]
 
 
-def _ground_figure(path, rgb, prob, truth, index):
+def _ground_figure(path, rgb, prob, truth, index, mean_iou):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    from polar_sim.sim.pictures import save_figure
+    from polar_sim.sim.pictures import colorbar_beside, save_figure
 
-    fig, ax = plt.subplots(1, 3, figsize=(16, 3.6))
+    fig, ax = plt.subplots(1, 3, figsize=(17, 2.9), gridspec_kw={"wspace": 0.42})
     ax[0].imshow(rgb)
     ax[0].set_title(f"camera, frame {index}")
     im = ax[1].imshow(prob, cmap="viridis", vmin=0, vmax=1)
     ax[1].set_title("learned P(ground | colour)")
-    fig.colorbar(im, ax=ax[1], shrink=0.8, label="probability")
+    colorbar_beside(fig, ax[1], im, "probability")
     pred = prob > 0.5
     agree = np.zeros(rgb.shape, np.uint8)
     agree[pred & truth] = (60, 170, 60)
@@ -159,6 +177,8 @@ def _ground_figure(path, rgb, prob, truth, index):
     for a in ax:
         a.set_xlabel("u [px]")
         a.set_ylabel("v [px]")
+    fig.suptitle(f"rover on route flat_00 (simulated): GroundVO's ground classifier, learned online from its own "
+                 f"RANSAC labels, after {index + 1} frames (mean IoU {mean_iou:.2f} after frame 10)")
     save_figure(fig, path)
 
 
@@ -196,14 +216,14 @@ def demo_tracking(out: Path):
     hand = metrics.occluder_as_target(np.stack(masks), np.stack(hands), within=np.stack(near))
     add = metrics.add(np.asarray(P, float), G[start:end], np.stack(poses))
     d = metrics.object_diameter(np.asarray(P, float))
-    _tracking_figure(out / "tracking_mug.png", f, r, end - 1)
+    _tracking_figure(out / "tracking_mug.png", f, r, end - 1, start)
     return [f"tabletop mug_touch, frames {start}-{end - 1} as the hand comes down on the mug: ADD < 0.1 d on "
             f"{100 * metrics.add_success(add, d, 0.1):.0f}% of frames (mean {1000 * add.mean():.1f} mm), "
             f"IoU > 0.5 on {100 * metrics.iou_success(np.array(ious), 0.5):.0f}%, hand pixels as target "
             f"{100 * hand:.1f}% (tracking_mug.png)"]
 
 
-def _tracking_figure(path, f, r, index):
+def _tracking_figure(path, f, r, index, start):
     import cv2
     import matplotlib
 
@@ -227,6 +247,8 @@ def _tracking_figure(path, f, r, index):
     for a in ax:
         a.set_xlabel("u [px]")
         a.set_ylabel("v [px]")
+    fig.suptitle(f"tabletop mug_touch (simulated RGB-D, 320x240): ObjectTracker from the true pose at frame {start}, "
+                 f"learning the mug's appearance online")
     save_figure(fig, path)
 
 
@@ -237,22 +259,84 @@ def demo_env(out: Path):
     import polar_sim.envs  # noqa: F401  (registers the ids)
     from polar_sim.envs.policies import SDFNavigator
 
-    env = gym.make("polar_sim/GPISNav-v0", sdf_source="gpis", render_mode="rgb_array", rooms=2, room_size=4.0,
-                   clutter=3)
+    rooms, room_size = 2, 4.0
+    env = gym.make("polar_sim/GPISNav-v0", sdf_source="gpis", render_mode="rgb_array", rooms=rooms,
+                   room_size=room_size, clutter=3)
     pol = SDFNavigator()
     obs, info = env.reset(seed=1)
     start = info["goal_distance"]
+    track = [info["robot_pose2d"][:2].copy()]
     done, n = False, 0
     while not done:
         obs, r, term, trunc, info = env.step(pol(obs))
+        track.append(info["robot_pose2d"][:2].copy())
         done, n = term or trunc, n + 1
-    from polar_sim.sim.pictures import image_figure, save_figure
-
-    save_figure(image_figure(env.render(), f"GPISNav-v0 after {n} steps: the navigator on the online GPIS map"),
-                out / "env_gpisnav.png")
+    _env_figure(out / "env_gpisnav.png", env, np.array(track), info, n, rooms * room_size / 2)
     env.close()
     return [f"GPISNav-v0 (gpis map): goal {start:.1f} m away, {'reached' if info['is_success'] else 'not reached'} "
             f"in {n} steps, path {info['path_length']:.1f} m, collision {info['collision']} (env_gpisnav.png)"]
+
+
+def _env_figure(path, env, track, info, n, half):
+    """The episode in three panels: the scene rendered from above; the exact SDF of the world with
+    the path; the online GPIS map around the robot at the end (the environment's own view)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+
+    from polar_sim.envs.gpis_nav import RENDER_SDF_RANGE, RENDER_SPAN, RENDER_ZERO_BAND
+    from polar_sim.envs.lidar_nav import GOAL_RADIUS
+    from polar_sim.sim.pictures import colorbar_beside, save_figure
+
+    frame = env.render()                      # (h, 2w, 3): the top-down render | the map around the robot
+    w = frame.shape[1] // 2
+    lo, hi = RENDER_SDF_RANGE
+    norm = Normalize(lo, hi)
+    goal, pose = info["goal"], info["robot_pose2d"]
+    fig, ax = plt.subplots(1, 3, figsize=(18, 5.6), gridspec_kw={"wspace": 0.32})
+    ax[0].imshow(frame[:, :w])
+    ax[0].set_title("the scene from above\n(render; walls white)")
+    ax[0].set_xticks([])
+    ax[0].set_yticks([])
+    ax[0].set_xlabel(f"{2 * half:.0f} x {2 * half:.0f} m: 2 x 2 rooms, doors, clutter; the robot is the small box")
+    # the exact SDF of the whole world, with the path
+    m = half + 0.5
+    xs = np.linspace(-m, m, 360)
+    X, Y = np.meshgrid(xs, xs)
+    sdf = env.unwrapped.world.sdf(np.stack([X.ravel(), Y.ravel()], 1)).reshape(X.shape)
+    im = ax[1].imshow(sdf, origin="lower", extent=[-m, m, -m, m], cmap="viridis", norm=norm)
+    ax[1].contour(X, Y, sdf, levels=[0.0], colors="w", linewidths=0.8)
+    ax[1].plot(track[:, 0], track[:, 1], color="orange", lw=1.5)
+    ax[1].plot(*track[0], "s", color="orange", ms=7)
+    ax[1].add_patch(plt.Circle(goal[:2], GOAL_RADIUS, fill=False, color=(0.24, 0.86, 0.24), lw=2))
+    ax[1].plot(*pose[:2], "o", color=(1, 0.31, 0.31), ms=7)
+    ax[1].set_title(f"exact SDF of the world and the path driven\n({n} steps, {info['path_length']:.1f} m)")
+    colorbar_beside(fig, ax[1], im, f"exact signed distance [m] (clipped to {lo:g}..{hi:g})")
+    # the map around the robot at the end, as the environment renders it
+    ext = [pose[0] - RENDER_SPAN, pose[0] + RENDER_SPAN, pose[1] - RENDER_SPAN, pose[1] + RENDER_SPAN]
+    ax[2].imshow(frame[:, w:], extent=ext, origin="upper")
+    ax[2].set_title(f"the online GPIS map around the robot at the end (the env's\nrender; beyond the outer wall: never seen, extrapolated)")
+    colorbar_beside(fig, ax[2], ScalarMappable(norm, "viridis"),
+                    f"map signed distance [m] (clipped to {lo:g}..{hi:g};\nwhite: |d| < {100 * RENDER_ZERO_BAND:g} cm, "
+                    "the mapped surface)")
+    for a in ax[1:]:
+        a.set_xlabel("x [m]")
+        a.set_ylabel("y [m]")
+        a.set_aspect("equal")
+    fig.legend(handles=[Line2D([], [], color="orange", lw=1.5, marker="s", markevery=[0], label="path (square: start)"),
+                        Line2D([], [], ls="", marker="o", color=(1, 0.31, 0.31), ms=8,
+                               label="robot at the end"),
+                        Line2D([], [], ls="", marker="o", mfc="none", mec=(0.24, 0.86, 0.24), mew=2, ms=10,
+                               label=f"goal (success within {GOAL_RADIUS:g} m)"),
+                        Line2D([], [], color="w", lw=1.5, path_effects=_outlined(), label="zero level: the surface")],
+               loc="lower center", ncol=4, fontsize=9, frameon=False, bbox_to_anchor=(0.5, -0.03))
+    fig.suptitle("GPISNav-v0, seed 1: the SDFNavigator policy drives to the goal on a GPIS map built online from its "
+                 "lidar (true pose given)")
+    save_figure(fig, path)
 
 
 DEMOS = [("scenes", demo_scenes), ("gpis", demo_gpis), ("ground", demo_ground), ("tracking", demo_tracking),

@@ -14,12 +14,19 @@ from polar_sim.envs.observers import SDFStencil, TruthSource, make_sdf_source
 from polar_sim.envs.sdf_grid import GRID_SDF_BOUND, GRID_VAR_MAX, SDFGrid, VisitedMask
 from polar_sim.geometry import between2d, compose2d, inv2d, wrap_angle
 
-__all__ = ["GPISNavEnv", "stencil_observation", "OBS_MODES", "LOST_DISTANCE"]
+__all__ = ["GPISNavEnv", "stencil_observation", "OBS_MODES", "LOST_DISTANCE", "RENDER_SPAN", "RENDER_SDF_RANGE",
+           "RENDER_ZERO_BAND"]
 
 SDF_BOUND = 50.0
 GRAD_BOUND = 10.0
 OBS_MODES = ("stencil", "grid")
 LOST_DISTANCE = 0.5  # m: info["track_lost"] when the estimate is further than this from the truth
+#: The map panel of ``render()``: the robot's surroundings within RENDER_SPAN m each way, world axes;
+#: the map's distance coloured by viridis from RENDER_SDF_RANGE[0] to [1] m (clipped), white where
+#: |d| < RENDER_ZERO_BAND m (the map's surface). For legends and colour bars (``polar-sim demo``).
+RENDER_SPAN = 4.0
+RENDER_SDF_RANGE = (-1.0, 2.0)
+RENDER_ZERO_BAND = 0.05
 
 
 def stencil_observation(source, stencil, pose2d, queried=None):
@@ -231,7 +238,7 @@ class GPISNavEnv(ModuleEnv):
         the true robot red, the estimated one orange, the goal green)."""
         top = self.base.render()
         h, w = top.shape[:2]
-        n, span = 96, 4.0
+        n, span = 96, RENDER_SPAN
         pose = self.base._pose
         xs = np.linspace(-span, span, n)
         X, Y = np.meshgrid(xs, xs[::-1])
@@ -239,9 +246,10 @@ class GPISNavEnv(ModuleEnv):
         if self._origin is not None:  # world points into the map frame
             pts = compose2d(inv2d(self._origin), np.c_[pts, np.zeros(len(pts))])[:, :2]
         d = self._source.query(pts)[0].reshape(n, n)
-        v = np.clip((d + 1.0) / 3.0, 0, 1)
+        lo, hi = RENDER_SDF_RANGE
+        v = np.clip((d - lo) / (hi - lo), 0, 1)
         heat = cv2.applyColorMap((255 * v).astype(np.uint8), cv2.COLORMAP_VIRIDIS)[..., ::-1].copy()
-        heat[np.abs(d) < 0.05] = 255
+        heat[np.abs(d) < RENDER_ZERO_BAND] = 255
         heat = cv2.resize(heat, (w, h), interpolation=cv2.INTER_NEAREST)
         c = np.array([w // 2, h // 2])
 

@@ -10,7 +10,7 @@ import numpy as np
 from polar_sim.sim.truth import LABELS
 
 __all__ = ["colourise_depth", "colourise_labels", "LABEL_COLOURS", "render_scene_pictures", "save_png", "save_figure",
-           "image_figure", "camera_figure", "lidar_map_figure"]
+           "image_figure", "camera_figure", "lidar_map_figure", "colorbar_beside"]
 
 #: RGB colour per label (none, ground, obstacle, target, occluder, robot).
 LABEL_COLOURS = np.array([[0, 0, 0], [90, 160, 60], [200, 60, 50], [250, 200, 30], [230, 140, 180],
@@ -55,6 +55,14 @@ def save_figure(fig, path):
     return path
 
 
+def colorbar_beside(fig, ax, mappable, label, *, size="4%", pad=0.08):
+    """A colour bar exactly as tall as ``ax`` on its right (never over its title), labelled ``label``."""
+    from mpl_toolkits.axes_grid1 import make_axes_locatable
+
+    cax = make_axes_locatable(ax).append_axes("right", size=size, pad=pad)
+    return fig.colorbar(mappable, cax=cax, label=label)
+
+
 def image_figure(rgb, title, *, caption=None):
     """A titled figure of one RGB image (no axes ticks), for renders a user looks at."""
     import matplotlib
@@ -81,19 +89,20 @@ def camera_figure(frame, title):
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.2), gridspec_kw={"wspace": 0.42})
     ax[0].imshow(frame.rgb)
     ax[0].set_title("RGB")
     d = np.where(np.isfinite(frame.depth), frame.depth, np.nan)
     ok = np.isfinite(d)
     hi = float(np.percentile(d[ok], 98)) if ok.any() else 1.0
     im = ax[1].imshow(d, cmap="inferno_r", vmin=0.0, vmax=hi)
-    ax[1].set_title("depth along the optical axis (white: none)")
-    fig.colorbar(im, ax=ax[1], shrink=0.8, label="depth [m]")
+    ax[1].set_title("metric depth (white: no surface)")
+    colorbar_beside(fig, ax[1], im, f"depth along the optical axis [m]\n(farther than {hi:.3g} m: darkest)")
     ax[2].imshow(colourise_labels(frame.labels))
     ax[2].set_title("per-pixel truth labels")
     present = sorted(set(np.unique(frame.labels).tolist()) & set(LABELS.values()))
     names = {v: k for k, v in LABELS.items()}
+    names[LABELS["none"]] = "none (sky, nothing hit)"
     ax[2].legend(handles=[Patch(color=LABEL_COLOURS[v] / 255.0, label=names[v]) for v in present],
                  loc="lower right", fontsize=8, framealpha=0.8)
     for a in ax:
@@ -106,39 +115,65 @@ def camera_figure(frame, title):
 def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=400):
     """Top-down map around the robot: the exact SDF of the static scene in the lidar plane
     (colour bar in metres, zero level in black), the scan's end points and the sensor pose.
-    The window covers the scan's end points plus ``margin`` (at most ``max_half`` m each way)."""
+    The window covers the scan's end points plus ``margin`` (at most ``max_half`` m each way); when
+    fewer than half the beams return (open ground), it covers the lidar's range circle instead, drawn
+    dashed, and the legend says how many beams met nothing within range."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.lines import Line2D
 
     scan = world.lidar(lidar)
+    rmax = float(world.lidar_spec(lidar).max_range)
     T = scan.T_world_sensor
     cx, cy = T[0, 3], T[1, 3]
     P = scan.points()
     W = P[:, :2] @ T[:2, :2].T + T[:2, 3] if len(P) else np.zeros((0, 2))
-    span = np.vstack([W, [[cx, cy]]])
-    lo = np.maximum(span.min(0) - margin, [cx - max_half, cy - max_half])
-    hi = np.minimum(span.max(0) + margin, [cx + max_half, cy + max_half])
+    n_beams, n_ret = len(scan.ranges), len(W)
+    sparse = n_ret < n_beams / 2
+    span = np.vstack([W, [[cx, cy]]] + ([[[cx - rmax, cy - rmax], [cx + rmax, cy + rmax]]] if sparse else []))
+    lo = np.maximum(span.min(0) - margin, [cx - max_half - margin, cy - max_half - margin])
+    hi = np.minimum(span.max(0) + margin, [cx + max_half + margin, cy + max_half + margin])
+    grow = np.maximum(0.6 * float(max(hi - lo)) - (hi - lo), 0.0)   # no thin strips: short side >= 0.6 long
+    lo, hi = lo - grow / 2, hi + grow / 2
     res = float(max(hi - lo)) / n_cells
     xs, ys = np.arange(lo[0], hi[0], res), np.arange(lo[1], hi[1], res)
     X, Y = np.meshgrid(xs, ys)
     sdf = world.sdf(np.stack([X.ravel(), Y.ravel()], 1)).reshape(X.shape)
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    fig, ax = plt.subplots(figsize=(8.0, 6.5))
     im = ax.imshow(np.clip(sdf, -1.0, 3.0), origin="lower", extent=[xs[0], xs[-1], ys[0], ys[-1]], cmap="RdBu",
                    norm=TwoSlopeNorm(vmin=-1.0, vcenter=0.0, vmax=3.0))
     ax.contour(X, Y, sdf, levels=[0.0], colors="k", linewidths=0.8)
-    fig.colorbar(im, ax=ax, shrink=0.85, label="exact signed distance in the lidar plane [m] (clipped to -1..3)")
+    handles = [Line2D([], [], color="k", lw=0.8, label="scene surface (zero level)")]
     if len(W):
-        ax.scatter(W[:, 0], W[:, 1], s=2, c="orange", label=f"lidar end points ({len(W)} returns)")
+        ax.scatter(W[:, 0], W[:, 1], s=2 if not sparse else 25, c="orange", zorder=3)
+    handles.append(Line2D([], [], ls="", marker="o", color="orange",
+                          label=f"lidar end points: {n_ret} of {n_beams} beams returned"))
     yaw = np.arctan2(T[1, 0], T[0, 0])
+    if sparse:   # the field of view: what the beams that did not return swept
+        a0, a1 = float(np.min(scan.angles)), float(np.max(scan.angles))
+        t = yaw + np.linspace(a0, a1, 361)
+        fov = np.c_[np.r_[cx, cx + rmax * np.cos(t), cx], np.r_[cy, cy + rmax * np.sin(t), cy]]
+        ax.plot(fov[:, 0], fov[:, 1], "k--", lw=0.8)
+        handles.append(Line2D([], [], color="k", ls="--", lw=0.8,
+                              label=f"lidar field of view ({np.degrees(a1 - a0):.0f} deg, {rmax:g} m): the other\n"
+                                    f"{n_beams - n_ret} beams met nothing within it (open ground)"))
     L = 0.06 * float(max(hi - lo))
-    ax.arrow(cx, cy, L * np.cos(yaw), L * np.sin(yaw), width=0.15 * L, color="k", label="sensor pose")
+    ax.arrow(cx, cy, L * np.cos(yaw), L * np.sin(yaw), width=0.15 * L, color="k", zorder=4)
+    handles.append(Line2D([], [], ls="", marker=r"$\rightarrow$", markersize=12, color="k",
+                          label="lidar position and heading"))
+    colorbar_beside(fig, ax, im, "exact signed distance in the lidar plane [m]\n(clipped to -1..3; < 0 inside objects)",
+                    size="3%")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=8)
+    from matplotlib.transforms import ScaledTranslation
+
+    below = ax.transAxes + ScaledTranslation(0, -0.5, fig.dpi_scale_trans)   # half an inch under the axes
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0), bbox_transform=below, ncol=2, fontsize=8,
+              frameon=False)
     ax.set_aspect("equal")
     return fig
 
@@ -156,8 +191,8 @@ def render_scene_pictures(world, out_dir, *, width=640, height=480):
                                                   f"{width}x{height}"), out_dir / f"{world.scene}_{cam}.png"))
     lidars2d = [n for n in world.lidars if getattr(world.lidar(n), "angles", None) is not None]
     if lidars2d:
-        fig = lidar_map_figure(world, lidars2d[0], f"{world.scene}: exact SDF around the robot and "
-                                                   f"lidar {lidars2d[0]!r}")
+        fig = lidar_map_figure(world, lidars2d[0], f"{world.scene} from above at t = {world.time:.2f} s: exact SDF "
+                                                   f"and one scan of lidar {lidars2d[0]!r}")
     else:
         fig = image_figure(world.render_view(width=width, height=height), f"{world.scene}: third-person view")
     paths.append(save_figure(fig, out_dir / f"{world.scene}_overview.png"))
