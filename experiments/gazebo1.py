@@ -1,15 +1,15 @@
 """gazebo1: the GPisMap authors' ``gazebo1`` log (2879 scans of a **Gazebo simulation** of an office,
-not real data) mapped in default and legacy modes; self-consistency on held-out scans (issue 4).
+not real data) mapped in default and legacy modes; self-consistency on held-out scans.
 
 The ``mapper2d`` method (``gpis``: default mode; ``gpis_legacy``: the published behaviour) fuses
-every scan except the held-out ones (every 10th, offset 5: 288 scans) at the log's *sensor* poses
-(the base poses moved by the log's 0.08 m laser offset; quick: every 10th scan maps, every 20th
-offset 5 is held out). The log comes with poses but no geometry, so the map is scored by
-*self-consistency* on the held-out scans: the |SDF| at their beam end points (on the true surface,
-up to the simulation's pose and range noise), and the share of the mid-points of their beams
-(observed free space) that the map calls free (SDF > 0). gazebo1 is the log the GPIS parameters
-were compared and tuned on (the parity tests), so it is a dev-split figure only; the held-out real
-log is ``intel_lab``. Check: default mode, median |SDF| at held-out end points <= 2 cm.
+every ``map_every_scans``-th scan (1: all) except the held-out ones (every
+``held_out_every_scans``-th, offset 5: 288 scans at 10) at the log's *sensor* poses (the base poses
+moved by the log's 0.08 m laser offset; quick: every 10th scan maps, every 20th offset 5 is held
+out). The log comes with poses but no geometry, so the map is scored by *self-consistency* on the
+held-out scans: the |SDF| at their beam end points (on the true surface, up to the simulation's
+pose and range noise), and the share of the mid-points of their beams (observed free space) that
+the map calls free (SDF > 0). gazebo1 is the log the GPIS parameters were compared and tuned on
+(the parity tests), so it is a dev-split figure only; the held-out real log is ``intel_lab``. Check: default mode, median |SDF| at held-out end points <= 2 cm.
 """
 
 from __future__ import annotations
@@ -29,10 +29,12 @@ COLS = ["method", "map_scans", "held_out_scans", "endpoints", "abs_sdf_median_m"
         "update_cpu_ms_p99", "load"]
 
 
-def _split(n, quick):
+def _split(n, map_every, held_every):
+    """Indices of the mapping scans (every ``map_every``-th, less the held-out ones) and of the
+    held-out scans (every ``held_every``-th, offset 5)."""
     k = np.arange(n)
-    held = (k % 20 == 5) if quick else (k % 10 == 5)
-    return np.nonzero((k % 10 == 0) if quick else ~held)[0], np.nonzero(held)[0]
+    held = k % held_every == 5
+    return np.nonzero((k % map_every == 0) & ~held)[0], np.nonzero(held)[0]
 
 
 def trial(params, seed, ctx):
@@ -43,7 +45,7 @@ def trial(params, seed, ctx):
     g = load_gazebo1()
     off = np.r_[g["sensor_offset"], 0.0]
     poses = compose2d(g["poses"], off)                       # laser poses: the mappers take the sensor pose
-    used, held = _split(len(g["ranges"]), ctx.quick)
+    used, held = _split(len(g["ranges"]), ctx.params["map_every_scans"], ctx.params["held_out_every_scans"])
     m = C.make("mapper2d", params["method"], seed=seed)
     cpu = C.fuse(m, g["thetas"], poses[used], g["ranges"][used])
     E = hit_points(g["thetas"], poses[held], g["ranges"][held], max_range=np.inf)
@@ -57,7 +59,7 @@ def trial(params, seed, ctx):
            "map_mb": m.nbytes() / 1e6 if hasattr(m, "nbytes") else float("nan"), **C.cpu_stats(cpu), "load": C.load_now()}
     ends = hit_points(g["thetas"], poses[used[:: max(1, len(used) // 300)]], g["ranges"][used[:: max(1, len(used) // 300)]],
                       max_range=np.inf)
-    ctx.save_arrays(**C.map_picture(m, np.vstack([poses[:, :2], ends]), 0.2 if ctx.quick else 0.1), path=poses[:, :2], held=E[::5])
+    ctx.save_arrays(**C.map_picture(m, np.vstack([poses[:, :2], ends]), ctx.params["picture_res_m"]), path=poses[:, :2], held=E[::5])
     return row
 
 
@@ -101,6 +103,8 @@ EXPERIMENT = Experiment(
     grid={"method": ["gpis", "gpis_legacy"]},
     methods={"method": "mapper2d"},
     splits={"dev": {"seeds": [0]}},
-    sizes={"quick": {"n_seeds": 1}, "full": {}},
+    params={"map_every_scans": 1, "held_out_every_scans": 10, "picture_res_m": 0.1},
+    sizes={"quick": {"n_seeds": 1, "params": {"map_every_scans": 10, "held_out_every_scans": 20, "picture_res_m": 0.2}},
+           "full": {}},
     trial=trial, summarize=summarize, checks=checks,
 )

@@ -152,3 +152,132 @@ def test_tiled_office_is_drivable():
     finally:
         w.close()
         one.close()
+
+
+# ---- sizes as data, findings and user-facing text (unit tests: no trial runs) ----
+
+#: The full-size protocol of each GPIS experiment (the committed full-size runs were made with it)
+#: and the quick size's overrides.
+PROTOCOL = {
+    "gazebo1": ({"map_every_scans": 1, "held_out_every_scans": 10, "picture_res_m": 0.1},
+                {"map_every_scans": 10, "held_out_every_scans": 20, "picture_res_m": 0.2}),
+    "gpis_accuracy": ({"every_steps": 1, "n_eval_2d": 60_000, "orbit_n_frames": 40, "orbit_n_eval": 4000},
+                      {"every_steps": 3, "n_eval_2d": 30_000, "orbit_n_frames": 20, "orbit_n_eval": 2000}),
+    "intel_lab": ({"held_out_stride": 1, "picture_res_m": 0.05}, {"held_out_stride": 4, "picture_res_m": 0.2}),
+    "localisation": ({"map_s": 150.0, "map_every_steps": 2, "loc_s": 60.0, "loc_every_steps": 2},
+                     {"map_s": 60.0, "map_every_steps": 3, "loc_s": 30.0, "loc_every_steps": 2}),
+    "mapping_cost": ({"every_m": 0.5}, {"every_m": 1.0}),
+    "objects3d": ({"n_frames": 40, "n_eval": 4000}, {"n_frames": 20, "n_eval": 2000}),
+    "surface_vs_rate": ({"n_eval": 40_000}, {"n_eval": 15_000}),
+    "sensors": ({}, {}),
+}
+
+
+# every size-dependent protocol value is a declared param, not an `if quick` branch in the code
+@pytest.mark.parametrize("name", sorted(PROTOCOL))
+def test_sizes_are_params(name):
+    import inspect
+
+    from polar_sim.runner import get_experiment
+
+    exp = get_experiment(name)
+    full, quick = PROTOCOL[name]
+    assert exp.resolve_params("full") == full
+    assert exp.resolve_params("quick") == quick
+    src = inspect.getsource(inspect.getmodule(exp.trial))
+    assert "ctx.quick" not in src and "quick =" not in src, f"{name}: a size picked in code, not in params"
+
+
+# the committed full-size run folders still load: their trial keys are the full grid's
+def test_full_size_runs_still_load():
+    from pathlib import Path
+
+    from polar_sim.runner.run import load_run
+
+    root = Path(__file__).resolve().parents[2] / "docs" / "reproduce_full"
+    for name in ["gazebo1", "gpis_accuracy", "intel_lab", "mapping_cost", "objects3d", "sensors"]:
+        if not (root / name / "results.csv").is_file():
+            pytest.skip(f"no committed full-size run of {name}")
+        assert load_run(root / name).table
+
+
+# scene-like axes refuse unknown values before any trial runs
+@pytest.mark.parametrize("name, axis, bad", [("gpis_accuracy", "scene", "office3d"), ("surface_vs_rate", "scene", "moon"),
+                                             ("localisation", "scene", "warehouse"), ("sensors", "scene", "tabletop_x"),
+                                             ("objects3d", "object", "teapot")])
+def test_scene_choices(name, axis, bad, tmp_path):
+    with pytest.raises(ValueError, match=f"{axis}: {name} has no {axis} '{bad}'; valid: "):
+        run_experiment(name, quick=True, split="dev", out=tmp_path / "r", overrides={axis: [bad]}, progress=False)
+    assert not (tmp_path / "r" / "results.csv").exists()
+
+
+# no internal issue numbers in what `polar-sim list` shows
+@pytest.mark.parametrize("name", sorted(PROTOCOL))
+def test_no_issue_numbers_in_descriptions(name):
+    import re
+
+    from polar_sim.runner import get_experiment
+
+    assert not re.search(r"\bissues? \d", get_experiment(name).description)
+
+
+class _Ctx:
+    """A RunContext stand-in whose rows carry their arrays."""
+
+    out_dir, size, split, params = None, "full", "dev", {}
+
+    def arrays(self, row, name="arrays"):
+        return row["_arrays"]
+
+
+def _loc_row(method, median_m, cpu_ms, n=100):
+    err = np.c_[np.full(n, median_m), np.full(n, 0.1)]
+    return {"method": method, "seed": 0, "pos_median_m": median_m, "fail_steps": 0, "cpu_ms_median": cpu_ms,
+            "wall_ms_median": cpu_ms, "head_median_deg": 0.1, "_arrays": {"err": err}}
+
+
+# localisation: one finding per comparison, each with its figures; ICP-G losing to ICP-D on the
+# ground-truth SDF is "not held" there while it still beats ICP-D on the grid EDT and the PF
+def test_localisation_findings_compare_each_baseline():
+    from polar_sim.experiments import localisation as L
+
+    table = [_loc_row("icpg", 0.004, 6.0), _loc_row("icpd", 0.005, 3.0), _loc_row("icpd_gt", 0.002, 3.0),
+             _loc_row("pf1000", 0.016, 1.8), _loc_row("pf5000", 0.0158, 6.3), _loc_row("pf10000", 0.015, 13.0)]
+    f = {x.source.split(": ", 1)[1]: x for x in L.findings(table, _Ctx())}
+    gt, edt, pf = (f["ICP-G vs ICP-D on a ground-truth discrete SDF"], f["ICP-G vs ICP-D on a map from the same scans"],
+                   f["ICP-G vs the particle filter at the same compute budget"])
+    assert (gt.verdict, edt.verdict, pf.verdict) == ("not held", "held", "held")
+    assert "0.40 cm" in gt.ours and "0.20 cm" in gt.ours and "0.50 cm" in edt.ours
+    assert "pf5000 1.58 cm" in pf.ours and "pf10000" in pf.ours      # the budget match, and the most accurate PF
+    assert "ground-truth" in gt.claim and "dissertation's setting" in gt.note
+    # no PF reaches ICP-G's CPU per step: the same-budget claim is not tested
+    cheap = [r for r in table if r["method"] not in ("pf5000", "pf10000")]
+    pf = next(x for x in L.findings(cheap, _Ctx()) if "particle filter" in x.source)
+    assert pf.verdict == "not tested the same way" and "no PF run reached" in pf.note
+
+
+def _svr_rows(values):
+    """surface_vs_rate rows from {(spacing, method): (hausdorff m, surface rmse m)}."""
+    return [{"scene": "office2d", "spacing_m": sp, "method": k, "seed": 0, "hausdorff_m": h, "surface_rmse_m": r,
+             "worst_corner_share": 0.8 if k == "gpis" else 0.2, "worst_sparse_share": 0.1 if k == "gpis" else 0.5}
+            for (sp, k), (h, r) in values.items()]
+
+
+# surface_vs_rate: the finding gives Hausdorff and RMSE of GPIS, both grids and the EDT at the
+# sparsest and densest spacing, and its verdict follows where GPIS is the lowest
+def test_surface_vs_rate_finding_gives_figures():
+    from polar_sim.experiments import surface_vs_rate as S
+
+    base = {(sp, k): (0.5, 0.01) for sp in (0.1, 0.5, 1.0) for k in ("grid5", "grid10", "edt5")}
+    cases = [({(0.1, "gpis"): (0.2, 0.005), (1.0, "gpis"): (0.3, 0.006)}, "held"),
+             ({(0.1, "gpis"): (0.2, 0.02), (1.0, "gpis"): (0.9, 0.02)}, "partly held"),
+             ({(0.1, "gpis"): (0.9, 0.02), (1.0, "gpis"): (0.9, 0.02)}, "not held")]
+    for gp, verdict in cases:
+        gp[(0.5, "gpis")] = (0.1, 0.001)          # an intermediate spacing: not in the finding
+        acc, worst = S.findings(_svr_rows({**base, **gp}), _Ctx())
+        assert acc.verdict == verdict, (gp, acc.ours)
+        assert "every 1 m (sparsest)" in acc.ours and "every 0.1 m (densest)" in acc.ours and "every 0.5 m" not in acc.ours
+        for label in ("GPIS", "grid 5 cm", "grid 10 cm", "EDT"):
+            assert f"{label} " in acc.ours
+        assert f"GPIS {gp[(1.0, 'gpis')][0]:.2f} m / {100 * gp[(1.0, 'gpis')][1]:.2f} cm" in acc.ours
+        assert worst.source == "Ch. 7, where the worst errors lie" and worst.verdict == "held"
