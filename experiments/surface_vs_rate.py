@@ -107,7 +107,7 @@ def _accuracy_finding(long, scene):
     seeds = min(r["seeds"] for r in long if r["scene"] == scene)
     return Finding("Ch. 7, surface accuracy against data rate", "GPIS surfaces are more accurate than occupancy "
                    "grids (and their EDT), most of all when the data are sparse",
-                   f"{scene}, Hausdorff / surface RMSE (means over {seeds} seed(s)); " + "; ".join(parts),
+                   f"{scene}: Hausdorff / surface RMSE (means over {seeds} seed(s)); " + "; ".join(parts),
                    "held" if wins == n else ("partly held" if wins else "not held"),
                    "Hausdorff: the larger directed distance between the estimated and the observed true surface; surface "
                    "RMSE: RMS of the exact |SDF| at the estimated surface; EDT: the zero contour of the 5 cm grid's signed "
