@@ -130,10 +130,15 @@ def checks(table, ctx):
                       f"{t:.2f} % vs {tm:.2f} %", known_miss=ctx.split == "test")]
     t, r = p["w6"]["t_pct"], p["w6"]["r_degm"]
     others = {m: p[m]["t_pct"] for m in OURS if m in p and m != "w6"}
-    return [Check(f"w6 pooled translation error ≤ {TARGET_T_PCT} % ({ctx.split})", t <= TARGET_T_PCT, f"{t:.3f} %"),
-            Check(f"w6 pooled rotation error ≤ {TARGET_R_DEGM} deg/m ({ctx.split})", r <= TARGET_R_DEGM, f"{r:.5f} deg/m"),
+    # Recorded as missed on the held-out routes in benchmarks/RESULTS.md (w6 7.58 %, 0.0235 deg/m,
+    # u6 6.58 % below it): the scale fails on the never-tuned ground families, the tracks on checker.
+    held_out = ctx.split == "test"
+    return [Check(f"w6 pooled translation error ≤ {TARGET_T_PCT} % ({ctx.split})", t <= TARGET_T_PCT, f"{t:.3f} %",
+                  known_miss=held_out),
+            Check(f"w6 pooled rotation error ≤ {TARGET_R_DEGM} deg/m ({ctx.split})", r <= TARGET_R_DEGM, f"{r:.5f} deg/m",
+                  known_miss=held_out),
             Check("w6 has the lowest pooled translation error", all(t < v for v in others.values()),
-                  "; ".join(f"{m} {v:.3f} %" for m, v in others.items())),
+                  "; ".join(f"{m} {v:.3f} %" for m, v in others.items()), known_miss=held_out),
             Check(f"per-frame CPU ≤ {TARGET_MS} ms (621x188, median)", cpu <= TARGET_MS, f"{cpu:.1f} ms")]
 
 

@@ -81,6 +81,19 @@ def test_odometry_findings_reversed_two_parameter_pair(tmp_path):
     assert all(c.passed for c in checks.values())
 
 
+# The held-out figures recorded as missed in benchmarks/RESULTS.md (w6 7.58 %, u6 6.58 % below it)
+# read "missed" on the test split, and fail on dev, where the targets were met.
+@pytest.mark.parametrize("split, status", [("test", "missed"), ("dev", "FAIL")])
+def test_odometry_recorded_misses(tmp_path, split, status):
+    errors = {"u2": 13.69, "w2": 13.09, "u6": 6.58, "w6": 7.58, "mono": 30.09}
+    table, ctx = _odometry_run(tmp_path, errors, split=split)
+    checks = {c.name.split(" (")[0]: c for c in GO.checks(table, ctx)}
+    assert checks["w6 pooled translation error ≤ 2.0 %"].status == status
+    assert checks["w6 has the lowest pooled translation error"].status == status
+    assert checks["w6 pooled rotation error ≤ 0.01 deg/m"].status == "pass"   # this table drifts 1e-5 rad/m
+    assert checks["per-frame CPU ≤ 15.0 ms"].status == "pass"
+
+
 # The published ordering and a worse monocular baseline: "held", with no reversal named.
 def test_odometry_findings_published_order_holds(tmp_path):
     table, ctx = _odometry_run(tmp_path, {"u2": 7.19, "w2": 7.15, "u6": 7.01, "w6": 6.21, "mono": 12.58})
