@@ -92,7 +92,7 @@ def checks(table, ctx):
         out += [Check("Intel Lab: held-out end points' median |SDF| <= 1.5 cm", r["heldout_abs_sdf_median_m"] <= 0.015,
                       f"{100 * r['heldout_abs_sdf_median_m']:.2f} cm over {r['heldout_endpoints']:.0f} end points", known_miss=True),
                 Check("Intel Lab: median update <= 8 ms per scan (CPU time)", r["update_cpu_ms_median"] <= 8.0,
-                      f"{r['update_cpu_ms_median']:.2f} ms (median over {len(table)} trials)", known_miss=True)]
+                      f"{r['update_cpu_ms_median']:.2f} ms (median over {len(table)} trials)", timing=True)]
     for r in [r for r in table if r["method"] == "icpg"][:1]:
         out += [Check("Intel Lab: ICP-G relocalisation median <= 3 cm against the corrected poses", r["reloc_median_m"] <= 0.03,
                       f"{100 * r['reloc_median_m']:.2f} cm over {r['reloc_scans']} held-out scans"),

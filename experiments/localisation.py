@@ -97,8 +97,10 @@ def checks(table, ctx):
         out.append(Check("ICP-G error lower than the PF's at the same compute budget (CPU time)",
                          bool(gm["pos_median_m"] < pf["pos_median_m"] and pf["cpu_ms_median"] >= gcpu),
                          f"median position error ICP-G {100 * gm['pos_median_m']:.2f} cm vs {pf['method']} "
-                         f"{100 * pf['pos_median_m']:.2f} cm; median CPU per step {gcpu:.2f} vs {pf['cpu_ms_median']:.2f} ms"))
-    out.append(Check("one ICP-G step <= 10 ms (1081-beam scan; median CPU time)", gcpu <= 10.0, f"{gcpu:.2f} ms"))
+                         f"{100 * pf['pos_median_m']:.2f} cm; median CPU per step {gcpu:.2f} vs {pf['cpu_ms_median']:.2f} ms",
+                         timing=True))   # which PF matches ICP-G's budget depends on the measured CPU times
+    out.append(Check("one ICP-G step <= 10 ms (1081-beam scan; median CPU time)", gcpu <= 10.0, f"{gcpu:.2f} ms",
+                     timing=True))
     return out
 
 

@@ -232,7 +232,7 @@ def _print_checks(res):
 
 
 def _exit_code(results, strict):
-    """0: every trial ran and no check regressed; 2: a failure (or, with --strict, a miss)."""
+    """0: every trial ran and no check regressed; 2: a failure (or, with --strict, a miss or a slow timing)."""
     ok = all((r.strict_passed if strict else r.passed) for r in results)
     return 0 if ok else 2
 
@@ -259,8 +259,8 @@ def _cmd_reproduce(args):
                                 report_only=args.report_only)
     for name, res in results.items():
         c = [x.status for x in res.checks]
-        print(f"{name}: {c.count('pass')} met, {c.count('missed')} missed (recorded), {c.count('FAIL')} failed, "
-              f"{len(res.failures)} trial errors")
+        print(f"{name}: {c.count('pass')} met, {c.count('missed')} missed (recorded), {c.count('slow')} slow (timing), "
+              f"{c.count('FAIL')} failed, {len(res.failures)} trial errors")
     print(f"report: {report} (and {report.with_suffix('.html').name})")
     return _exit_code(list(results.values()), args.strict)
 

@@ -51,12 +51,12 @@ class RunResult:
 
     @property
     def passed(self) -> bool:
-        """No failed trial and no failed check other than a recorded miss."""
+        """No failed trial and no failed check other than a recorded miss or a slow timing."""
         return not self.failures and all(c.status != "FAIL" for c in self.checks)
 
     @property
     def strict_passed(self) -> bool:
-        """No failed trial and every check met (recorded misses count as failures)."""
+        """No failed trial and every check met (recorded misses and slow timings count as failures)."""
         return not self.failures and all(c.passed for c in self.checks)
 
     @property
@@ -460,8 +460,8 @@ def load_run(out, name=None):
         config = json.loads((out_dir / "config.json").read_text())
         raw_checks = json.loads((out_dir / "checks.json").read_text())
         raw_findings = json.loads((out_dir / "findings.json").read_text())
-        checks = [Check(c["name"], bool(c["passed"]), c.get("detail", ""), bool(c.get("known_miss", False)))
-                  for c in raw_checks]
+        checks = [Check(c["name"], bool(c["passed"]), c.get("detail", ""), bool(c.get("known_miss", False)),
+                        bool(c.get("timing", False))) for c in raw_checks]
         findings = [Finding(**f) for f in raw_findings]
     except (json.JSONDecodeError, KeyError, TypeError) as exc:
         raise ValueError(f"out: {out_dir} holds a corrupt config.json, checks.json or findings.json ({exc})") from None

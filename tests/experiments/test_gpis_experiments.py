@@ -63,7 +63,9 @@ def test_quick_experiment(name, tmp_path):
     saved = json.loads((tmp_path / "checks.json").read_text())
     assert [c["name"] for c in saved] == [c.name for c in res.checks]
     for c in res.checks:
-        if _match(name, c, TIMED):
+        # the checks on CPU time say so (a miss of one shows as "slow", not as a failure)
+        assert c.timing == _match(name, c, TIMED), f"{name}: {c.name}: timing={c.timing}"
+        if c.timing:
             assert " ms" in c.detail, c.detail
             continue
         miss = _match(name, c, KNOWN_MISSES)
@@ -186,19 +188,6 @@ def test_sizes_are_params(name):
     assert exp.resolve_params("quick") == quick
     src = inspect.getsource(inspect.getmodule(exp.trial))
     assert "ctx.quick" not in src and "quick =" not in src, f"{name}: a size picked in code, not in params"
-
-
-# the committed full-size run folders still load: their trial keys are the full grid's
-def test_full_size_runs_still_load():
-    from pathlib import Path
-
-    from polar_sim.runner.run import load_run
-
-    root = Path(__file__).resolve().parents[2] / "docs" / "reproduce_full"
-    for name in ["gazebo1", "gpis_accuracy", "intel_lab", "mapping_cost", "objects3d", "sensors"]:
-        if not (root / name / "results.csv").is_file():
-            pytest.skip(f"no committed full-size run of {name}")
-        assert load_run(root / name).table
 
 
 # scene-like axes refuse unknown values before any trial runs

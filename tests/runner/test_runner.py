@@ -289,3 +289,20 @@ def test_load_run(tmp_path):
     with pytest.raises(ValueError, match="no findings.json"):
         load_run(tmp_path, TOY)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(set(before) - {"findings.json"})
+
+
+# A check's status: met, a recorded miss, a slow timing, or a failure. Only a failure (or a failed
+# trial) fails a run by default; --strict fails it on a miss or a slow timing too.
+def test_check_status_and_exit_code(tmp_path):
+    from polar_sim.cli import _exit_code
+    from polar_sim.runner.run import RunResult
+
+    assert Check("a", True, timing=True, known_miss=True).status == "pass"
+    assert Check("b", False, known_miss=True, timing=True).status == "missed"
+    assert Check("c", False, timing=True).status == "slow"
+    assert Check("d", False).status == "FAIL"
+    run = lambda *checks: RunResult(tmp_path, [{}], list(checks), [])  # noqa: E731
+    assert _exit_code([run(Check("c", False, timing=True), Check("b", False, known_miss=True))], strict=False) == 0
+    assert _exit_code([run(Check("c", False, timing=True))], strict=True) == 2
+    assert _exit_code([run(Check("c", True, timing=True), Check("d", False))], strict=False) == 2
+    assert _exit_code([RunResult(tmp_path, [{}], [Check("a", True)], [{"error": "x"}])], strict=False) == 2
