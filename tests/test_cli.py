@@ -150,9 +150,9 @@ def _toy_experiment():
                       methods={"method": "tracker"}, trial=lambda p, s, c: {},
                       splits={"dev": {"seeds": range(3)}, "test": {"seeds": range(10_000, 10_005), "grid": {"sequence": seqs},
                                                              "params": {"stride": 3}}},
-                      sizes={"quick": {"n_seeds": 1, "grid": {"sequence": seqs[:1]}, "params": {"duration_s": 20.0}},
+                      sizes={"quick": {"n_seeds": 1, "grid": {"sequence": seqs[:1]}, "params": {"drive_m": 20.0}},
                              "full": {}},
-                      params={"duration_s": 60.0, "stride": 2, "label": "a b", "scale": [0.5, 1.0]})
+                      params={"drive_m": 60.0, "stride": 2, "label": "a b", "scale": [0.5, 1.0]})
 
 
 # list shows, under each experiment, its grid axes and protocol params in the syntax --set takes,
@@ -167,9 +167,9 @@ def test_describe_experiment_lists_set_keys():
     assert "seed 10000..10004 (test split)" in text
     assert "sequence=[sequence_00_with_a_long_name, " in text and "... 12 values]" in text   # cut
     (params,) = [ln for ln in lines if ln.startswith("params:")]
-    assert params.split(None, 1)[1] == 'duration_s=60.0; stride=3; label="a b"; scale=[0.5, 1.0]'
+    assert params.split(None, 1)[1] == 'drive_m=60.0; stride=3; label="a b"; scale=[0.5, 1.0]'
     (quick,) = [ln for ln in lines if ln.startswith("quick:")]
-    assert quick.split(None, 1)[1] == "duration_s=20.0; sequence=[sequence_00_with_a_long_name]; seed 10000"
+    assert quick.split(None, 1)[1] == "drive_m=20.0; sequence=[sequence_00_with_a_long_name]; seed 10000"
     (dev,) = [ln for ln in lines if ln.startswith("dev:")]
     assert "stride=2" in dev and "sequence=[sequence_00" in dev and dev.endswith("seed 0..2")
     # in full, nothing is cut, and every KEY=VALUE shown is --set syntax that gives back the value
@@ -184,7 +184,7 @@ def test_describe_experiment_lists_set_keys():
     items = [it.strip().split(" (")[0] for it in shown.split(";") if "=" in it]
     got = _parse_overrides(items)
     assert got == {"sequence": [f"sequence_{i:02d}_with_a_long_name" for i in range(12)], "method": ["ww", "h"],
-                   "n": [1, 2], "duration_s": 60.0, "stride": 3, "label": "a b", "scale": [0.5, 1.0]}
+                   "n": [1, 2], "drive_m": 60.0, "stride": 3, "label": "a b", "scale": [0.5, 1.0]}
     assert exp.resolve_params("full", "test", got) == {k: got[k] for k in exp.params}
 
 
