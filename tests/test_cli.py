@@ -158,7 +158,8 @@ def _toy_experiment():
 # list shows, under each experiment, its grid axes and protocol params in the syntax --set takes,
 # what the quick size and the other split change, and cuts long lists unless asked for one experiment.
 def test_describe_experiment_lists_set_keys():
-    from polar_sim.cli import _parse_overrides, describe_experiment
+    from polar_sim.cli import _parse_overrides
+    from polar_sim.runner.describe import describe_experiment
 
     exp = _toy_experiment()
     lines = describe_experiment(exp)
