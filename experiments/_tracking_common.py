@@ -25,10 +25,7 @@ import numpy as np
 from polar_sim import metrics
 from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
 
-try:  # the registry imports this module as polar_sim.experiments._tracking_common
-    from polar_sim.experiments._tracking_tables import summarize_run
-except ImportError:  # pragma: no cover
-    from _tracking_tables import summarize_run
+from polar_sim.experiments._tracking_tables import summarize_run
 
 DEV = list_sequences("dev") + list_sequences("dev_appearance")
 TEST = list_sequences("test")

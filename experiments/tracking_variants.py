@@ -15,16 +15,11 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import fmt, markdown_table, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_variants
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_tables as T
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_tables as T
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_tables as T
+from polar_sim.experiments import _tracking_pictures as pictures
 
 #: ICG (Stoiber et al., CVPR 2022): 1.3 ms per frame on one CPU core.
 ICG_MS = 1.3
