@@ -5,7 +5,8 @@ The full method (``ww``, every default) beside configurations that switch one pa
 (the blurred predicted silhouette as the prior pi, the spec's form with epsilon 0.02; off by default,
 as chosen on dev) and ``spatial-prior-0.1`` (the same prior softened to epsilon 0.1),
 ``alpha-beta`` (the spec's fallback filter), ``no-hold`` (velocity integrated along directions the
-points do not constrain, the tracker's earlier behaviour) and ``plain-icp`` (robust ICP on every ROI point, no
+points do not constrain, the tracker's earlier behaviour), ``no-deadzone`` (the ICP's tangential term
+without its dead zone, the behaviour before issue 35) and ``plain-icp`` (robust ICP on every ROI point, no
 appearance, no label weighting). Not run: oracle-mask ICP, appearance without shape and learned
 visibility (no such switch), and ICG/M3T (not installable here).
 
@@ -24,7 +25,8 @@ from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 from polar_sim.experiments import _tracking_common as C
 from polar_sim.experiments import _tracking_tables as T
 
-ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "spatial-prior-0.1", "alpha-beta", "no-hold", "plain-icp"]
+ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "spatial-prior-0.1", "alpha-beta", "no-hold", "no-deadzone",
+             "plain-icp"]
 ORDER = C.VARIANTS + ABLATIONS
 
 
@@ -107,7 +109,8 @@ def findings(table, ctx):
 EXPERIMENT = Experiment(
     name="tracking_ablation",
     description="ablations of the tracker (appearance off, motion prior off, the silhouette prior on, alpha-beta, "
-                "no hold of unobserved directions, plain ICP) against the variants, under occlusion by touch",
+                "no hold of unobserved directions, no tangential dead zone, plain ICP) against the variants, under "
+                "occlusion by touch",
     grid={"sequence": C.DEV, "method": ORDER},
     methods={"method": "tracker"},
     choices=C.CHOICES,

@@ -230,6 +230,8 @@ TRACKERS = {
                           "ablation: the silhouette prior softened to epsilon 0.1"),
     "alpha-beta": ({"motion__filter": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
     "no-hold": ({"registration__hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "no-deadzone": ({"registration__tangential_deadzone": 0.0},
+                    "ablation: the ICP's tangential term without its dead zone (every sampling gap of the model pulls)"),
     "lost-by-silhouette": ({"guard__coverage": "silhouette"},
                            "ablation: lost when too few inliers per pixel of the whole predicted silhouette, hidden "
                            "pixels included (the rule before the visible-pixel coverage)"),

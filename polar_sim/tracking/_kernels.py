@@ -117,13 +117,18 @@ def icp_residuals(X, R, t, origin, inv_h, knn, P, N, vis, gate, idx, res):
 
 
 @njit(cache=True, nogil=True)
-def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
+def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, dz, H, g):
     """Accumulate H (6, 6) and g (6,) of the weighted point-to-plane term plus ``mu2`` times the
-    tangential point-to-point term (body twist about the centred frame, see icp.py)."""
+    tangential point-to-point term (body twist about the centred frame, see icp.py).
+
+    ``dz`` (M,): the tangential term's dead zone per model point, m. A point whose tangential
+    offset from its model point is within it gives no tangential term (only point-to-plane); one
+    beyond it gives the offset shortened by it. 0 everywhere: the plain tangential term."""
     for a in range(6):
         g[a] = 0.0
         for b in range(6):
             H[a, b] = 0.0
+    Hin = np.zeros((6, 6))
     s0 = 0.0
     s1 = np.zeros(3)
     s2 = np.zeros((3, 3))
@@ -151,13 +156,27 @@ def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
         if mu2 > 0.0:
             dx = X[i, 0] - t[0]
             dy = X[i, 1] - t[1]
-            dz = X[i, 2] - t[2]
-            yx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
-            yy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
-            yz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+            dw = X[i, 2] - t[2]
+            yx = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dw
+            yy = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dw
+            yz = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dw
             ex, ey, ez = mx - yx, my - yy, mz - yz
             en = ex * nx + ey * ny + ez * nz
-            ex, ey, ez = wi * (ex - en * nx), wi * (ey - en * ny), wi * (ez - en * nz)
+            ex, ey, ez = ex - en * nx, ey - en * ny, ez - en * nz
+            dzj = dz[j]
+            if dzj > 0.0:
+                # within the dead zone the offset is the gap random samples leave: no tangential term
+                # (the point keeps its full point-to-plane term, added back below)
+                a_t = np.sqrt(ex * ex + ey * ey + ez * ez)
+                if a_t <= dzj:
+                    for a in range(6):
+                        wa = wi * J[a]
+                        for b in range(a, 6):
+                            Hin[a, b] += wa * J[b]
+                    continue
+                f = 1.0 - dzj / a_t
+                ex, ey, ez = f * ex, f * ey, f * ez
+            ex, ey, ez = wi * ex, wi * ey, wi * ez
             gt[0] += my * ez - mz * ey
             gt[1] += mz * ex - mx * ez
             gt[2] += mx * ey - my * ex
@@ -186,6 +205,11 @@ def icp_normal_equations(X, R, t, P, N, idx, res, w, mu2, H, g):
             g[a] += mu2 * gt[a]
             for b in range(6):
                 H[a, b] *= 1.0 - mu2
+        for a in range(6):
+            for b in range(a, 6):
+                H[a, b] += mu2 * Hin[a, b]
+                if b > a:
+                    H[b, a] += mu2 * Hin[a, b]
         for a in range(3):
             for b in range(3):
                 H[a, b] += mu2 * ((tr if a == b else 0.0) - s2[a, b])

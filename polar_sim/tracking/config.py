@@ -128,6 +128,14 @@ class RegistrationConfig:
         Threshold on P for the highly probable points.
     max_iterations : int in [1, 1000], default=30
         ICP iterations.
+    tangential_deadzone : float in [0, 5], default=1.5
+        Dead zone of the ICP's tangential term for a fully hidden object, in units of the model's
+        local point spacing (:func:`polar_sim.tracking.icp.weighted_icp`); on each frame it is
+        scaled by the hidden fraction of the predicted silhouette (pixels where something is seen
+        in front of the predicted surface). A tangential offset from the nearest model point within
+        it is a sampling gap, not a slide. With few points visible the gaps no longer average out
+        and pull the weakly observed rotations (a mug under a palm); with the whole object visible
+        the tangential term keeps its full pull. 0: every offset pulls.
     em_refine : bool, default=True
         When the registration lands more than 2 predicted standard deviations from the prediction,
         redo the prediction map at the registered pose (3 mm / 1 deg spread) and register again: a
@@ -148,6 +156,7 @@ class RegistrationConfig:
     max_points: int = 3000
     tau_y: float = 0.5
     max_iterations: int = 30
+    tangential_deadzone: float = 1.5
     em_refine: bool = True
     pose_prior: bool = True
     hold_unobserved: bool = True
@@ -158,6 +167,7 @@ class RegistrationConfig:
         as_int(self.max_points, "max_points", minimum=6, maximum=MAX_REGISTRATION_POINTS)
         _open(self.tau_y, "tau_y", 0.0, 1.0)
         as_int(self.max_iterations, "max_iterations", minimum=1, maximum=MAX_ITERATIONS)
+        as_float(self.tangential_deadzone, "tangential_deadzone", minimum=0.0, maximum=5.0)
         for name in ("em_refine", "pose_prior", "hold_unobserved"):
             as_bool(getattr(self, name), name)
 

@@ -93,8 +93,8 @@ def _correspond(X, T, model, vis, gate, exact):
 
 def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate_floor,
                  max_iterations=30, vis_every=5, gate_decay=0.7, tol_rot=1e-4, tol_trans=1e-5,
-                 exact=False, min_points=6, tangential_weight=0.6, vis_init=None, rel_decrease=1e-3,
-                 prior=None):
+                 exact=False, min_points=6, tangential_weight=0.6, tangential_deadzone=0.0, vis_init=None,
+                 rel_decrease=1e-3, prior=None):
     """Register camera-frame points X (n, 3) with prior weights w0 (n,) to the model.
 
     Parameters
@@ -110,6 +110,14 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
         ``mu^2 |(I - n n^T)(m - y)|^2``. Point-to-plane alone cannot see a slide along a face (a
         box seen face-on); the tangential term lets the boundary of the selected points pin it.
         0 gives pure point-to-plane.
+    tangential_deadzone : dead zone of the tangential term, in units of the model's local point
+        spacing (``model.local_spacing``). A tangential offset from the nearest model point within
+        it is the gap random samples leave, not a slide: such a point gives no tangential term, and
+        a larger offset counts shortened by it. Without a dead zone (0) the sampling gaps are read as
+        pulls whose balance point is off by a fraction of the spacing; where point-to-plane
+        constrains a direction only weakly (a mug's turn about its axis while the hand hides most
+        of it) that moves the pose by degrees. With a dead zone c, a point on the surface has no
+        sample within c spacings with probability exp(-pi c^2) (random samples of that density).
     vis_init : (M,) visibility at T_init if already known (saves one projection).
     rel_decrease : stop when the predicted cost decrease of a step is below this fraction of the
         weighted cost (besides the spec's step-size test ``tol_rot``, ``tol_trans``).
@@ -123,7 +131,7 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     X = np.ascontiguousarray(X, dtype=np.float64)
     sig_floor = float(np.median(sigma_d)) if len(sigma_d) else 1e-3
     step = dict(w0=w0, model=model, exact=exact, min_points=min_points, sig_floor=sig_floor,
-                mu2=float(tangential_weight) ** 2, prior=prior)
+                mu2=float(tangential_weight) ** 2, dz=float(tangential_deadzone) * model.local_spacing, prior=prior)
     T, vis, gate, sigma, it, ok = T_init.copy(), vis_init, gate0, sig_floor, 0, False
     for outer in range(int(np.ceil(max_iterations / vis_every))):
         if outer > 0 or vis is None:
@@ -163,7 +171,7 @@ def _robust(w0, sel, res, sigma):
     return w
 
 
-def _gauss_newton_step(X, T, vis, gate, sigma, *, w0, model, exact, min_points, sig_floor, mu2, prior):
+def _gauss_newton_step(X, T, vis, gate, sigma, *, w0, model, exact, min_points, sig_floor, mu2, dz, prior):
     """One IRLS Gauss-Newton step at T: ``(delta (6,), predicted decrease, cost, sigma)``, with
     delta None when fewer than ``min_points`` points correspond or the system is singular (sigma is
     the robust scale, MAD of the residuals floored at ``sig_floor``, or the one given when no scale
@@ -177,7 +185,7 @@ def _gauss_newton_step(X, T, vis, gate, sigma, *, w0, model, exact, min_points, 
     w = _robust(w0, sel, res, sigma)
     H, g = np.zeros((6, 6)), np.zeros(6)
     icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                         model.P, model.N, idx, res, w, mu2, H, g)
+                         model.P, model.N, idx, res, w, mu2, dz, H, g)
     tr = np.trace(H)
     if not np.isfinite(tr) or tr <= 0:
         return None, 0.0, 0.0, sigma
@@ -208,7 +216,7 @@ def _converged(X, w0, model, T, K, shape, gate, sigma, delta1, exact, iterations
     # look well measured and the filter would reject its true motion)
     H, g = np.zeros((6, 6)), np.zeros(6)
     icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                         P, N, idx, res, w, 0.0, H, g)
+                         P, N, idx, res, w, 0.0, np.zeros(len(P)), H, g)  # mu2 = 0: no tangential term
     tr = np.trace(H)
     try:
         cov = sigma**2 * np.linalg.inv(H + 1e-6 * max(tr, 1e-12) * np.eye(6))

@@ -89,8 +89,9 @@ class MotionFilter:
             self.T = T_meas.copy()
             return
         if self.mode == "alpha-beta":
-            step = se3_log(inv_pose(self.T) @ T_meas) / max(dt, 1e-6)
-            self.xi = (1.0 - self.beta) * self.xi + self.beta * step
+            if dt > 0:  # a velocity needs an interval: none before the first frame
+                step = se3_log(inv_pose(self.T) @ T_meas) / dt
+                self.xi = (1.0 - self.beta) * self.xi + self.beta * step
             self.T = T_meas.copy()
             self._hold(hold)
             return

@@ -88,13 +88,14 @@ def prediction_map(m, K, D, roi, T, proj, sig_pos, lI, gamma, attention):
 def in_front(m, K, D, roi, proj, sig_pos):
     """(h, w) bool: valid depth nearer than the model's surface (splatted from the visible points
     of ``proj``, its projection at a pose) by more than 3 sigma of depth noise and pose spread
-    ``sig_pos`` (m), and at least 1 cm."""
+    ``sig_pos`` (m), and at least 1 cm. Where no splat reaches (gaps of a sparsely sampled part of
+    the model) there is no predicted surface, so nothing is in front of it."""
     f = float(K[0, 0])
     r = int(max(1, np.ceil(f * m.spacing / proj.z_mean)))
     Z = splat_depth(proj.uv[proj.vis], proj.Pc[proj.vis, 2], r, roi)
     sig_d = depth_sigma(D)
     band = np.maximum(3.0 * np.sqrt(sig_d * sig_d + sig_pos * sig_pos), 0.01)
-    return (D > 0) & (D < Z - band)
+    return (D > 0) & np.isfinite(Z) & (D < Z - band)
 
 
 def labels(m, K, shape, D, roi, T, vis=None):

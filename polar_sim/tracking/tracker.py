@@ -73,8 +73,8 @@ class _Frame:
     ``T_bar`` (4, 4) predicted T_cam_cen, its spreads ``sig_rot`` (rad), ``sig_tr`` and ``sig_pos``
     (m), the model's projection ``proj`` there; the ROI and its depth crop ``D``; the appearance
     features and log-ratio ``lI`` with weight ``gamma``; the prediction map ``Pmap``, prior ``pi``
-    and silhouette ``S``; the registration ``res`` of ``n_sel`` of ``n_cand`` candidate points and
-    ``at``, the (projection, spread) that ``S`` was made with.
+    and silhouette ``S``; the registration ``res`` of ``n_sel`` of ``n_cand`` candidate points,
+    ``at``, the (projection, spread) that ``S`` was made with, and the ICP's tangential dead zone.
     """
 
     dt: float
@@ -95,6 +95,7 @@ class _Frame:
     n_sel: int = 0
     n_cand: int = 0
     at: tuple = ()
+    deadzone: float = 0.0
 
 
 def _logit(p):
@@ -268,7 +269,8 @@ class ObjectTracker(Parameterised):
         t : float, optional
             Time stamp, s; without it frames are 1/fps apart. Either every frame since the first
             (or since :meth:`reset`) has one or none has. A gap longer than ``MAX_GAP_S`` (1 s)
-            is predicted as 1 s.
+            is predicted as 1 s. The first frame is taken at the time of ``initial_pose``: it is
+            registered from that pose and its spread, with no motion predicted before it.
 
         Returns
         -------
@@ -288,6 +290,11 @@ class ObjectTracker(Parameterised):
             raise ValueError("t: every frame needs a time stamp once one was given, and none may be "
                              f"given after unstamped frames (got {t!r}, previous {t_prev!r}); reset() to start again")
         dt = 1.0 / self.fps if (t is None or t_prev is None) else float(t - t_prev)
+        if not built or self.n_frames_ == 0:
+            # the first frame is at the time of initial_pose: predicting over 1/fps before it would
+            # correlate the pose with the (unknown) velocity, so that its first registration error
+            # became a spurious velocity that rings for frames (issue 35: up to 1.7 deg at rest)
+            dt = 0.0
         # a longer gap is predicted as MAX_GAP_S: the covariance is at its caps by then, and constant
         # velocity is not extrapolated further (nor overflows on absurd gaps)
         dt = min(dt, MAX_GAP_S)
@@ -375,6 +382,7 @@ class ObjectTracker(Parameterised):
         away, the prediction map was centred on the wrong place: redo the E-step at the registered
         pose with a tight spread and register again (``registration.em_refine``)."""
         m, T_bar = self.model_, fr.T_bar
+        fr.deadzone = self.registration.tangential_deadzone * self._hidden_fraction(fr)
         fr.res, fr.n_sel, fr.n_cand = self._register(fr, fr.Pmap, T_bar, fr.proj.vis, fr.sig_pos)
         res = fr.res
         if res is None or not res.ok or not self.registration.em_refine:
@@ -392,6 +400,18 @@ class ObjectTracker(Parameterised):
         if res2 is not None and res2.ok:
             fr.res, fr.n_sel, fr.n_cand, fr.Pmap, fr.pi, fr.S = res2, n_sel2, n_cand2, Pmap2, pi2, S2
             fr.at = (proj2, sig2)
+
+    def _hidden_fraction(self, fr):
+        """Fraction of the predicted silhouette's valid-depth pixels where something is seen in front
+        of the predicted surface (a hand, another object); 0 when no dead zone is asked for."""
+        if self.registration.tangential_deadzone == 0.0:
+            return 0.0
+        seen = (fr.D > 0) & (fr.S > 0)
+        n_seen = int(np.count_nonzero(seen))
+        if n_seen == 0:
+            return 0.0
+        hidden = seen & pixels.in_front(self.model_, self.K_, fr.D, fr.roi, fr.proj, fr.sig_pos)
+        return int(np.count_nonzero(hidden)) / n_seen
 
     def _register(self, fr, Pmap, T_init, vis, sig_pos):
         """Select the highly probable points and run the weighted ICP from T_init (spec 3.5).
@@ -428,7 +448,7 @@ class ObjectTracker(Parameterised):
         res = weighted_icp(X, w0, m, T_init, self.K_, self.image_shape_, sigma_d=sd,
                            delta1=np.maximum(3 * sd, 0.006), gate0=gate0, gate_floor=gate_floor,
                            max_iterations=rc.max_iterations, exact=rc.correspondence == "kdtree",
-                           vis_init=vis, prior=prior)
+                           tangential_deadzone=fr.deadzone, vis_init=vis, prior=prior)
         return res, len(cand), n_cand
 
     def _gate(self, fr):

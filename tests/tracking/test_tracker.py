@@ -235,6 +235,83 @@ def test_mostly_hidden_object_is_tracked_not_lost():
     assert lost == {"visible": 0, "silhouette": n - 10}, lost
 
 
+def test_still_object_almost_all_hidden_is_held_still():
+    # issue 35 item 3: a mug at rest, held by the hand, with a board in front that hides all but about
+    # 3 % of it from frame 10 on. Its pose must not move: the largest rotation drift against the exact
+    # truth stays under 2 deg, the track is never lost and ADD stays < 0.1 d. Without the tangential
+    # term's dead zone the sampling gaps of the model pull the few visible points' weak directions and
+    # the estimate turns by about 5 deg (so the test can fail)
+    import trimesh
+
+    from polar_sim.geometry import make_pose
+    from polar_sim.tracking.synthetic import OCCLUDER, Part
+
+    n = 25
+    seq = make_sequence(n, "mug", speed=0.0, hand=True)
+    occ = make_sequence(n, "mug", speed=0.0, hand=True)
+    board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
+    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.10, 0.0, 0.0]))]
+    frames = [seq.frame(i) if i < 10 else occ.frame(i) for i in range(n)]
+    seen = [f["mask"].sum() / frames[0]["mask"].sum() for f in frames[10:]]
+    assert 0.01 < min(seen) and max(seen) < 0.05, seen
+    P, N = seq.model(3000)
+    drift = {}
+    for dz in (None, 0.0):
+        kw = {} if dz is None else {"registration__tangential_deadzone": dz}
+        _, res = _track(seq, P, N, frames, **kw)
+        E = np.stack([r.pose for r in res])
+        drift[dz] = np.rad2deg(metrics.rotation_drift(seq.poses, E)).max()
+        if dz is None:
+            assert not any(r.lost for r in res)
+            assert np.all(metrics.add(P, seq.poses, E) < 0.1 * metrics.object_diameter(P))
+    assert drift[None] <= 2.0 < drift[0.0], drift
+
+
+def test_dead_zone_scales_with_the_hidden_fraction(monkeypatch):
+    # the ICP's dead zone is the configured one times the fraction of the predicted silhouette seen
+    # behind something: ~0 for a mug with nothing in front (edge pixels only), ~1 behind a board that
+    # leaves 3 % of it visible (the exact visible mask of the synthetic frames says how much)
+    import trimesh
+
+    from polar_sim.geometry import make_pose
+    from polar_sim.tracking import tracker as tracker_mod
+    from polar_sim.tracking.synthetic import OCCLUDER, Part
+
+    used = []
+    icp = tracker_mod.weighted_icp
+
+    def spy(*a, **kw):
+        used.append(kw["tangential_deadzone"])
+        return icp(*a, **kw)
+
+    monkeypatch.setattr(tracker_mod, "weighted_icp", spy)
+    seq = make_sequence(6, "mug", speed=0.0, hand=False)
+    occ = make_sequence(6, "mug", speed=0.0, hand=False)
+    board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
+    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.10, 0.0, 0.0]))]
+    frames = [seq.frame(i) for i in range(3)] + [occ.frame(i) for i in range(3, 6)]
+    hidden = 1.0 - np.array([f["mask"].sum() for f in frames]) / frames[0]["mask"].sum()
+    assert hidden[:3].max() < 1e-9 and hidden[3:].min() > 0.9, hidden
+    P, N = seq.model(3000)
+    _track(seq, P, N, frames, registration__tangential_deadzone=2.0)
+    assert len(used) >= 6
+    assert max(used[:3]) < 0.02 and min(used[-3:]) > 0.9 * 2.0, used
+
+
+def test_first_frame_predicts_no_motion():
+    # the first frame is at the time of initial_pose: no interval is predicted over before it, so its
+    # registration moves the pose but gives the filter no velocity (with 1/fps predicted, the pose and
+    # velocity errors are correlated and the first registration error becomes a rate that rings)
+    seq = make_sequence(3, "mug", speed=0.0, hand=False)
+    f = seq.frame(0)
+    P, N = seq.model(2000)
+    for motion in ("ekf", "alpha-beta"):
+        tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N).set_params(motion__filter=motion)
+        r = tr.process(f["rgb"], f["depth"], t=5.0)
+        assert not np.array_equal(r.pose, seq.poses[0])  # the registration did move the pose
+        assert np.array_equal(tr.filter_.xi, np.zeros(6)), (motion, tr.filter_.xi)
+
+
 def test_deterministic(mug):
     # same inputs, same outputs, bit for bit; reset() replays like a fresh tracker
     seq, P, N, frames = mug

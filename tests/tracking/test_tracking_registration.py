@@ -119,7 +119,7 @@ def test_normal_equations_kernel_matches_brute_force():
     res = np.einsum("ij,ij->i", N, P - Y)
     w = rng.random(n_)
     H, g = np.zeros((6, 6)), np.zeros(6)
-    icp_normal_equations(X, T[:3, :3].copy(), T[:3, 3].copy(), P, N, idx, res, w, 0.09, H, g)
+    icp_normal_equations(X, T[:3, :3].copy(), T[:3, 3].copy(), P, N, idx, res, w, 0.09, np.zeros(len(P)), H, g)
     Hb = np.zeros((6, 6))
     gb = np.zeros(6)
     for i in range(n_):
@@ -196,3 +196,41 @@ def test_icp_weights_are_the_registration_package_tukey_bit_for_bit():
     old = np.where(a > 0.0, a * a, 0.0)
     assert np.array_equal(robust_weight(r, "tukey", c), old)
     assert old[-5] == 0.0 and old[-3] == 1.0 and (old >= 0).all()
+
+
+def test_normal_equations_kernel_with_a_tangential_dead_zone():
+    # with a dead zone dz per model point, a point whose tangential offset is within dz keeps its
+    # point-to-plane term only, and one beyond it adds the tangential term with the offset shortened by
+    # dz (explicit 3x6-Jacobian sums); dz = 0 is the plain tangential term
+    from polar_sim.tracking._kernels import icp_normal_equations
+
+    rng = np.random.default_rng(1)
+    n_ = 80
+    P = rng.normal(size=(n_, 3))
+    N = rng.normal(size=(n_, 3))
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    T = make_pose(so3_exp(rng.normal(size=3) * 0.3), rng.normal(size=3))
+    Y = P + rng.normal(size=(n_, 3)) * 0.05
+    X = Y @ T[:3, :3].T + T[:3, 3]
+    res = np.einsum("ij,ij->i", N, P - Y)
+    w = rng.random(n_)
+    et = (P - Y) - N * res[:, None]
+    dz = np.full(n_, np.median(np.linalg.norm(et, axis=1)))   # about half the points in the dead zone
+    H, g = np.zeros((6, 6)), np.zeros(6)
+    icp_normal_equations(X, T[:3, :3].copy(), T[:3, 3].copy(), P, N, np.arange(n_), res, w, 0.09, dz, H, g)
+    Hb, gb, active = np.zeros((6, 6)), np.zeros(6), 0
+    for i in range(n_):
+        m, nn = P[i], N[i]
+        Jpl = np.concatenate([np.cross(m, nn), nn])
+        Hb += w[i] * np.outer(Jpl, Jpl)
+        gb += w[i] * Jpl * res[i]
+        a = np.linalg.norm(et[i])
+        if a > dz[i]:
+            active += 1
+            hat = np.array([[0, -m[2], m[1]], [m[2], 0, -m[0]], [-m[1], m[0], 0]])
+            Jp = np.concatenate([-hat, np.eye(3)], 1)
+            Pi = np.eye(3) - np.outer(nn, nn)
+            Hb += w[i] * 0.09 * Jp.T @ Pi @ Jp
+            gb += w[i] * 0.09 * Jp.T @ (et[i] * (1.0 - dz[i] / a))
+    assert 0.3 * n_ < active < 0.7 * n_
+    assert np.allclose(H, Hb, atol=1e-10) and np.allclose(g, gb, atol=1e-10)
