@@ -7,7 +7,9 @@ The reference (``tracker_reference.json``) is recorded from the tracker as it wa
 covariance as exact float hex strings, SHA-1 digests of the mask and label maps, moments of the
 probability and raw probability maps (:func:`_prob_stats`), and the scalar outputs, for four
 configurations on synthetic RGB-D (format 2, recorded on an x86-64 machine without AVX-512; compared
-to within float round-off, see below).
+to within float round-off, see below). Re-recorded for issue 35 item 3 (branch tracking, after
+commit 0c6ae69), which changes results on purpose: no motion predicted before the first frame, the
+ICP's tangential dead zone scaled by the hidden fraction, and ``pixels.in_front`` ignoring splat gaps.
 """
 
 import dataclasses
