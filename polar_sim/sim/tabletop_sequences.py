@@ -271,8 +271,9 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         Also save the recording there (``.npz``). :func:`cached_sequence` keeps it in the cache.
     width, height : int
         Image size; the intrinsics scale with it (fovy is fixed).
-    progress : bool
-        Show a tqdm bar.
+    progress : bool or callable
+        True shows a tqdm bar; a callable is called with the number of frames recorded so far
+        after each frame (``polar-sim demo`` draws its own bars from it).
     """
     from polar_sim._validation import as_int
     from polar_sim.geometry import inv_pose
@@ -304,7 +305,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
             meta.update(split=s.split, appearance=w.meta.get("appearance"))
         rec = Recording(meta)
         it = range(n)
-        if progress:
+        tick = progress if callable(progress) else None
+        if progress and tick is None:
             from tqdm import tqdm
 
             it = tqdm(it, desc=name, unit="frame")
@@ -330,6 +332,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
                 "light_scale": float(tr.get("light_scale", 1.0)),
                 "phase": PHASES.index(tr.get("phase", "rest")),
             })
+            if tick is not None:
+                tick(k + 1)
     finally:
         w.close()
     if out is not None:
