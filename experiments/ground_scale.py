@@ -81,7 +81,9 @@ def summarize(table, ctx):
         ax.set(xlabel="RANSAC iterations N", ylabel="ΔV_mean (m/s)", title=G.model_label(cfg))
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Raw RANSAC speed error ({ctx.split} split, simulated routes; mean ± std over repetitions)", fontsize=9)
+    fig.tight_layout()    # the panels' labels clear of each other, the title above the panels' titles
+    fig.suptitle(f"Raw RANSAC speed error ({ctx.split} split, simulated routes; mean ± std over repetitions)", fontsize=9,
+                 y=1.02)
     lines.append(savefig(fig, ctx.out_dir, "ground_scale_dv"))
     return "\n".join(lines)
 
