@@ -289,3 +289,31 @@ if __name__ == "__main__":
     import sys
 
     run_page(Path(sys.argv[1]), os.environ.get("POLAR_SIM_FULL", "") == "1", log=sys.stdout)
+
+
+def dotted_names(path: Path):
+    """``(where, name)`` for every ``polar_sim.x.y`` a page names in inline code (not in quotes, and
+    not a placeholder in capitals)."""
+    for tok in _tokens(path):
+        if tok.type == "inline":
+            for child in tok.children or []:
+                if child.type == "code_inline":
+                    for name in re.findall(r"(?<![\w./:\"'])polar_sim(?:\.[A-Za-z_]\w*)+", child.content):
+                        if not any(part.isupper() for part in name.split(".")):   # PACKAGE.MODULE
+                            yield f"{path}:{tok.map[0] + 1}", name
+
+
+def resolve(name: str):
+    """The object a dotted name names: the longest importable module, then attributes."""
+    import importlib
+
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ModuleNotFoundError:
+            continue
+        for attr in parts[i:]:
+            obj = getattr(obj, attr)
+        return obj
+    raise ModuleNotFoundError(name)

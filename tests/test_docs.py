@@ -113,3 +113,15 @@ def test_command_checks_catch_mistakes():
     assert "no such scene" in error("polar-sim render office3d")
     assert "no such file" in error("python benchmarks/bench_nothing.py")
     assert "no extra" in error('pip install .[tests]')
+
+
+# Every polar_sim.x.y a page names in inline code exists (a renamed module or class fails here).
+def test_dotted_names_resolve():
+    errors = []
+    for page in ds.doc_pages():
+        for where, name in ds.dotted_names(page):
+            try:
+                ds.resolve(name)
+            except (ImportError, AttributeError) as exc:
+                errors.append(f"{where}: {name}: {exc}")
+    assert not errors, "\n".join(errors)
