@@ -1,5 +1,6 @@
 """Segmentation metrics: IoU and its success rate, precision/recall, occluder-as-target fraction,
-ROC AUC of probability maps; the rates of a run from per-frame scores (:func:`mask_frame_scores`).
+ROC AUC of probability maps; the rates of a run from per-frame scores (:func:`mask_frame_scores`),
+and the calibration error of a run's probability maps from per-frame reliability counts.
 
 Masks are boolean arrays (H, W) or stacks (n, H, W). Rates are fractions in [0, 1].
 """
@@ -22,6 +23,7 @@ __all__ = [
     "iou_success_rate",
     "pooled_precision_recall",
     "pooled_occluder_as_target",
+    "pooled_ece",
 ]
 
 
@@ -243,3 +245,23 @@ def pooled_occluder_as_target(n_occluder, n_occluder_target, *, where=None):
     w = _where(where, len(n))
     h = n[w].sum()
     return float(nt[w].sum() / h) if h else float("nan")
+
+
+def pooled_ece(counts):
+    """Expected calibration error of probability maps pooled over frames (and runs).
+
+    ``counts`` (..., 3, n_bins): per-frame reliability counts (pixel count, sum of p, sum of labels
+    per bin, as :func:`polar_sim.metrics.reliability_counts` gives them), added over the leading
+    axes; the ECE of the sums is :func:`polar_sim.metrics.pooled_reliability`'s. NaN when no pixel
+    is counted (a method without a probability map).
+    """
+    from polar_sim.metrics import pooled_reliability   # where the reliability statistics live
+
+    c = np.asarray(counts)
+    if c.dtype.kind not in "iuf" or c.ndim < 2 or c.shape[-2] != 3 or c.shape[-1] < 1:
+        raise ValueError(f"counts: expected an array of reliability counts of shape (..., 3, n_bins), got "
+                         f"{c.dtype} {c.shape}")
+    c, p, y = c.astype(np.float64).reshape(-1, 3, c.shape[-1]).sum(axis=0)
+    if not (np.isfinite(c).all() and np.isfinite(p).all() and np.isfinite(y).all()) or (c < 0).any():
+        raise ValueError("counts: expected finite counts and sums, counts >= 0")
+    return pooled_reliability(c, p, y).ece if c.sum() else float("nan")

@@ -179,15 +179,22 @@ def _ep_groundvo_process():
 
 
 def _ep_tracker_init():
-    from polar_sim.tracking import ObjectTracker
+    from polar_sim.tracking import LearningConfig, ObjectTracker, RegistrationConfig
 
     def args(t, tmp):
         seq, pts, nrm, _ = _cached("trk", _track_sequence)
-        return {"model_points": pts.copy(), "K": seq.K.copy(), "initial_pose": seq.poses[0].copy()}
+        return {"model_points": pts.copy(), "K": seq.K.copy(), "initial_pose": seq.poses[0].copy(), "appearance": "ww",
+                "registration": RegistrationConfig(), "learning": LearningConfig(), "fps": 30.0, "calibrate": True,
+                "random_state": 0}
 
-    return EntryPoint("ObjectTracker", setup=lambda tmp: None, args=args,
-                      call=lambda t, a: ObjectTracker(a["model_points"], a["K"], a["initial_pose"]),
-                      kinds={"model_points": "points", "K": "K", "initial_pose": "pose"})
+    def call(t, a):
+        kw = {k: v for k, v in a.items() if k not in ("model_points", "K", "initial_pose")}
+        return ObjectTracker(a["model_points"], a["K"], a["initial_pose"], **kw)
+
+    return EntryPoint("ObjectTracker", setup=lambda tmp: None, args=args, call=call,
+                      kinds={"model_points": "points", "K": "K", "initial_pose": "pose", "appearance": "choice",
+                             "registration": "object", "learning": "object", "fps": "float+", "calibrate": "bool",
+                             "random_state": "seed"})
 
 
 def _ep_tracker_process():
