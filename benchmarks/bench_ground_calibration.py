@@ -62,7 +62,8 @@ def sweep_route(name, frames):
 
     from polar_sim.ground import CalibrationConfig, GroundVO
     from polar_sim.ground.calibration import PlattCalibrator
-    from polar_sim.metrics.ground import class_prob_sums, classifier_iou, reliability_counts
+    from polar_sim.metrics.calibration import reliability_counts
+    from polar_sim.metrics.ground import class_prob_sums, classifier_iou
     from polar_sim.sim.rover_sequences import SPLITS, load_route, route_truth, route_zones
 
     if name not in SPLITS["dev"]:
@@ -102,7 +103,7 @@ def sweep_route(name, frames):
 
 
 def main():
-    from polar_sim.metrics.ground import pooled_reliability
+    from polar_sim.metrics.calibration import pooled_reliability
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300, help="first frames of each route (default 300)")
