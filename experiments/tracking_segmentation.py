@@ -16,6 +16,7 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
+from polar_sim.runner.pictures_calibration import plot_reliability
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
 from polar_sim.experiments import _tracking_common as C
@@ -87,9 +88,9 @@ def summarize(table, ctx):
     ww = T.by(head, "method", ref)
     rels = [_bins(ww, ctx, k) for k in ("cal_bins", "raw_bins")]
     if all(b[0].sum() for b in rels):   # a method without a P(target) map has no reliability diagram
-        metrics.plot_reliability([metrics.pooled_reliability(*b) for b in rels],
-                                 ["P(target), calibrated", "raw prediction map"], ax=ax[2],
-                                 title=f"{ref}, ROI pixels ({ctx.split})")
+        plot_reliability([metrics.pooled_reliability(*b) for b in rels],
+                         ["P(target), calibrated", "raw prediction map"], ax=ax[2],
+                         title=f"{ref}, ROI pixels ({ctx.split})")
     fig.tight_layout()
     return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_segmentation")])
 

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from polar_sim.experiments import _ground_common as G  # noqa: E402
+from polar_sim.experiments import _ground_pictures as G  # noqa: E402
 from polar_sim.runner import pictures2d as P  # noqa: E402
 
 
@@ -40,7 +40,7 @@ def test_error_chart_ticks_and_labels():
     rng = np.random.default_rng(0)
     table = [{"route": f"test_{k}", "method": m, "t_pct": float(v)} for k in range(12)
              for m, v in zip(("mono", "u2", "w6"), rng.uniform(0.8, 170.0, 3))]
-    fig = G.plot_per_route(table, "t_pct", 2.0, "translation error (%), scaled segments: routes under 100 m",
+    fig = G.per_route_bars(table, "t_pct", 2.0, "translation error (%), scaled segments: routes under 100 m",
                            "KITTI translation error per route")
     ax = fig.axes[0]
     r = _boxes(fig)
