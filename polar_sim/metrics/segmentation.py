@@ -257,11 +257,10 @@ def pooled_ece(counts):
     """
     from polar_sim.metrics import pooled_reliability   # where the reliability statistics live
 
-    c = np.asarray(counts)
-    if c.dtype.kind not in "iuf" or c.ndim < 2 or c.shape[-2] != 3 or c.shape[-1] < 1:
-        raise ValueError(f"counts: expected an array of reliability counts of shape (..., 3, n_bins), got "
-                         f"{c.dtype} {c.shape}")
-    c, p, y = c.astype(np.float64).reshape(-1, 3, c.shape[-1]).sum(axis=0)
+    c = as_float_array(counts, "counts")     # strings, complex numbers, None: TypeError
+    if c.ndim < 2 or c.shape[-2] != 3 or c.shape[-1] < 1:
+        raise ValueError(f"counts: expected an array of reliability counts of shape (..., 3, n_bins), got {c.shape}")
+    c, p, y = c.reshape(-1, 3, c.shape[-1]).sum(axis=0)
     if not (np.isfinite(c).all() and np.isfinite(p).all() and np.isfinite(y).all()) or (c < 0).any():
         raise ValueError("counts: expected finite counts and sums, counts >= 0")
     return pooled_reliability(c, p, y).ece if c.sum() else float("nan")

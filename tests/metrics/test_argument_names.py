@@ -74,6 +74,7 @@ CASES = {
                           dict(pred="scnd", truth="scnd", occluder="scd", within="scd")),
     M.iou_success_rate: (dict(ious=[0.4, 0.7], threshold=0.5, where=np.array([True, False])),
                          dict(ious="scndf", threshold="scnf", where="scd")),
+    M.pooled_ece: (dict(counts=np.ones((2, 3, 4))), dict(counts="scndf")),
     M.pooled_precision_recall: (dict(n_tp=[1, 2], n_pred=[2, 2], n_gt=[3, 2]), dict(n_tp="scnd", n_pred="scnd", n_gt="scnd")),
     M.pooled_occluder_as_target: (dict(n_occluder=[4, 2], n_occluder_target=[1, 0], where=np.array([True, True])),
                                   dict(n_occluder="scnd", n_occluder_target="scnd", where="scd")),
