@@ -25,6 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from polar_sim._validation import as_float, as_int, check_choice
+from polar_sim.envs.features import STENCIL_KEYS
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
 
@@ -34,7 +35,6 @@ __all__ = ["DAggerConfig", "EXPERTS", "make_expert", "rollout", "fit_mlp", "trai
 EXPERTS = {"reactive": SDFReactive, "navigator": SDFNavigator}
 #: The training worlds: episode seeds cycle through this range (dev worlds start at 1000, held-out at 10,000).
 TRAIN_SEEDS = (0, 1000)
-STENCIL_KEYS = ("goal", "sdf", "sdf_grad", "twist")
 
 
 @dataclasses.dataclass(frozen=True)
