@@ -56,6 +56,8 @@ def read_policy_file(path, name="path"):
     """``(meta, arrays)`` of a file written by :func:`write_policy_file`, checked: a readable
     ``.npz`` without pickled objects, a JSON header, this format version, an intact digest."""
     p = check_source(path, name)
+    if not zipfile.is_zipfile(p):
+        raise ValueError(f"{name}: {p} is not a readable .npz policy file (not a zip archive)")
     try:
         with np.load(p, allow_pickle=False) as f:
             if "meta" not in f.files:
