@@ -6,9 +6,11 @@ learning-curve rows to ``curve`` and returns ``(policy, env_steps)``; the policy
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
+import torch
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
@@ -20,9 +22,21 @@ from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
                                      make_model, ppo_recipe, sb3_recipe)
 
-__all__ = ["RUNNERS", "bar_disable"]
+__all__ = ["RUNNERS", "bar_disable", "one_torch_thread"]
 
 DEV_SEED = 1000
+
+
+@contextlib.contextmanager
+def one_torch_thread():
+    """Run torch on one thread, then restore the caller's setting: the nets are small (one thread is
+    as fast on 2 shared cores), and one thread makes a run bit-for-bit repeatable from its seed."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(n)
 
 
 def bar_disable(progress):

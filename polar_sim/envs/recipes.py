@@ -137,7 +137,8 @@ def train(recipe, env_id, *, params=None, seed=0, out=None, progress=None):
 
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     curve = []
-    policy, steps = _train.RUNNERS[recipe](env_id, p, seed, curve, progress)
+    with _train.one_torch_thread():
+        policy, steps = _train.RUNNERS[recipe](env_id, p, seed, curve, progress)
     summary = {"recipe": recipe, "env_id": env_id, "params": p, "seed": seed, "steps": int(steps),
                "wall_s": time.perf_counter() - t_wall, "cpu_s": time.process_time() - t_cpu,
                "dev_seeds": [DEV_SEED, DEV_SEED + p["eval_episodes"] - 1], "curve": curve}
