@@ -18,14 +18,18 @@ from polar_sim.envs.policy_file import POLICY_FORMAT_VERSION, read_policy_file, 
 from polar_sim.envs.shipped import policy_path
 
 ROOM = "polar_sim/GPISNav-Room-v1"
-TIERS = ["polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1"]
+SHIPPED = ["polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1"]
 
 
-# A policy ships for each learning tier; each is a numpy MLP made for its own id, acting in the
-# env's action space on the env made with its env_kwargs (the default slam mode), memoryless.
-@pytest.mark.parametrize("env_id", TIERS)
+# The shipped policies are exactly the files in polar_sim/data/policies, one per tier listed.
+def test_pretrained_ids_are_the_shipped_files():
+    assert pretrained_ids() == sorted(SHIPPED)
+
+
+# Each shipped policy is a numpy MLP made for its own id, acting in the env's action space on the
+# env made with its env_kwargs (the default slam mode), memoryless.
+@pytest.mark.parametrize("env_id", SHIPPED)
 def test_pretrained_policy_acts_in_the_envs_action_space(env_id):
-    assert env_id in pretrained_ids()
     policy = pretrained(env_id)
     assert policy.env_id == env_id and "pose_source" not in policy.env_kwargs
     assert policy.recipe["name"] in ("dagger", "dagger_ppo") and policy.recipe["params"]
