@@ -111,7 +111,7 @@ def test_policy_for_other_observation_spaces_is_refused(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="observation mismatch.*'sdf'.*shape"):
         load_policy(p, gym.make(ROOM, stencil_rays=8))
     with pytest.raises(ValueError, match="mean, std"):  # shapes that do not fit its own weights
-        MLPPolicy.load(_copy(tmp_path, obs_shapes={"goal": [3], "sdf": [64], "sdf_grad": [128], "twist": [2]}))
+        MLPPolicy.load(_copy(tmp_path, obs_shapes={"goal": [3], "sdf": [64], "sdf_grad": [128], "sdf_var": [64], "twist": [2]}))
     renamed = _copy(tmp_path, env_id="polar_sim/GPISNav-v1")  # another tier's file under Room's name
     MLPPolicy.load(renamed)  # intact as a file
     monkeypatch.setattr(polar_sim.envs.shipped, "policy_path", lambda env_id: renamed)
