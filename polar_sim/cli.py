@@ -229,6 +229,35 @@ def _cmd_eval(args):
     return 0
 
 
+def _cmd_train(args):
+    import json
+
+    from polar_sim.envs.recipes import check_recipe, train
+
+    try:
+        params = json.loads(args.params) if args.params else {}
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--params: not valid JSON ({exc.msg})") from None
+    check_recipe(args.recipe, params, args.env)  # every argument checked before anything is built
+    if not 0 <= args.test_episodes <= 1_000_000:
+        raise ValueError(f"--test-episodes: expected an integer in [0, 1000000], got {args.test_episodes}")
+    if args.seed < 0:
+        raise ValueError(f"--seed: expected an integer >= 0, got {args.seed}")
+    out = _out_dir(args.out or f"polar_sim_out/train/{args.recipe}_{args.env.split('/')[-1]}_s{args.seed}")
+    policy, summary = train(args.recipe, args.env, params=params, seed=args.seed, out=out,
+                            progress=False if args.quiet else None)
+    print(f"{args.recipe} on {args.env}: {summary['steps']} env steps, {summary['wall_s'] / 60:.1f} min wall, "
+          f"{summary['cpu_s'] / 60:.1f} min CPU; policy: {out}/policy.npz")
+    if args.test_episodes:
+        from polar_sim.envs.evaluate import evaluate
+
+        _, s = evaluate(args.env, str(out / "policy.npz"), episodes=args.test_episodes, seed=10_000,
+                        out_dir=out / "test", progress=not args.quiet)
+        print(f"held-out worlds (seeds 10000..{10_000 + args.test_episodes - 1}, slam): success "
+              f"{s['success_rate']:.3f}, collisions {s['mean_collision']:.3f}")
+    return 0
+
+
 def _cmd_bench(args):
     import subprocess
 
@@ -318,12 +347,25 @@ def build_parser():
 
     s = sub.add_parser("eval", help="closed-loop evaluation of a policy in an environment")
     s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v1 (polar-sim list shows them all)")
-    s.add_argument("--policy", required=True, help="MODULE:CALLABLE (a class is instantiated) or 'random'")
+    s.add_argument("--policy", required=True,
+                   help="'pretrained' (the policy shipped for ENV_ID), a policy file (.npz), MODULE:CALLABLE "
+                        "(a class is instantiated) or 'random'")
     s.add_argument("--episodes", type=int, default=10)
     s.add_argument("--seed", type=int, default=10_000, help="seed of the first episode (default 10000: held out)")
     s.add_argument("--env-kwargs", default=None, help='JSON, e.g. \'{"sdf_source": "truth"}\'')
     s.add_argument("--out", default=None, help="output folder (default polar_sim_out/eval/ENV)")
     s.set_defaults(func=_cmd_eval)
+
+    s = sub.add_parser("train", help="train a learning recipe on a GPISNav tier (needs torch, stable-baselines3)")
+    s.add_argument("recipe", help="dagger, dagger_ppo, ppo, recurrent_ppo, sac or tqc (docs/guide/learning.md)")
+    s.add_argument("--env", default="polar_sim/GPISNav-Room-v1", help="the tier's env id")
+    s.add_argument("--params", default=None, help='JSON object of recipe parameters, e.g. \'{"rounds": 6}\'')
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--test-episodes", type=int, default=0,
+                   help="then score the policy on this many held-out worlds (seeds 10000.., slam)")
+    s.add_argument("--out", default=None, help="output folder (default polar_sim_out/train/RECIPE_ENV_sSEED)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_train)
 
     s = sub.add_parser("bench", help="run the speed/memory benchmarks (from a repository clone)")
     s.add_argument("only", nargs="*", help="benchmark names (bench_NAME.py); default all")
