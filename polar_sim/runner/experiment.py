@@ -46,12 +46,12 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
+
+from polar_sim.fileio import atomic_write
 
 __all__ = ["Experiment", "Check", "Finding", "TrialContext", "RunContext", "VERDICTS", "SIZES"]
 
@@ -116,15 +116,8 @@ def _save_npz_atomic(path: Path, arrays: Mapping[str, Any]):
         if a.dtype == object:
             raise TypeError(f"{k}: object arrays cannot be saved (they would need pickle)")
         clean[k] = a
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **clean)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path, "name") as fh:
+        np.savez_compressed(fh, **clean)
     return path
 
 

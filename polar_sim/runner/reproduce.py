@@ -19,6 +19,7 @@ import time
 import traceback
 from pathlib import Path
 
+from polar_sim.fileio import write_text
 from polar_sim.runner.registry import get_experiment, list_experiments
 from polar_sim.runner.report import cell
 
@@ -175,14 +176,14 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
         lines += ["", text]
     md = "\n".join(lines) + "\n"
     path = out_dir / "report.md"
-    path.write_text(md)
-    (out_dir / "report.html").write_text(markdown_to_html(md, base=out_dir, title="polar_sim report"))
-    (out_dir / "report.json").write_text(json.dumps(
+    write_text(path, md, "out")
+    write_text(out_dir / "report.html", markdown_to_html(md, base=out_dir, title="polar_sim report"), "out")
+    write_text(out_dir / "report.json", json.dumps(
         {"provenance": prov, "wall_s": wall_s, "errors": errors,
          "experiments": {n: {"checks": [dict(name=c.name, status=c.status, detail=c.detail) for c in r.checks],
                              "findings": [f.__dict__ for f in r.findings], "trials": len(r.table),
                              "trial_errors": len(r.failures), "split": r.config.get("split")}
-                         for n, r in results.items()}}, indent=2, default=str))
+                         for n, r in results.items()}}, indent=2, default=str), "out")
     return path
 
 

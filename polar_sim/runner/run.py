@@ -29,6 +29,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 import polar_sim
+from polar_sim.fileio import write_text
 from polar_sim.runner.experiment import Check, RunContext, TrialContext
 from polar_sim.runner.registry import get_experiment
 from polar_sim.runner.results import RESERVED, ResultsFile, trial_dir, trial_key
@@ -333,10 +334,7 @@ def run_commits(config):
 
 
 def _write_config(out_dir, config):
-    path = out_dir / "config.json"
-    tmp = path.with_name(".config.json.tmp")
-    tmp.write_text(json.dumps(config, indent=2, default=str))
-    os.replace(tmp, path)
+    write_text(out_dir / "config.json", json.dumps(config, indent=2, default=str), "out")
 
 
 def run_experiment(name, *, quick=False, size=None, split=None, out=None, workers=1, backend="local",
@@ -504,7 +502,7 @@ def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, find
         lines += ["", "## Findings", "", "| source | published | ours | verdict | note |", "|---|---|---|---|---|"]
         lines += [f"| {_cell(f.source)} | {_cell(f.claim)} | {_cell(f.ours)} | {f.verdict} | {_cell(f.note)} |"
                   for f in findings]
-    (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
-    (out_dir / "checks.json").write_text(json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
-                                                    indent=2, default=str))
-    (out_dir / "findings.json").write_text(json.dumps([dataclasses.asdict(f) for f in findings], indent=2))
+    write_text(out_dir / "summary.md", "\n".join(lines) + "\n", "out")
+    write_text(out_dir / "checks.json", json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
+                                                   indent=2, default=str), "out")
+    write_text(out_dir / "findings.json", json.dumps([dataclasses.asdict(f) for f in findings], indent=2), "out")
