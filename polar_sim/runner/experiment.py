@@ -52,6 +52,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from polar_sim.fileio import atomic_write
+from polar_sim.runner.overrides import conform, declared_kinds
 
 __all__ = ["Experiment", "Check", "Finding", "TrialContext", "RunContext", "VERDICTS", "SIZES"]
 
@@ -299,7 +300,9 @@ class Experiment:
             if key not in self.grid:
                 valid = ", ".join(sorted(self.grid) + ["seed"] + sorted(self.params))
                 raise ValueError(f"{self.name}: unknown parameter {key!r}; valid: {valid}")
-            grid[key] = _as_list(value)
+            declared = self.declared_values(key)
+            grid[key] = [conform(v, declared_kinds(declared), f"{self.name}: axis {key!r}", declared)
+                         for v in _as_list(value)]
         for key, values in grid.items():
             if not values:
                 raise ValueError(f"{self.name}: axis {key!r} has no values")
@@ -321,12 +324,26 @@ class Experiment:
         out.update(self.sizes[size].get("params", {}))
         for key, v in (overrides or {}).items():
             if key in self.params:
-                out[key] = _like(v, self.params[key], f"{self.name}: param {key!r}")
+                if isinstance(v, list) and len(v) == 1 and not isinstance(self.params[key], list):
+                    v = v[0]     # --set KEY=[x] for a scalar param
+                declared = self.declared_values(key)
+                out[key] = conform(v, declared_kinds(declared), f"{self.name}: param {key!r}", declared)
         for key, v in out.items():
             try:
                 json.dumps(v)
             except TypeError:
                 raise ValueError(f"{self.name}: value {v!r} of param {key!r} is not JSON-serialisable") from None
+        return out
+
+    def declared_values(self, key) -> list:
+        """Every value the experiment declares for param or grid axis ``key`` (in ``params`` or
+        ``grid``, then in each split and size): what a ``--set`` value's type is checked against."""
+        field = "params" if key in self.params else "grid"
+        layers = [getattr(self, field)] + [spec.get(field, {}) for spec in (*self.splits.values(), *self.sizes.values())]
+        out = []
+        for layer in layers:
+            if key in layer:
+                out += [layer[key]] if field == "params" else _as_list(layer[key])
         return out
 
     def points(self, size="full", split=None, overrides=None):
@@ -338,20 +355,6 @@ class Experiment:
 
     def seeds_of(self, split) -> list:
         return [int(s) for s in self.splits[self.pick_split(split)]["seeds"]]
-
-
-def _like(value, default, what):
-    """``value`` (a ``--set`` override) if it has the type of the param's ``default`` (an int for a
-    float is fine; a one-element list of a scalar is unwrapped, as ``--set`` may give one)."""
-    if isinstance(value, list) and len(value) == 1 and not isinstance(default, list):
-        value = value[0]
-    num = (int, float)
-    ok = (isinstance(default, bool) and isinstance(value, bool)) or \
-         (isinstance(default, num) and not isinstance(default, bool) and isinstance(value, num) and not isinstance(value, bool)) or \
-         (default is None) or (not isinstance(default, (bool, int, float)) and isinstance(value, type(default)))
-    if not ok:
-        raise ValueError(f"{what}: expected a value like the default {default!r}, got {value!r}")
-    return float(value) if isinstance(default, float) else value
 
 
 def _as_seed(s):
