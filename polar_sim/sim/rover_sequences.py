@@ -22,9 +22,9 @@ import dataclasses
 import cv2
 import mujoco
 import numpy as np
-from tqdm.auto import tqdm
 
 from polar_sim.control import PurePursuit
+from polar_sim.progress import progress_bar
 from polar_sim.sim import sequences
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.truth import LABELS
@@ -158,7 +158,7 @@ def _height_along_down(w, T_wc):
     return float(d) if d >= 0 else np.nan
 
 
-def record_route(name, *, max_frames=None, progress=True):
+def record_route(name, *, max_frames=None, progress=None):
     """Drive route ``name`` and return its :class:`Recording` (see the module docstring).
 
     Per frame: ``rgb`` (188, 621, 3) uint8, ``ground_mask`` (188, 621) bool, ``T_world_cam``
@@ -187,7 +187,7 @@ def record_route(name, *, max_frames=None, progress=True):
         K_full = None
         rec = None
         frames = 0
-        bar = tqdm(total=int(length), desc=name, unit="m", disable=not progress)
+        bar = progress_bar(total=int(length), desc=f"recording {name}", unit="m", enabled=progress, leave=None)
         k = 0
         while True:
             pose2d = w.truth()["robot_pose2d"]
@@ -233,7 +233,7 @@ def record_route(name, *, max_frames=None, progress=True):
     return rec
 
 
-def load_route(name, *, max_frames=None, progress=False):
+def load_route(name, *, max_frames=None, progress=None):
     """The recording of route ``name`` (its first ``max_frames`` frames if given) as a lazy
     :class:`~polar_sim.sim.recording.RecordingReader` from the recording cache
     (:func:`polar_sim.sim.sequences.cached`, kind ``"rover_route"``), recorded first if absent."""
