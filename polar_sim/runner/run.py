@@ -83,16 +83,19 @@ def _check_axes(exp, grid):
             raise ValueError(f"{axis}: {exp.name} has no {axis} {bad[0]!r}; valid: {', '.join(map(str, valid))}")
 
 
-def _read_config(out_dir, config):
-    """The folder's earlier config.json, or ``{}``. Refuses a folder that holds another
-    experiment, size or split (rows would mix), and a corrupt config.json (left as it is)."""
-    path = out_dir / "config.json"
+def read_folder_config(out_dir, config):
+    """The run folder's earlier config.json, or ``{}``. Refuses (``ValueError`` naming ``out``) a
+    folder that holds another experiment, size, split or params than ``config``'s (rows would
+    mix), and a corrupt config.json (left as it is)."""
+    path = Path(out_dir) / "config.json"
     if not path.is_file():
         return {}
     try:
         old = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
+    except ValueError:                      # not JSON, or not UTF-8
+        old = None
+    if not isinstance(old, dict):
+        raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)")
     for key in ("experiment", "size", "split", "params"):
         # a folder written before params existed has none to compare, and its trials' keys decide
         if key in old and old[key] != config[key]:
@@ -197,7 +200,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
               "grid": grid, "params": run_params, "seeds": seeds, "backend": backend, "workers": int(workers),
               "polar_sim": polar_sim.__version__, "provenance": provenance()}
     results = ResultsFile(out_dir / "results.csv")
-    history = _history(_read_config(out_dir, config))   # another size, split or params: refused
+    history = _history(read_folder_config(out_dir, config))   # another size, split or params: refused
     done = results.done_keys(size, split)  # reads (and checks) the file before anything is written
     todo = [(p, s) for p, s in points if trial_key(p, s) not in done]
     this_run = {"git_commit": config["provenance"]["git_commit"], "started": config["provenance"]["started"],

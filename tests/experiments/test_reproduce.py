@@ -70,7 +70,7 @@ def test_reproduce_quick_gpis_worlds(tmp_path):
     assert main(["reproduce", "--quick", "--only", *GPIS, "--out", str(tmp_path)]) == 0
     assert main(["reproduce", "--quick", "--strict", "--only", *GPIS, "--out", str(tmp_path)]) == 2
     # --report-only reads the finished folders back, their trials/ removed, and runs nothing: the
-    # same experiments and findings tables; a size the folders do not hold is an error per experiment
+    # same experiments and findings tables; a size the folders do not hold is refused, writing nothing
     import shutil
 
     for name in GPIS:
@@ -82,8 +82,8 @@ def test_reproduce_quick_gpis_worlds(tmp_path):
         [r[:7] for r in _table(md, "| experiment | split (seeds) | trials |")]
     assert _table(md2, "| source | published | ours | verdict |") == found
     assert main(["reproduce", "--quick", "--report-only", "--only", *GPIS, "--out", str(tmp_path)]) == 0
-    full, _ = reproduce(tmp_path, quick=False, only=GPIS, progress=False, report_only=True)
-    assert all(not r.passed and "holds the quick size" in r.checks[0].detail for r in full.values())
+    with pytest.raises(ValueError, match="holds quick-size runs, not full-size ones"):
+        reproduce(tmp_path, quick=False, only=GPIS, progress=False, report_only=True)
 
 
 # The committed full reproduction (docs/reproduce_full, linked from the README) is whole and
