@@ -52,12 +52,12 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from polar_sim.fileio import atomic_write
+from polar_sim.runner.findings import VERDICTS, Finding
 from polar_sim.runner.overrides import conform, declared_kinds
 
 __all__ = ["Experiment", "Check", "Finding", "TrialContext", "RunContext", "VERDICTS", "SIZES"]
 
 SIZES = ("quick", "full")
-VERDICTS = ("held", "partly held", "not held", "not tested the same way")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,26 +88,6 @@ class Check:
         if self.known_miss:
             return "missed"
         return "slow" if self.timing else "FAIL"
-
-
-@dataclasses.dataclass(frozen=True)
-class Finding:
-    """One row of the dissertation-findings table that ``polar-sim reproduce`` writes.
-
-    ``source``: where the published claim is (chapter, figure or table); ``claim``: the published
-    claim or number; ``ours``: our figure; ``verdict``: one of :data:`VERDICTS`; ``note``: what
-    differs from the published setting (say it when our experiment tests something else).
-    """
-
-    source: str
-    claim: str
-    ours: str
-    verdict: str
-    note: str = ""
-
-    def __post_init__(self):
-        if self.verdict not in VERDICTS:
-            raise ValueError(f"verdict: {self.verdict!r} is not one of {', '.join(VERDICTS)}")
 
 
 def _save_npz_atomic(path: Path, arrays: Mapping[str, Any]):

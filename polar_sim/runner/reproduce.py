@@ -20,6 +20,7 @@ import traceback
 from pathlib import Path
 
 from polar_sim.fileio import write_text
+from polar_sim.runner.findings import findings_table
 from polar_sim.runner.registry import get_experiment, list_experiments
 from polar_sim.runner.report import cell
 
@@ -190,11 +191,11 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
     findings = [(name, f) for name, r in results.items() for f in r.findings]
     lines += ["## Findings", "",
               "For each published result we reproduce: the published claim, our figure, and a verdict "
-              "(held / partly held / not held / not tested the same way).", ""]
+              "(held / partly held / not held / not tested the same way). Only a full-size run on the protocol's "
+              "seeds gives held or not held: a smaller one, or cells that cannot separate the methods (every one "
+              "at 100 %, say), read *insufficient evidence*, with the sample n the figures rest on.", ""]
     if findings:
-        lines += ["| source | published | ours | verdict | note | experiment |", "|---|---|---|---|---|---|"]
-        lines += [f"| {cell(f.source)} | {cell(f.claim)} | {cell(f.ours)} | **{f.verdict}** | {cell(f.note)} | {name} |"
-                  for name, f in findings]
+        lines += findings_table(findings, experiment_column=True)
     else:
         lines.append("(no experiment in this run states findings)")
     lines += ["", "## Experiments", "",

@@ -27,6 +27,7 @@ from polar_sim.fileio import write_text
 from polar_sim.progress import progress_bar
 from polar_sim.runner.backends import BACKENDS, Running, ray_connect
 from polar_sim.runner.experiment import Check, RunContext
+from polar_sim.runner.findings import Finding, findings_table, weigh
 from polar_sim.runner.registry import get_experiment
 from polar_sim.runner.results import ResultsFile, trial_key
 
@@ -229,6 +230,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     body = exp.summarize(ok_rows, rctx) if (exp.summarize and ok_rows) else ""
     checks = list(exp.checks(ok_rows, rctx)) if (exp.checks and ok_rows) else []
     findings = list(exp.findings(ok_rows, rctx)) if (exp.findings and ok_rows) else []
+    findings = _weighed(exp, findings, config, len(ok_rows))
     if failures:
         checks.append(Check("every trial ran", False, f"{len(failures)} of {len(table)} trials failed; "
                                                       f"first: {failures[0]['error']}"))
@@ -248,8 +250,6 @@ def load_run(out, name=None):
     that is not a finished run (a file missing or corrupt, or trials of its grid still to run)
     raises ``ValueError`` naming the folder and what is missing; it is read only, never changed.
     """
-    from polar_sim.runner.experiment import Finding
-
     out_dir = Path(out)
     need = ["config.json", "results.csv", "checks.json", "findings.json"]
     missing = [f for f in need if not (out_dir / f).is_file()]
@@ -262,7 +262,7 @@ def load_run(out, name=None):
         checks = [Check(c["name"], bool(c["passed"]), c.get("detail", ""), bool(c.get("known_miss", False)),
                         bool(c.get("timing", False))) for c in raw_checks]
         findings = [Finding(**f) for f in raw_findings]
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError) as exc:  # not JSON, a field missing, or of a wrong type
         raise ValueError(f"out: {out_dir} holds a corrupt config.json, checks.json or findings.json ({exc})") from None
     exp = get_experiment(config.get("experiment") if name is None else name)
     if config.get("experiment") != exp.name:
@@ -283,7 +283,16 @@ def load_run(out, name=None):
         raise ValueError(f"out: {out_dir} was interrupted before its summary was written "
                          "(run the experiment into it again to summarise)")
     failures = [r for r in table if r.get("status") != "ok"]
+    findings = _weighed(exp, findings, config, len(table) - len(failures))   # folders written before weighing
     return RunResult(out_dir, table, checks, failures, findings, config)
+
+
+def _weighed(exp, findings, config, n_ok):
+    """The findings with their verdicts weighed against the run's size, seeds and sample
+    (:func:`polar_sim.runner.findings.weigh`)."""
+    full_seeds = len(exp.resolve("full", config["split"])[1])
+    return [weigh(f, size=config["size"], n_trials=n_ok, seeds=len(config.get("seeds") or []) or None,
+                  full_seeds=full_seeds) for f in findings]
 
 
 def _cell(text):
@@ -300,9 +309,7 @@ def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, find
     lines += [f"| {_cell(c.name)} | {c.status if c.status != 'FAIL' else '**FAIL**'} | {_cell(c.detail)} |"
               for c in checks]
     if findings:
-        lines += ["", "## Findings", "", "| source | published | ours | verdict | note |", "|---|---|---|---|---|"]
-        lines += [f"| {_cell(f.source)} | {_cell(f.claim)} | {_cell(f.ours)} | {f.verdict} | {_cell(f.note)} |"
-                  for f in findings]
+        lines += ["", "## Findings", ""] + findings_table(findings)
     write_text(out_dir / "summary.md", "\n".join(lines) + "\n", "out")
     write_text(out_dir / "checks.json", json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
                                                    indent=2, default=str), "out")
