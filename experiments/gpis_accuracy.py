@@ -103,7 +103,7 @@ def checks(table, ctx):
             continue
         x = {"worst": max, "best": min, "mean": np.mean}[how](v)
         ok = x <= bound if op == "<=" else (x > bound if op == ">" else bound[0] <= x <= bound[1])
-        out.append(Check(label, bool(ok), f"{how} of {len(v)} seeds: {_value(key, x, bound)} (bound {op} "
+        out.append(Check(label, bool(ok), f"{how} of {len(v)} seed{'s' if len(v) != 1 else ''}: {_value(key, x, bound)} (bound {op} "
                          f"{' to '.join(_value(key, b, bound) for b in np.atleast_1d(bound))})", known_miss=known))
     return out
 

@@ -107,6 +107,10 @@ def _fig(s):
             f"failed steps, {duration(s['cpu_ms_median'] / 1e3, 'ms', decimals=2)} CPU per step)")
 
 
+def _steps_of(s):
+    return f"steps of {s['seeds']} seed{'s' if s['seeds'] != 1 else ''}"
+
+
 #: The two ICP-D baselines: (method, its map, the claim's words, ours, what differs from the dissertation).
 ICPD_FINDINGS = [
     ("icpd_gt", "a ground-truth discrete SDF", "a ground-truth discrete SDF", "the exact SDF sampled at 5 cm",
@@ -133,7 +137,7 @@ def findings(table, ctx):
             out.append(Finding(f"Ch. 7, localisation: ICP-G vs ICP-D on {src}", "ICP-G on the GPIS map localises more "
                                f"accurately than ICP-D on {claim}", f"{over}; ICP-D on {theirs} {_fig(st[key])}",
                                "held" if g["pos_median_m"] < st[key]["pos_median_m"] else "not held", note,
-                               n=int(g["steps"]), n_of=f"steps of {g['seeds']} seed(s)"))
+                               n=int(g["steps"]), n_of=_steps_of(g)))
     pf, gcpu = budget_match(list(st.values()))
     if pf is not None:
         same = pf["cpu_ms_median"] >= gcpu
@@ -145,7 +149,7 @@ def findings(table, ctx):
         out.append(Finding("Ch. 7, localisation: ICP-G vs the particle filter at the same compute budget",
                            "ICP-G on the GPIS map localises more accurately than a particle filter", ours, verdict,
                            note + "; the PFs run MCL on the likelihood field of a 5 cm grid from the same scans",
-                           n=int(g["steps"]), n_of=f"steps of {g['seeds']} seed(s)"))
+                           n=int(g["steps"]), n_of=_steps_of(g)))
     return out
 
 

@@ -110,7 +110,7 @@ def _accuracy_finding(long, scene):
                    "Hausdorff: the larger directed distance between the estimated and the observed true surface; surface "
                    "RMSE: RMS of the exact |SDF| at the estimated surface; EDT: the zero contour of the 5 cm grid's signed "
                    "EDT. Simulated lidar drives scored against the exact SDF; our grids, not the dissertation's",
-                   n=int(seeds), n_of="seeds")
+                   n=int(seeds), n_of="seed" if seeds == 1 else "seeds")
 
 
 def findings(table, ctx):

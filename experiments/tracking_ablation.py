@@ -77,8 +77,9 @@ def _beats(table, ctx):
     p = rows["plain-icp"]
     beat = {v: rows[v]["occl_add_ok"] > p["occl_add_ok"] and rows[v]["occl_iou_ok"] > p["occl_iou_ok"]
             for v in C.VARIANTS if v in rows}
-    detail = ", ".join(f"{v} {100 * rows[v]['occl_add_ok']:.1f}/{100 * rows[v]['occl_iou_ok']:.1f}" for v in beat)
-    return rows, beat, f"{detail}; plain ICP {100 * p['occl_add_ok']:.1f}/{100 * p['occl_iou_ok']:.1f} ({p['occl_frames']} frames)"
+    pair = lambda r: f"{percent(r['occl_add_ok'])} / {percent(r['occl_iou_ok'])}"  # noqa: E731
+    detail = ", ".join(f"{v} {pair(rows[v])}" for v in beat)
+    return rows, beat, f"{detail}; plain ICP {pair(p)} ({p['occl_frames']} frames)"
 
 
 def checks(table, ctx):

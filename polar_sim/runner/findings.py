@@ -1,12 +1,13 @@
 """Findings: a published claim, our figure, and a verdict that respects the sample it rests on.
 
 An experiment's ``findings(table, ctx)`` judges its figures (:data:`VERDICTS`). The runner then
-weighs that judgement (:func:`weigh`): *held*, *partly held* and *not held* stand only at the
-full size, on the protocol's seeds, with the sample the finding says it needs, and with cells
-that can separate the methods. Otherwise the verdict reads **insufficient evidence** with the
-reason and the sample: "insufficient evidence at this size (n = 50 frames of 2 sequences; every
-variant at 100.0 %)". A quick run is a smoke test of the pipeline, not evidence. The verdict the
-figures indicated is kept in ``indicated`` (``findings.json``, ``report.json``), not shown.
+weighs that judgement (:func:`weigh`). A run below the full size is a smoke test of the pipeline,
+not evidence: every verdict reads **insufficient evidence** with the sample, e.g. "insufficient
+evidence at this size (n = 50 frames of 2 sequences; every variant at 100.0 %)". At the full size
+*held*, *partly held* and *not held* stand only on the protocol's seeds, with the sample the
+finding says it needs, and with cells that can separate the methods; otherwise they too read
+insufficient evidence, with the reason. The verdict the figures indicated is kept in
+``indicated`` (``findings.json``, ``report.json``), not shown.
 
 :func:`findings_table` renders findings as a Markdown table whose long notes move below it as
 numbered notes, so no row runs to hundreds of characters.
@@ -70,15 +71,16 @@ def weigh(finding: Finding, *, size: str, n_trials: int, seeds: int | None = Non
           full_seeds: int | None = None) -> Finding:
     """``finding`` with its verdict weighed against its sample.
 
-    A decisive verdict (:data:`DECISIVE`) becomes :data:`INSUFFICIENT` when the run is not the
-    full size, when it ran fewer than the protocol's ``full_seeds`` seeds (``seeds``, e.g. a
+    Below the full size every verdict becomes :data:`INSUFFICIENT` ("not tested the same way"
+    too: a smaller run does not test it). At the full size a decisive verdict (:data:`DECISIVE`)
+    does when the run has fewer than the protocol's ``full_seeds`` seeds (``seeds``, e.g. a
     ``--set seed=...``), when ``n`` is below the finding's ``n_needed``, or when its cells are
     ``saturated``. ``n_trials``: the run's finished trials, the ``n`` of a finding that states
-    none. Idempotent; other verdicts pass unchanged.
+    none. Idempotent.
     """
-    if finding.verdict not in DECISIVE:
+    if finding.verdict == INSUFFICIENT or (size == "full" and finding.verdict not in DECISIVE):
         return finding
-    n, of = (finding.n, finding.n_of) if finding.n is not None else (n_trials, "trials")
+    n, of = (finding.n, finding.n_of) if finding.n is not None else (n_trials, "trial" if n_trials == 1 else "trials")
     if size != "full":
         head = "at this size"
     elif seeds is not None and full_seeds is not None and seeds < full_seeds:

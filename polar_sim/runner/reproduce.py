@@ -192,8 +192,8 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
     lines += ["## Findings", "",
               "For each published result we reproduce: the published claim, our figure, and a verdict "
               "(held / partly held / not held / not tested the same way). Only a full-size run on the protocol's "
-              "seeds gives held or not held: a smaller one, or cells that cannot separate the methods (every one "
-              "at 100 %, say), read *insufficient evidence*, with the sample n the figures rest on.", ""]
+              "seeds gives a verdict: a smaller run, or cells that cannot separate the methods (every one at "
+              "100 %, say), read *insufficient evidence*, with the sample n the figures rest on.", ""]
     if findings:
         lines += findings_table(findings, experiment_column=True)
     else:

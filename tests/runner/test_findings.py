@@ -16,16 +16,18 @@ def _f(verdict="held", **kw):
     return Finding("Ch. 5, Fig. 5.6", "the four implementations perform similarly", "98.4 % to 99.9 %", verdict, **kw)
 
 
-# At the quick size every decisive verdict reads "insufficient evidence at this size (n = ...)";
-# "not tested the same way" is a statement about the setting and stays.
-@pytest.mark.parametrize("verdict", ["held", "partly held", "not held"])
+# At the quick size every verdict reads "insufficient evidence at this size (n = ...)" (a smaller
+# run does not test the claim the same way either); at the full size "not tested the same way",
+# a statement about the setting, stays.
+@pytest.mark.parametrize("verdict", ["held", "partly held", "not held", "not tested the same way"])
 def test_quick_size_is_not_evidence(verdict):
     w = weigh(_f(verdict, n=50, n_of="frames of 2 sequences"), size="quick", n_trials=10)
     assert w.verdict == INSUFFICIENT and w.indicated == verdict
     assert verdict_text(w) == "**insufficient evidence** at this size (n = 50 frames of 2 sequences)"
     assert weigh(w, size="quick", n_trials=10) == w                      # idempotent
-    kept = _f("not tested the same way")
-    assert weigh(kept, size="quick", n_trials=3) is kept
+    assert weigh(_f(verdict), size="quick", n_trials=1).evidence == "at this size (n = 1 trial)"
+    kept = _f("not tested the same way", saturated="every variant at 100.0 %")
+    assert weigh(kept, size="full", n_trials=3, seeds=1, full_seeds=20) is kept
 
 
 # At the full size the verdict stands, unless the seeds were cut below the protocol's, n is below
@@ -69,11 +71,11 @@ def test_runs_weigh_their_findings(tmp_path):
     saved = json.loads((tmp_path / "q" / "findings.json").read_text())
     assert saved[0]["verdict"] == INSUFFICIENT and saved[0]["indicated"] == "held"
     md = (tmp_path / "q" / "summary.md").read_text()
-    assert "**insufficient evidence** at this size (n = 1 trials)" in md and "| [1] |" in md and "- [1] a note" in md
+    assert "**insufficient evidence** at this size (n = 1 trial)" in md and "| [1] |" in md and "- [1] a note" in md
     full = run_experiment(EXP, out=tmp_path / "f", progress=False)
     assert [f.verdict for f in full.findings] == ["held"]
     cut = run_experiment(EXP, out=tmp_path / "c", overrides={"seed": [0]}, progress=False)
-    assert cut.findings[0].evidence == "with 1 of the protocol's 2 seeds (n = 1 trials)"
+    assert cut.findings[0].evidence == "with 1 of the protocol's 2 seeds (n = 1 trial)"
     # an older folder stored the unweighed verdict: reading it back weighs it
     saved[0].update(verdict="held", evidence="", indicated="")
     for k in ("n", "n_of", "n_needed", "saturated", "evidence", "indicated"):
