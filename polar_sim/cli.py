@@ -223,6 +223,7 @@ def _cmd_compare(args):
     from polar_sim.runner.compare import compare_runs
 
     _positive_int(args.n_boot, "--n-boot", 10_000_000)
+    _out_dir(args.out, create=False)
     out = compare_runs(args.run_a, args.run_b, by=args.by, metrics=args.metric, out=args.out,
                        n_boot=args.n_boot, seed=args.seed)
     print(out.read_text())

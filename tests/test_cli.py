@@ -100,6 +100,7 @@ def test_set_parsing():
     (["reproduce", "--report-only", "--out", "/nonexistent/reproduce"], "--out: '/nonexistent/reproduce' does not exist"),
     (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--out", "/dev/null/x"], "--out: cannot create"),
     (["compare", "/proc/self", "/proc/self"], "run_a"),
+    (["compare", "/nonexistent/a", "/nonexistent/b", "--out", "/dev/null"], "--out: '/dev/null' exists and is not a folder"),
     (["run", "sensors", "--quick", "--backend", "ray", "--address", "127.0.0.1:1"], "--address: cannot reach"),
 ])
 def test_cli_slips(argv, match, capsys):
