@@ -195,10 +195,22 @@ def _h2_frame(kind, flags, stream, payload=b""):
     return len(payload).to_bytes(3, "big") + bytes([kind, flags]) + stream.to_bytes(4, "big") + payload
 
 
+def _hpack_int(value, prefix_bits):
+    """An HPACK integer (RFC 7541, 5.1) with a ``prefix_bits``-bit prefix (flag bits left 0)."""
+    top = (1 << prefix_bits) - 1
+    if value < top:
+        return bytes([value])
+    out, value = [top], value - top
+    while value >= 128:
+        out.append((value & 127) | 128)
+        value >>= 7
+    return bytes(out + [value])
+
+
 def _h2_literal(index, value):
     """A header field "literal without indexing" whose name is static-table entry ``index``."""
     v = value.encode()
-    return (bytes([index]) if index < 15 else bytes([15, index - 15])) + bytes([len(v)]) + v
+    return _hpack_int(index, 4) + _hpack_int(len(v), 7) + v
 
 
 def grpc_status(host, port, timeout=3.0):

@@ -86,3 +86,13 @@ def test_address_of_something_that_is_not_ray(tmp_path, reply, says):
         t.join()
         srv.close()
     assert "\n" not in str(e.value) and not (tmp_path / "b").exists() and not ray.is_initialized()
+
+
+# The probe's HPACK integers follow RFC 7541's examples (C.1.1, C.1.2), so header values of any
+# length (a long host name in :authority) are encoded right.
+def test_probe_hpack_integers():
+    from polar_sim.runner.backends import _h2_literal, _hpack_int
+
+    assert _hpack_int(10, 5) == bytes([10]) and _hpack_int(1337, 5) == bytes([31, 154, 10])
+    assert _h2_literal(31, "application/grpc")[:2] == bytes([15, 16])
+    assert _h2_literal(1, "h" * 200)[:3] == bytes([1, 127, 73])
