@@ -9,7 +9,7 @@ the ``mapper2d`` method (``gpis``):
 - **held-out self-consistency**: map 4 of every 5 scans, then |SDF| at the end points of the 5th
   (every ``held_out_stride``-th of these held-out scans: all at full size, every 4th quick);
 - **scan-to-map odometry**: each scan registered by ICP-G to the map of the scans before it, from
-  the previous estimate moved by the raw odometry, then fused; scored (``runner.localise.relation_scores``)
+  the previous estimate moved by the raw odometry, then fused; scored (``metrics.relation_scores``)
   on the Freiburg benchmark relations among these scans (Kümmerle et al. 2009; 90 of 2984, matched by
   ``t_abs``): *local* ones (scans <= 5 apart: the front end's accuracy) and *loop* ones (a place
   revisited: the drift a SLAM system removes by closing the loop). **Not** a SLAM result (no polar_sim
@@ -27,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.localise import relation_scores, relocalise
+from polar_sim.metrics import relation_scores
+from polar_sim.runner.localise import relocalise
 from polar_sim.runner.pictures2d import map_figure
 from polar_sim.runner.report import duration, length, markdown_table, savefig, write_csv_table
 

@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
+from polar_sim.metrics import pooled_pose2d_errors
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.localise import (budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start,
-                                      pooled_errors)
+from polar_sim.runner.localise import budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start
 from polar_sim.runner.report import duration, length, markdown_table, savefig, write_csv_table
 
 from polar_sim.experiments import _gpis_common as C
@@ -57,7 +57,7 @@ def trial(params, seed, ctx):
     r = localise_drive(loc, d2.angles, d2.ranges, truth, odom, perturbed_start(truth[0], rng, offset_m=0.1, offset_deg=2.0))
     e, cpu = r["err"], r["cpu_ms"]
     ctx.save_arrays(err=e, truth=truth, odom=odom)
-    st = pooled_errors(e, FAIL_M)
+    st = pooled_pose2d_errors(e, FAIL_M)
     return {**{k: st[k] for k in ("pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg", "fail_steps")},
             "not_ok_steps": int(getattr(loc, "not_ok_", 0)), "cpu_ms_median": float(np.median(cpu)),
             "cpu_ms_p90": float(np.percentile(cpu, 90)), "wall_ms_median": float(np.median(r["wall_ms"])), "n_steps": len(truth),
@@ -70,7 +70,7 @@ def _stats(table, ctx):
     for k in sorted({r["method"] for r in table}):
         rows = [r for r in table if r["method"] == k]
         e = np.vstack([ctx.arrays(r)["err"] for r in rows])
-        out.append({"method": k, "seeds": len(rows), **pooled_errors(e, FAIL_M),
+        out.append({"method": k, "seeds": len(rows), **pooled_pose2d_errors(e, FAIL_M),
                     "seeds_with_failure": sum(r["fail_steps"] > 0 for r in rows),
                     "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rows])),
                     "wall_ms_median": float(np.median([r["wall_ms_median"] for r in rows])), "err": e})

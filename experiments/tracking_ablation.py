@@ -22,6 +22,7 @@ from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, percent, savefig, write_csv_table
 
 from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_tables as T
 
 ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "spatial-prior-0.1", "alpha-beta", "no-hold", "plain-icp"]
 ORDER = C.VARIANTS + ABLATIONS
@@ -37,15 +38,15 @@ def summarize(table, ctx):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    head = C.group(table, ctx.split)
+    head = T.group(table, ctx.split)
     methods = list(dict.fromkeys(r["method"] for r in table))
-    rows = C.rate_rows(head, "method", ORDER + [m for m in methods if m not in ORDER])
+    rows = T.rate_rows(head, "method", ORDER + [m for m in methods if m not in ORDER])
     cols = ["method", "frames", "add_ok", "add_auc", "iou_ok", "iou_mean", "occl_frames", "occl_add_ok", "occl_iou_ok",
             "hand_as_target", "drift_deg_max", "lost", "cpu_ms_median"]
     write_csv_table(rows, cols, ctx.out_dir / "tracking_ablation_table.csv")
     prow = []
     for s in dict.fromkeys(r["sequence"] for r in table):
-        rs = C.by(table, "sequence", s)
+        rs = T.by(table, "sequence", s)
         prow.append({"sequence": s, "occl_frames": rs[0]["occl_frames"],
                      **{r["method"]: f"{100 * r['add_ok']:.0f} / {100 * r['iou_ok']:.0f}" for r in rs}})
     pcols = ["sequence", "occl_frames"] + [r["method"] for r in rows]
@@ -71,7 +72,7 @@ def summarize(table, ctx):
 
 def _beats(table, ctx):
     """Whether each variant run beats plain ICP under touch; None without plain ICP or any variant."""
-    rows = {r["method"]: r for r in C.rate_rows(C.group(table, ctx.split), "method", ORDER)}
+    rows = {r["method"]: r for r in T.rate_rows(T.group(table, ctx.split), "method", ORDER)}
     if "plain-icp" not in rows or not any(v in rows for v in C.VARIANTS):
         return rows, None, ""
     p = rows["plain-icp"]

@@ -233,7 +233,7 @@ def _cmd_compare(args):
 def _cmd_demo(args):
     from polar_sim.demo import run_demo
 
-    return run_demo(_out_dir(args.out), quick=True, workers=args.workers)
+    return run_demo(_out_dir(args.out), workers=args.workers, progress=not args.quiet)
 
 
 def _cmd_eval(args):
@@ -336,6 +336,7 @@ def build_parser():
     s.add_argument("--out", default="polar_sim_out", help="output folder (default ./polar_sim_out)")
     s.add_argument("--workers", type=int, choices=(1, 2), default=None,
                    help="processes: 1 runs the parts one by one, 2 (default on 2+ cores) in two lanes")
+    s.add_argument("--quiet", action="store_true", help="no progress bars (they are off anyway when stderr is not a terminal)")
     s.set_defaults(func=_cmd_demo)
 
     s = sub.add_parser("render", help="pictures of a scene from its cameras")
@@ -389,7 +390,7 @@ def build_parser():
     s.set_defaults(func=_cmd_compare)
 
     s = sub.add_parser("eval", help="closed-loop evaluation of a policy in an environment")
-    s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v0 (polar-sim list shows them all)")
+    s.add_argument("env_id", help="e.g. polar_sim/GPISNav-v1 (polar-sim list shows them all)")
     s.add_argument("--policy", default=None, help="required: MODULE:CALLABLE (a class is instantiated) or 'random'")
     s.add_argument("--episodes", type=int, default=10)
     s.add_argument("--seed", type=int, default=10_000, help="seed of the first episode (default 10000: held out)")

@@ -280,6 +280,11 @@ def _check_names(ns):
 
         if ns.env_id not in ENV_IDS:
             return f"polar-sim eval {ns.env_id}: no such environment id"
+    if ns.command == "eval" and ":" in ns.policy and not _placeholder(ns.policy):
+        try:
+            resolve(ns.policy.replace(":", "."))
+        except (ImportError, AttributeError):
+            return f"polar-sim eval --policy {ns.policy}: cannot import it"
     return None
 
 

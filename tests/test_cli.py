@@ -73,9 +73,9 @@ def test_set_parsing():
 # The slips a new user makes end in one-line errors, never tracebacks.
 @pytest.mark.parametrize("argv, match", [
     (["eval", "polar_sim/Nope-v0", "--policy", "random"], "unknown environment"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", "0"], "--episodes"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "[1]"], "--env-kwargs"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "{bad"], "--env-kwargs"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--episodes", "0"], "--episodes"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--env-kwargs", "[1]"], "--env-kwargs"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--env-kwargs", "{bad"], "--env-kwargs"),
     (["render", "office2d", "--width", "0"], "--width"),
     (["demo", "--out", "/dev/null/x"], "--out"),
     (["render", "office2d", "--out", "/tmp/" + "x" * 5000], "--out"),
@@ -153,7 +153,7 @@ def test_eval_units():
 
 # A callable that is not a policy is named once it is called (after the progress bar has started).
 def test_eval_names_a_callable_that_is_not_a_policy(capsys):
-    assert main(["eval", "polar_sim/GPISNav-v0", "--policy", "os:getcwd", "--episodes", "1"]) == 1
+    assert main(["eval", "polar_sim/GPISNav-v1", "--policy", "os:getcwd", "--episodes", "1"]) == 1
     last = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
     assert last.startswith("polar-sim: error: policy: ") and "policy(obs)" in last, last
 

@@ -110,6 +110,7 @@ def test_command_checks_catch_mistakes():
     assert "no such experiment" in error("polar-sim run localization --quick")
     assert "unrecognized arguments" in error("polar-sim run localisation --fast")
     assert "no such environment" in error("polar-sim eval polar_sim/GPISNav-v9 --policy random")
+    assert "cannot import" in error("polar-sim eval polar_sim/GPISNav-v1 --policy polar_sim.envs.policies:Nope")
     assert "no such scene" in error("polar-sim render office3d")
     assert "no such file" in error("python benchmarks/bench_nothing.py")
     assert "no extra" in error('pip install .[tests]')

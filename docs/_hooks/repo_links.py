@@ -81,8 +81,9 @@ def _rewrite(match, page, config):
         log.warning("%s: the image '%s' lies outside docs/ and cannot be shown", page.file.src_path, target)
         return match.group(0)
     shown = rel.replace(os.sep, "/") + ("/" if os.path.isdir(path) else "")
-    if text.strip("`") in (shown, shown.rstrip("/")):
-        return text if text.startswith("`") else f"`{text}`"
+    named = text.strip("`").rstrip("/")
+    if named and ("/" + shown.rstrip("/")).endswith("/" + named):   # the text is the path, or its tail
+        return f"`{shown}`"
     return f"{text} (`{shown}`)"
 
 

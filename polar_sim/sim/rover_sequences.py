@@ -167,6 +167,10 @@ def record_route(name, *, max_frames=None, progress=None):
     right), ``speed`` (m/s), ``h_y`` (m), ``surface_coeffs`` (6,), ``static`` (bool).
     Meta: ``K`` of the reduced image, ``dt``, ``camera_height``, ``route``, ``length_m``,
     ``appearance`` (the resolved spec, None for the default look), ``zones`` (zone families).
+    ``progress``: a bar of the metres driven, on stderr (:func:`polar_sim.progress.progress_bar`: by
+    default on a terminal unless ``POLAR_SIM_QUIET=1``; ``False``: never); a callable is called with
+    the number of frames recorded so far after each frame instead (``polar-sim demo`` draws its own
+    bars from it).
     """
     spec = route_spec(name)
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
@@ -187,7 +191,9 @@ def record_route(name, *, max_frames=None, progress=None):
         K_full = None
         rec = None
         frames = 0
-        bar = progress_bar(total=int(length), desc=f"recording {name}", unit="m", enabled=progress, leave=None)
+        tick = progress if callable(progress) else None
+        bar = progress_bar(total=int(length), desc=f"recording {name}", unit="m",
+                           enabled=False if tick is not None else progress, leave=None)
         k = 0
         while True:
             pose2d = w.truth()["robot_pose2d"]
@@ -221,6 +227,8 @@ def record_route(name, *, max_frames=None, progress=None):
             })
             frames += 1
             bar.update(int(s) - bar.n)
+            if tick is not None:
+                tick(frames)
             if s >= length or (max_frames is not None and frames >= max_frames) or k >= n_max - 1:
                 break
             v = float(min(profile[k], np.sqrt(2.0 / max(abs(follower.steer(pose2d, profile[k])) / max(profile[k], 0.1), 1e-3))))

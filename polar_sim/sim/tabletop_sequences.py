@@ -273,9 +273,11 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         Also save the recording there (``.npz``). :func:`cached_sequence` keeps it in the cache.
     width, height : int
         Image size; the intrinsics scale with it (fovy is fixed).
-    progress : bool, optional
+    progress : bool or callable, optional
         A bar of the frames recorded, on stderr (:func:`polar_sim.progress.progress_bar`: by
-        default shown on a terminal unless ``POLAR_SIM_QUIET=1``; ``False``: never).
+        default shown on a terminal unless ``POLAR_SIM_QUIET=1``; ``False``: never); a callable
+        is called with the number of frames recorded so far after each frame, instead of a bar
+        (``polar-sim demo`` draws its own bars from it).
     """
     from polar_sim._validation import as_int
     from polar_sim.geometry import inv_pose
@@ -306,7 +308,10 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         if s.split != "dev" or "appearance" in w.meta:  # (the dev recordings' headers stay as they were)
             meta.update(split=s.split, appearance=w.meta.get("appearance"))
         rec = Recording(meta)
-        for k in progress_bar(range(n), enabled=progress, desc=f"recording {name}", unit="frame", leave=None):
+        tick = progress if callable(progress) else None
+        frames = progress_bar(range(n), enabled=False if tick is not None else progress, desc=f"recording {name}",
+                              unit="frame", leave=None)
+        for k in frames:
             if k > 0:
                 w.step()
             f = f0 if k == 0 else w.camera("rgbd", width=width, height=height)
@@ -328,6 +333,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
                 "light_scale": float(tr.get("light_scale", 1.0)),
                 "phase": PHASES.index(tr.get("phase", "rest")),
             })
+            if tick is not None:
+                tick(k + 1)
     finally:
         w.close()
     if out is not None:
