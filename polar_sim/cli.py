@@ -336,7 +336,6 @@ def build_parser():
     s.add_argument("--out", default="polar_sim_out", help="output folder (default ./polar_sim_out)")
     s.add_argument("--workers", type=int, choices=(1, 2), default=None,
                    help="processes: 1 runs the parts one by one, 2 (default on 2+ cores) in two lanes")
-    s.add_argument("--quiet", action="store_true", help="no progress bars (they are off anyway when stderr is not a terminal)")
     s.set_defaults(func=_cmd_demo)
 
     s = sub.add_parser("render", help="pictures of a scene from its cameras")
