@@ -92,6 +92,12 @@ class PolarMujocoEnv(gym.Env):
         return self._world
 
     def reset(self, *, seed=None, options=None):
+        self._reset_state(seed, options)
+        obs = self._get_obs()
+        return obs, self._get_info()
+
+    def _reset_state(self, seed, options):
+        """Everything of :meth:`reset` but the observation and the info."""
         seed = check_seed(seed)
         if self._closed:
             raise RuntimeError(f"{type(self).__name__}: reset() after close()")
@@ -102,10 +108,15 @@ class PolarMujocoEnv(gym.Env):
         self._world = self._make_world(layout_seed)
         self._reset_scene()
         self._needs_reset = False
-        return self._get_obs(), self._get_info()
 
     def step(self, action):
         """One control period. A rejected action (``ValueError``) leaves the environment as it was."""
+        reward, terminated, info = self._step_state(action)
+        return self._get_obs(), reward, terminated, False, info
+
+    def _step_state(self, action):
+        """Everything of :meth:`step` but the observation: (reward, terminated, info). A module
+        environment asks for the raw observation only if its module reads it."""
         if self._closed:
             raise RuntimeError(f"{type(self).__name__}: step() after close()")
         if self._needs_reset:
@@ -117,7 +128,7 @@ class PolarMujocoEnv(gym.Env):
         info["reward_terms"] = terms
         if terminated:
             self._needs_reset = True
-        return self._get_obs(), float(reward), bool(terminated), False, info
+        return float(reward), bool(terminated), info
 
     def _check_action(self, action):
         try:

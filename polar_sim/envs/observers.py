@@ -120,18 +120,15 @@ class TruthSource:
         pass
 
     def query(self, points):
-        h = 1e-3
-        f = self.world.sdf
         o = self.origin
         if o is not None:
             points = compose2d(o, np.c_[points, np.zeros(len(points))])[:, :2]
-        d = f(points)
-        gx = (f(points + [h, 0]) - f(points - [h, 0])) / (2 * h)
-        gy = (f(points + [0, h]) - f(points - [0, h])) / (2 * h)
+        d, g = self.world.sdf_gradient(points, step=1e-3)
         if o is not None:  # the gradient back in the map frame
             c, s = np.cos(o[2]), np.sin(o[2])
-            gx, gy = c * gx + s * gy, -s * gx + c * gy
-        return d, np.stack([gx, gy], 1), np.zeros(len(points))
+            gx, gy = g[:, 0], g[:, 1]
+            g = np.stack([c * gx + s * gy, -s * gx + c * gy], 1)
+        return d, g, np.zeros(len(points))
 
 
 SDF_SOURCES = ("gpis", "truth", "occupancy_edt")

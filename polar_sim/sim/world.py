@@ -14,6 +14,8 @@ from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, Ran
 
 __all__ = ["World"]
 
+_OBJ = mujoco.mjtObj
+
 
 def _slices_for(m, tol):
     """Slices (<= 256) that draw every static cylinder and capsule within ``tol`` metres."""
@@ -81,9 +83,12 @@ class World:
         # use; no more, since every slice costs frame rate (128 slices cut 640x480 by 30 %).
         m.vis.quality.numslices = max(int(m.vis.quality.numslices), _slices_for(m, tol=5e-4))
         self.data = mujoco.MjData(m)
-        self.cameras = tuple(m.camera(i).name for i in range(m.ncam))
+        self.cameras = tuple(_truth.name_of(m, _OBJ.mjOBJ_CAMERA, i) for i in range(m.ncam))
         self._lidars = {k: Lidar(m, s) for k, s in parse_lidars(m).items()}
         self.lidars = tuple(self._lidars)
+        # The site of the first 2D lidar: its height is the plane of the 2D sdf().
+        self._plane_site = next((_truth.id_of(m, _OBJ.mjOBJ_SITE, lid.spec.site) for lid in self._lidars.values()
+                                 if lid.spec.kind == "lidar2d"), None)
         self._rig = None
         self._closed = False
         self.kinematic = kinematic
@@ -108,10 +113,10 @@ class World:
         self._labels = _truth.label_table(m, self.meta.get("target"))
         self._robot_geom = self._labels == _truth.LABELS["robot"]
         self._ground_geom = self._labels == _truth.LABELS["ground"]
-        self._ids = {"rover": m.body("rover").id if self._has_rover else -1,
-                     "hand": m.body("hand").id if _has_body(m, "hand") else -1,
-                     "cameras": {c: m.camera(c).id for c in self.cameras},
-                     "sites": {k: m.site(s.spec.site).id for k, s in self._lidars.items()},
+        self._ids = {"rover": _truth.id_of(m, _OBJ.mjOBJ_BODY, "rover") if self._has_rover else -1,
+                     "hand": _truth.id_of(m, _OBJ.mjOBJ_BODY, "hand"),
+                     "cameras": {c: _truth.id_of(m, _OBJ.mjOBJ_CAMERA, c) for c in self.cameras},
+                     "sites": {k: _truth.id_of(m, _OBJ.mjOBJ_SITE, s.spec.site) for k, s in self._lidars.items()},
                      "objects": {o: m.body(o).id for o in self.meta.get("objects", ())}}
         self._sdf = None
         self.reset(self.seed)
@@ -241,8 +246,8 @@ class World:
         xb = h - (h @ n) * n
         xb /= np.linalg.norm(xb)
         R = np.stack([xb, np.cross(n, xb), n], 1)
-        adr = m.jnt_qposadr[m.joint("rover_free").id]
-        vadr = m.jnt_dofadr[m.joint("rover_free").id]
+        adr = self._controller.qpos_adr
+        vadr = self._controller.qvel_adr
         # Directly above the ground point (x, y), at the height where a wheel of radius r
         # touches the local tangent plane: the unicycle holds exactly in the horizontal plane.
         d.qpos[adr : adr + 3] = [x, y, z + cfg.wheel_radius / n[2]]
@@ -415,16 +420,34 @@ class World:
         ``points`` (n, 3) are world points. ``points`` (n, 2) are taken in the horizontal plane
         of the 2D lidar (its current height) and measured within that plane, ground excluded.
         """
+        p, dim = self._sdf_points(points)
+        if dim == 3:
+            return self._scene_sdf()(p)
+        return self._scene_sdf().section(p, self.lidar_plane_height())
+
+    def sdf_gradient(self, points, *, step=1e-3):
+        """:meth:`sdf` (n,) and its gradient (n, 2) or (n, 3) at the same points, the gradient by
+        central differences ``(sdf(p + step e) - sdf(p - step e)) / (2 step)`` along each axis
+        (``step`` in m, > 0): one call for the distance and the gradient of a whole stencil."""
+        p, dim = self._sdf_points(points)
+        h = as_positive_float(step, "step")
+        if dim == 2:
+            return self._scene_sdf().section_gradient(p, self.lidar_plane_height(), h)
+        f = self._scene_sdf()
+        g = np.stack([(f(p + e) - f(p - e)) / (2 * h) for e in h * np.eye(3)], 1)
+        return f(p), g
+
+    def _sdf_points(self, points):
         from polar_sim._validation import as_points
 
         p = as_float_array(points, "points")
         dim = p.shape[1] if (p.ndim == 2 and p.shape[1] in (2, 3)) else 3
-        p = as_points(p, dim, "points")
+        return as_points(p, dim, "points"), dim
+
+    def _scene_sdf(self):
         if self._sdf is None:
             self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
-        if dim == 3:
-            return self._sdf(p)
-        return self._sdf.section(p, self.lidar_plane_height())
+        return self._sdf
 
     def nearest_surface(self, points):
         """Label (n,) of the static surface nearest to each world point (n, 3) (see
@@ -432,17 +455,13 @@ class World:
         from polar_sim._validation import as_points
 
         p = as_points(points, 3, "points")
-        if self._sdf is None:
-            self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
-        _, g = self._sdf(p, return_geom=True)
+        _, g = self._scene_sdf()(p, return_geom=True)
         return np.where(g < 0, _truth.LABELS["ground"], self._labels[np.maximum(g, 0)])
 
     def lidar_plane_height(self):
         """World height (m) of the plane 2D points of :meth:`sdf` live in: the first 2D lidar's."""
-        for k, lid in self._lidars.items():
-            if lid.spec.kind == "lidar2d":
-                return float(self.data.site_xpos[self.model.site(lid.spec.site).id][2])
-        return 0.0
+        site = self._plane_site
+        return 0.0 if site is None else float(self.data.site_xpos[site][2])
 
     def object_points(self, name, n, seed=0):
         """(n, 3) points and (n, 3) outward unit normals sampled uniformly on the surface of
@@ -505,8 +524,4 @@ def _check_model(m, scene):
 
 
 def _has_body(model, name):
-    try:
-        model.body(name)
-        return True
-    except KeyError:
-        return False
+    return _truth.id_of(model, _OBJ.mjOBJ_BODY, name) >= 0
