@@ -107,6 +107,8 @@ class PolarMujocoEnv(gym.Env):
             self._world.close()
         self._world = self._make_world(layout_seed)
         self._reset_scene()
+        space = self.action_space  # its bounds and tolerances, once (every step checks against them)
+        self._bounds = (space.low, space.high, space.low - ACTION_TOLERANCE, space.high + ACTION_TOLERANCE)
         self._needs_reset = False
 
     def step(self, action):
@@ -131,26 +133,30 @@ class PolarMujocoEnv(gym.Env):
         return float(reward), bool(terminated), info
 
     def _check_action(self, action):
-        try:
-            a = np.asarray(action)
-        except (TypeError, ValueError):
-            a = np.asarray(None, dtype=object)
+        if type(action) is np.ndarray:
+            a = action
+        else:
+            try:
+                a = np.asarray(action)
+            except (TypeError, ValueError):
+                a = np.asarray(None, dtype=object)
         if a.dtype.kind not in "iuf":
             # bool, complex, str, object: never a velocity command
             raise ValueError(f"action: expected a real numeric array of shape {self.action_space.shape}, got "
                              f"{_short(action)}")
         a = a.astype(np.float64)
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action: expected shape {self.action_space.shape}, got {a.shape}")
+        space = self.action_space
+        if a.shape != space.shape:
+            raise ValueError(f"action: expected shape {space.shape}, got {a.shape}")
         if not np.isfinite(a).all():
             raise ValueError(f"action: contains NaN or inf: {a.tolist()}")
-        lo, hi = self.action_space.low, self.action_space.high
-        if np.any(a < lo - ACTION_TOLERANCE) or np.any(a > hi + ACTION_TOLERANCE):
+        lo, hi, lo_tol, hi_tol = self._bounds
+        if (a < lo_tol).any() or (a > hi_tol).any():
             raise ValueError(f"action: {a.tolist()} is outside the action space [{lo.tolist()}, {hi.tolist()}]; "
                              "it is never clipped silently")
         # Within the tolerance (float32 round-off of a bound) the action is the bound itself, so
         # that nothing downstream (the rover's own limits) can reject what was accepted here.
-        return np.clip(a, lo, hi)
+        return np.minimum(np.maximum(a, lo), hi)
 
     def render(self):
         if self.render_mode is None:

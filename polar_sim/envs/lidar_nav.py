@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
+from polar_sim.envs import _pose2d
 from polar_sim.envs._gridplan import GeodesicDistance
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.envs.noise import LIDAR_NOISE, ODOMETRY_NOISE, WheelOdometry, as_lidar_noise, as_odometry_noise
@@ -199,12 +200,15 @@ class LidarNavEnv(PolarMujocoEnv):
 
     def __init__(self, *, render_mode=None, render_size=(480, 480), tier=None, rooms=None, room_size=None,
                  clutter=None, n_beams=270, max_speed=1.0, max_yaw_rate=1.5, lidar_noise=_DEFAULT,
-                 odometry_noise=_DEFAULT, reward_weights=None, version=1, **unknown):
+                 odometry_noise=_DEFAULT, reward_weights=None, kinematic=None, version=1, **unknown):
         check_kwargs(type(self), unknown)
         super().__init__(render_mode=render_mode, render_size=render_size)
-        if version not in (0, 1) or isinstance(version, bool):
-            raise ValueError(f"version: expected 0 or 1, got {version!r}")
+        if version not in (0, 1, 2) or isinstance(version, bool):
+            raise ValueError(f"version: expected 0, 1 or 2, got {version!r}")
         self._version = int(version)
+        if kinematic is not None and not isinstance(kinematic, (bool, np.bool_)):
+            raise TypeError(f"kinematic: expected None (the version's default) or a bool, got {kinematic!r}")
+        self._kinematic = self._version == 2 if kinematic is None else bool(kinematic)
         self._reward_w = as_reward_weights(reward_weights, self._version)
         self._rooms, self._room_size, self._clutter = resolve_tier(tier, rooms, room_size, clutter)
         self._tier = tier
@@ -252,7 +256,8 @@ class LidarNavEnv(PolarMujocoEnv):
         for attempt in range(MAX_LAYOUT_ATTEMPTS):
             try:
                 world = World("navworld", seed=layout_seed, rooms=self._rooms, room_size=self._room_size,
-                              clutter=self._clutter, lidar_beams=self._n_beams, noise=noise)
+                              clutter=self._clutter, lidar_beams=self._n_beams, noise=noise,
+                              kinematic="planar" if self._kinematic else False)
             except ValueError as err:
                 if "no reachable start/goal pair" not in str(err) or attempt == MAX_LAYOUT_ATTEMPTS - 1:
                     raise
@@ -266,40 +271,39 @@ class LidarNavEnv(PolarMujocoEnv):
         self._goal = np.asarray(w.meta["goal"], dtype=np.float64)
         x0, _, y0, _ = w.meta["bounds"]
         self._geodesic = GeodesicDistance(w.meta["occupancy"], (x0, y0), w.meta["occupancy_res"], self._goal)
-        self._truth = w.truth()
-        self._pose = self._truth["robot_pose2d"]
+        self._pose = w.robot_pose2d()
         self._start = self._pose.copy()
         self._geo = self._prev_dist = self._geodesic(self._pose[:2])
         self._robot_radius = float(w.meta["robot_radius"])
         self._path_length = 0.0
         self._collision = False
-        self._scan = w.lidar("lidar")
-        if self._version == 1:
+        self._scan = None  # cast when first read (see ``scan``)
+        if self._version >= 1:
             # The odometry noise has its own stream, drawn after the layout: the same seed gives
             # the same world whatever the noise settings.
             self._odometry.reset(np.random.default_rng(int(self.np_random.integers(0, 2**31 - 1))))
         self._odo = np.zeros(3)
         self._odo_twist = np.zeros(2)
         spec = w.lidar_spec("lidar")
-        mount = between2d(self._pose, T_to_pose2d(self._scan.T_world_sensor))
+        mount = between2d(self._pose, T_to_pose2d(w.lidar_pose("lidar")))
         goal_start = between2d(self._start, np.array([self._goal[0], self._goal[1], 0.0]))[:2]
-        self.task = NavTask(goal_start, mount, self._scan.angles.copy(), float(spec.min_range),
+        self.task = NavTask(goal_start, mount, spec.angles.copy(), float(spec.min_range),
                             float(spec.max_range), float(w.dt), self.extent)
 
     def _apply_action(self, a):
         v, om = a[0] * self._max_speed, a[1] * self._max_yaw_rate
         prev = self._pose
-        self._world.step((v, om))
-        self._truth = self._world.truth()
-        self._pose = self._truth["robot_pose2d"]
-        self._path_length += float(np.hypot(*(self._pose[:2] - prev[:2])))
-        self._collision = bool(self._truth["robot_collision"])
-        self._geo = self._geodesic(self._pose[:2])  # for the reward and the info alike
-        self._scan = self._world.lidar("lidar")
-        if self._version == 1:
+        w = self._world
+        w.step((v, om))
+        self._pose = w.robot_pose2d()
+        self._path_length += float(np.hypot(self._pose[0] - prev[0], self._pose[1] - prev[1]))
+        self._collision = w.robot_collision()
+        self._geo = self._geodesic(self._pose)  # for the reward and the info alike
+        self._scan = None
+        if self._version >= 1:
             # Wheels measure the distance driven along the heading and the turn (no side slip).
-            inc = between2d(prev, self._pose)
-            dt = self._world.dt
+            inc = _pose2d.between(prev, self._pose)
+            dt = w.dt
             ds, dth = self._odometry.measure(inc[0], inc[2], dt)
             self._odo = np.array([ds * np.cos(dth / 2), ds * np.sin(dth / 2), dth])
             self._odo_twist = np.array([ds / dt, dth / dt])
@@ -309,8 +313,21 @@ class LidarNavEnv(PolarMujocoEnv):
     def scan(self):
         """The last lidar scan (:class:`polar_sim.sim.LidarScan`, ranges in m with ``inf`` = no
         return, noisy as observed). Its ``T_world_sensor`` is the true sensor pose: truth, for
-        oracles and scoring only."""
+        oracles and scoring only.
+
+        The scan of a step is cast when it is first read (a module that reads no scan, such as
+        ``GPISNav`` with ``pose_source="truth", sdf_source="truth"``, casts none); the lidar
+        noise draws from its generator only for scans that are cast, so reading the scan every
+        step, as the observation does, gives the same scans whatever else is read."""
+        if self._scan is None:
+            self._scan = self._world.lidar("lidar")
         return self._scan
+
+    @property
+    def sensor_pose2d(self):
+        """The lidar's true pose (x, y, yaw) in the world now, m and rad (truth: for oracles and
+        scoring only; the same as the scan's ``T_world_sensor``, without casting it)."""
+        return T_to_pose2d(self._world.lidar_pose("lidar"))
 
     @property
     def odometry(self):
@@ -325,13 +342,18 @@ class LidarNavEnv(PolarMujocoEnv):
     def _twist(self):
         lim = self.observation_space["twist"]
         if self._version == 0:
-            tw = self._truth["robot_twist"]
+            tw = self._world.robot_twist()
             return np.clip(np.array([tw[0], tw[5]], np.float32), lim.low, lim.high)
         return np.clip(self._odo_twist.astype(np.float32), lim.low, lim.high)
 
-    def _get_obs(self):
-        r = np.where(np.isfinite(self._scan.ranges), self._scan.ranges, LIDAR_MAX).astype(np.float32)
-        obs = {"ranges": np.minimum(r, LIDAR_MAX), "twist": self._twist()}
+    def _get_obs(self, ranges=True):
+        """The observation; without the ``ranges`` (and casting no scan) if ``ranges`` is False,
+        for a module environment that reads only the rest."""
+        obs = {"twist": self._twist()}
+        if ranges:
+            scan = self.scan
+            r = np.where(np.isfinite(scan.ranges), scan.ranges, LIDAR_MAX).astype(np.float32)
+            obs["ranges"] = np.minimum(r, LIDAR_MAX)
         if self._version == 0:
             obs["goal"] = between2d(self._pose, np.array([self._goal[0], self._goal[1], 0.0]))[:2].astype(np.float32)
         else:
@@ -344,7 +366,7 @@ class LidarNavEnv(PolarMujocoEnv):
                 "geodesic_distance": self._geo, "collision": self._collision,
                 "path_length": self._path_length,
                 "is_success": bool(d < GOAL_RADIUS and not self._collision), "layout_seed": self._layout_seed}
-        if self._version == 1:
+        if self._version >= 1:
             info["start_pose2d"] = self._start.copy()
         return info
 
@@ -354,7 +376,7 @@ class LidarNavEnv(PolarMujocoEnv):
         terms = {"progress": w["progress"] * (self._prev_dist - self._geo), "time": -w["time"],
                  "collision": -w["collision"] if self._collision else 0.0,
                  "success": w["success"] if (d < GOAL_RADIUS and not self._collision) else 0.0}
-        if self._version == 1:
+        if self._version >= 1:
             # Clearance of the robot's disc from the exact scene SDF (truth, as the rest of the reward).
             clear = float(self._world.sdf(self._pose[None, :2])[0]) - self._robot_radius
             terms["proximity"] = -w["proximity"] * float(np.clip(1.0 - clear / w["proximity_radius"], 0.0, 1.0))

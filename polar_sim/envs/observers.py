@@ -10,10 +10,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import compose2d
-
 __all__ = ["SDFStencil", "GPISSource", "TruthSource", "OccupancyEDTSource", "make_sdf_source", "SDF_SOURCES",
            "RoutePath", "VOOdometry", "TrackerPose", "pose7", "grasp_yaw_error"]
+
+
+def robot_to_world(pose2d, points):
+    """Points (n, 2) in the frame of pose (x, y, theta) carried into the world: the position part
+    of :func:`polar_sim.geometry.compose2d`, the same operations, without its stacking."""
+    x, y, th = float(pose2d[0]), float(pose2d[1]), float(pose2d[2])
+    c, s = float(np.cos(th)), float(np.sin(th))
+    px, py = points[:, 0], points[:, 1]
+    out = np.empty((len(points), 2))
+    out[:, 0] = x + c * px - s * py
+    out[:, 1] = y + s * px + c * py
+    return out
 
 
 class SDFStencil:
@@ -38,8 +48,7 @@ class SDFStencil:
 
     def world_points(self, pose2d):
         """Stencil points (n, 2) in the world for a robot pose (x, y, theta)."""
-        pts = np.c_[self.points_robot, np.zeros(self.size)]
-        return compose2d(np.asarray(pose2d, float), pts)[:, :2]
+        return robot_to_world(pose2d, self.points_robot)
 
 
 class GPISSource:
@@ -122,12 +131,13 @@ class TruthSource:
     def query(self, points):
         o = self.origin
         if o is not None:
-            points = compose2d(o, np.c_[points, np.zeros(len(points))])[:, :2]
+            points = robot_to_world(o, points)
         d, g = self.world.sdf_gradient(points, step=1e-3)
         if o is not None:  # the gradient back in the map frame
-            c, s = np.cos(o[2]), np.sin(o[2])
-            gx, gy = g[:, 0], g[:, 1]
-            g = np.stack([c * gx + s * gy, -s * gx + c * gy], 1)
+            c, s = float(np.cos(o[2])), float(np.sin(o[2]))
+            gx, gy = g[:, 0].copy(), g[:, 1].copy()
+            g[:, 0] = c * gx + s * gy
+            g[:, 1] = -s * gx + c * gy
         return d, g, np.zeros(len(points))
 
 

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import compose2d
-
 __all__ = ["SDFGrid", "VisitedMask", "GRID_SDF_BOUND", "GRID_VAR_MAX"]
 
 GRID_SDF_BOUND = 4.0  # m: the image's distance channel is clipped to +-4 m
@@ -34,8 +32,9 @@ class SDFGrid:
 
     def world_points(self, pose2d):
         """Cell centres (size * size, 2) in the map frame for a robot pose (x, y, theta)."""
-        pts = np.c_[self.points_robot, np.zeros(len(self.points_robot))]
-        return compose2d(np.asarray(pose2d, float), pts)[:, :2]
+        from polar_sim.envs.observers import robot_to_world
+
+        return robot_to_world(pose2d, self.points_robot)
 
     def image(self, d, v, visited=None):
         """(C, size, size) float32: distance (m, clipped to +-4), variance (clipped to [0, 2];

@@ -8,6 +8,7 @@ file as it is, with no procedural part.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import inspect
 import os
@@ -91,8 +92,20 @@ def describe_scene(name):
 
 def scene_options(name):
     """Names and defaults of the options a shipped scene accepts, as a dict."""
+    return dict(_scene_options(name))
+
+
+@functools.lru_cache(maxsize=None)
+def _scene_options(name):
     sig = inspect.signature(SCENES[name].load_builder())
     return {p.name: p.default for p in sig.parameters.values() if p.kind == p.KEYWORD_ONLY}
+
+
+@functools.lru_cache(maxsize=None)
+def _base_spec(file):
+    """The parsed base MJCF of a shipped scene, parsed once (procedural scenes are rebuilt every
+    episode); callers get a copy (``MjSpec.copy``, ~20x cheaper than parsing the file)."""
+    return mujoco.MjSpec.from_file(str(scene_dir() / file))
 
 
 def _check_generic_options(options):
@@ -197,6 +210,6 @@ def load_scene(scene, seed=0, **options):
     if unknown:
         raise ValueError(f"{scene}: unknown scene option(s) {unknown}; valid: {sorted(valid)}")
     options = _check_generic_options(options)
-    spec = mujoco.MjSpec.from_file(str(scene_dir() / SCENES[scene].file))
+    spec = _base_spec(SCENES[scene].file).copy()
     meta = SCENES[scene].load_builder()(spec, seed, **options)
     return spec, meta

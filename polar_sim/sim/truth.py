@@ -260,6 +260,8 @@ class SceneSDF:
     def _cut(self, z):
         """The rectangles (k, 8) and discs (m, 3) of :func:`polar_sim.sim.sdf.section_boxes_discs`
         that the plane at height ``z`` cuts (kept while the cut shapes and radii stay the same)."""
+        if getattr(self, "_cut_z", None) == z:
+            return self._cut_tables
         boxes, discs, _ = self._section_tables()
         box_cut = np.abs(z - boxes[0][:, 2]) < boxes[2][:, 2] if boxes is not None else np.zeros(0, bool)
         radius = np.zeros(0)
@@ -287,6 +289,7 @@ class SceneSDF:
                 cut = radius > 0
                 D = np.ascontiguousarray(np.c_[discs[0][cut, :2], radius[cut]])
             self._cut_key, self._cut_tables = key, (B, D)
+        self._cut_z = z
         return self._cut_tables
 
     def section(self, points2d, z):
