@@ -13,8 +13,13 @@ import inspect
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["PolarMujocoEnv", "check_kwargs", "check_seed", "ACTION_TOLERANCE"]
+from polar_sim._validation import as_image_size, check_options
 
+__all__ = ["PolarMujocoEnv", "check_kwargs", "check_seed", "ACTION_TOLERANCE", "MAX_RENDER_SIZE"]
+
+#: Largest ``render_size`` side, pixels (the scenes' offscreen buffers are smaller still: a size
+#: beyond a scene's raises when rendered).
+MAX_RENDER_SIZE = 4096
 #: Actions up to this far outside the action box are taken as the bound (float32 round-off);
 #: further out they raise ``ValueError``.
 ACTION_TOLERANCE = 1e-6
@@ -54,18 +59,22 @@ class PolarMujocoEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    #: The keys ``reset(options=...)`` takes (none: any key is refused by name).
+    RESET_OPTIONS = ()
 
     def __init__(self, *, render_mode=None, render_size=(480, 480)):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self._render_size = tuple(int(v) for v in render_size)
+        self._render_size = as_image_size(render_size, "render_size", maximum=MAX_RENDER_SIZE)
         self._world = None
         self._closed = False
         self._needs_reset = True
 
     # -- subclass hooks -------------------------------------------------------------------
     def _make_world(self, layout_seed):
+        """The World of an episode with layout ``layout_seed``: a new one, or ``self.world`` given
+        that layout in place (the base closes the previous world if it is not returned)."""
         raise NotImplementedError
 
     def _reset_scene(self):
@@ -96,16 +105,33 @@ class PolarMujocoEnv(gym.Env):
         obs = self._get_obs()
         return obs, self._get_info()
 
+    def check_reset(self, seed, options):
+        """``reset``'s arguments, checked before any state changes: the seed (None or an int >= 0)
+        and the options (None or a dict with keys among :attr:`RESET_OPTIONS`, each checked by
+        :meth:`_check_option_values`). Returns (seed, options dict)."""
+        seed = check_seed(seed)
+        options = check_options(options, self.RESET_OPTIONS)
+        self._check_option_values(options)
+        return seed, options
+
+    def _check_option_values(self, options):
+        """Check the values of the options a subclass takes (raise before any state changes)."""
+
+    def _take_options(self, options):
+        """Keep the checked options of the episode that starts (the world is not built yet)."""
+
     def _reset_state(self, seed, options):
         """Everything of :meth:`reset` but the observation and the info."""
-        seed = check_seed(seed)
+        seed, options = self.check_reset(seed, options)
         if self._closed:
             raise RuntimeError(f"{type(self).__name__}: reset() after close()")
+        self._take_options(options)
         super().reset(seed=seed)
         layout_seed = int(self.np_random.integers(0, 2**31 - 1))
-        if self._world is not None:
+        world = self._make_world(layout_seed)  # may be the previous one, given the new layout
+        if self._world is not None and self._world is not world:
             self._world.close()
-        self._world = self._make_world(layout_seed)
+        self._world = world
         self._reset_scene()
         space = self.action_space  # its bounds and tolerances, once (every step checks against them)
         self._bounds = (space.low, space.high, space.low - ACTION_TOLERANCE, space.high + ACTION_TOLERANCE)

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
+from polar_sim._validation import as_float
 from polar_sim.envs import _pose2d
 from polar_sim.envs._gridplan import GeodesicDistance
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
@@ -42,18 +43,20 @@ _DEFAULT = "default"  # sentinel: the version's default noise
 
 
 def resolve_tier(tier, rooms, room_size, clutter):
-    """(rooms, room_size, clutter) of ``tier`` (None: the default), each overridden when given."""
+    """(rooms, room_size, clutter) of ``tier`` (None: the default), each overridden when given and
+    checked against the world's limits (:func:`polar_sim.sim.navworld.check_layout`) before
+    anything is built."""
+    from polar_sim.sim.navworld import check_layout
+
     name = DEFAULT_TIER if tier is None else tier
-    if name not in TIERS:
+    if not isinstance(name, str) or name not in TIERS:
         raise ValueError(f"tier: unknown tier {tier!r}; expected one of {', '.join(TIERS)}")
     t = TIERS[name]
     rooms = t["rooms"] if rooms is None else rooms
-    if isinstance(rooms, bool) or not isinstance(rooms, (int, np.integer)) or rooms < 1:
-        raise ValueError(f"rooms: expected an integer >= 1, got {rooms!r}")
     clutter = t["clutter"] if clutter is None else clutter
-    if isinstance(clutter, bool) or not isinstance(clutter, (int, np.integer)) or clutter < 0:
-        raise ValueError(f"clutter: expected an integer >= 0, got {clutter!r}")
-    return int(rooms), _positive(t["room_size"] if room_size is None else room_size, "room_size"), int(clutter)
+    room_size = t["room_size"] if room_size is None else room_size
+    rooms, room_size, clutter, *_ = check_layout(rooms, room_size, clutter)
+    return rooms, room_size, clutter
 
 
 def as_reward_weights(weights, version=1):
@@ -80,16 +83,8 @@ def as_reward_weights(weights, version=1):
 
 
 def _positive(x, name, upper=None):
-    if isinstance(x, bool):
-        raise TypeError(f"{name}: expected a positive number, got {x!r}")
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name}: expected a positive number, got {x!r}") from None
-    if not np.isfinite(v) or v <= 0 or (upper is not None and v > upper):
-        rng = f"in (0, {upper}]" if upper is not None else "> 0"
-        raise ValueError(f"{name}: expected a finite number {rng}, got {x!r}")
-    return v
+    """A finite number in (0, upper] (an int or float; strings and booleans are refused)."""
+    return as_float(x, name, minimum=0.0, exclusive_minimum=True, maximum=upper)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,7 +175,8 @@ class LidarNavEnv(PolarMujocoEnv):
     | ``lidar_noise`` | (0.01, 0.01) | (range sigma m, dropout probability), or None; v0: None |
     | ``odometry_noise`` | ``OdometryNoise()`` | wheel odometry noise (:class:`polar_sim.envs.noise.OdometryNoise` or a dict of its fields: 3 % of each step's distance, a 2 % scale error, 3 % of each turn plus 0.01 rad/m, a yaw drift of 0.01 rad/s (1-sigma, drawn per episode)), or None; v0: None |
     | ``reward_weights`` | None | v1: a dict overriding some of :data:`REWARD_V1` (``progress`` per m, ``time`` per step, ``collision``, ``success``, ``proximity`` per step, ``proximity_radius`` m; each finite and >= 0); v0: None only |
-    | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0`` |
+    | ``kinematic`` | None | the rover's motion: False, the wheel physics (MuJoCo, 20 substeps of 5 ms per step, a PI wheel controller; v0, v1); True, the exact unicycle with the commanded ``(v, omega)`` (``World(kinematic="planar")``; contacts still found by MuJoCo, the world built once and given each episode's layout in place, ``World.relayout``; v2); None, the version's |
+    | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0``, 2 ``LidarNav-v2`` |
 
     ## Truth in ``info``
     ``robot_pose2d`` (x, y, theta, world), ``goal`` (world, m), ``goal_distance`` (straight line,
@@ -189,6 +185,10 @@ class LidarNavEnv(PolarMujocoEnv):
     world).
 
     ## Version History
+    - v2: v1 with the kinematic rover (``kinematic=True``): each step moves it along the exact
+      unicycle arc of the commanded ``(v, omega)`` instead of simulating its wheels, a collision is
+      still a MuJoCo contact, and the worlds, sensors, noise, reward and observations are v1's.
+      About 3x the steps per CPU-second of v1 (``benchmarks/RESULTS.md``), for learning.
     - v1: lidar noise (1 cm, 1 % dropout) and wheel odometry noise on by default; the goal is
       given once in the start frame (``goal_start``) instead of every step in the true robot
       frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers;
@@ -249,15 +249,21 @@ class LidarNavEnv(PolarMujocoEnv):
         from polar_sim.sim import World
 
         noise = {"lidar": self._lidar_noise} if self._lidar_noise is not None else None
+        # The kinematic rover's world is pooled: built once, then given each episode's layout in
+        # place (World.relayout), which costs a fraction of a compilation and gives the same world.
+        reuse = self._world if (self._kinematic and self._world is not None) else None
         # A few layouts (a few in a thousand on the room tier) have no reachable start/goal pair;
         # such a draw is replaced by the next seed of a sequence keyed on it, so a seeded reset
         # still gives one world, and every valid layout seed keeps its world.
         seq = np.random.SeedSequence(layout_seed)
         for attempt in range(MAX_LAYOUT_ATTEMPTS):
             try:
-                world = World("navworld", seed=layout_seed, rooms=self._rooms, room_size=self._room_size,
-                              clutter=self._clutter, lidar_beams=self._n_beams, noise=noise,
-                              kinematic="planar" if self._kinematic else False)
+                if reuse is not None:
+                    world = reuse.relayout(layout_seed)
+                else:
+                    world = World("navworld", seed=layout_seed, rooms=self._rooms, room_size=self._room_size,
+                                  clutter=self._clutter, lidar_beams=self._n_beams, noise=noise,
+                                  kinematic="planar" if self._kinematic else False, pooled=self._kinematic)
             except ValueError as err:
                 if "no reachable start/goal pair" not in str(err) or attempt == MAX_LAYOUT_ATTEMPTS - 1:
                     raise
@@ -285,7 +291,7 @@ class LidarNavEnv(PolarMujocoEnv):
         self._odo = np.zeros(3)
         self._odo_twist = np.zeros(2)
         spec = w.lidar_spec("lidar")
-        mount = between2d(self._pose, T_to_pose2d(w.lidar_pose("lidar")))
+        mount = between2d(self._pose, w.lidar_pose2d("lidar"))
         goal_start = between2d(self._start, np.array([self._goal[0], self._goal[1], 0.0]))[:2]
         self.task = NavTask(goal_start, mount, spec.angles.copy(), float(spec.min_range),
                             float(spec.max_range), float(w.dt), self.extent)
@@ -327,7 +333,7 @@ class LidarNavEnv(PolarMujocoEnv):
     def sensor_pose2d(self):
         """The lidar's true pose (x, y, yaw) in the world now, m and rad (truth: for oracles and
         scoring only; the same as the scan's ``T_world_sensor``, without casting it)."""
-        return T_to_pose2d(self._world.lidar_pose("lidar"))
+        return self._world.lidar_pose2d("lidar")
 
     @property
     def odometry(self):

@@ -63,9 +63,7 @@ class ModuleEnv(gym.Env):
         return self.base.task
 
     def reset(self, *, seed=None, options=None):
-        from polar_sim.envs.base import check_seed
-
-        seed = check_seed(seed)
+        seed, options = self.base.check_reset(seed, options)  # before any state changes
         super().reset(seed=seed)
         self.base._reset_state(seed, options)
         raw = self._raw_obs()

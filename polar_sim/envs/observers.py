@@ -33,11 +33,19 @@ class SDFStencil:
     ray-major (all radii of ray 0, then ray 1, ...).
     """
 
+    #: Limits of the stencil: directions, and distances per direction.
+    MAX_RAYS, MAX_RADII = 1024, 64
+
     def __init__(self, n_rays=16, radii=(0.5, 1.0, 2.0, 3.0)):
-        self.n_rays = int(n_rays)
-        self.radii = np.asarray(radii, dtype=np.float64)
-        if self.n_rays < 1 or self.radii.ndim != 1 or len(self.radii) < 1 or np.any(self.radii <= 0):
-            raise ValueError(f"stencil: expected n_rays >= 1 and positive radii, got {n_rays}, {radii}")
+        from polar_sim._validation import as_float_array, as_int
+
+        self.n_rays = as_int(n_rays, "stencil_rays", minimum=1, maximum=self.MAX_RAYS)
+        self.radii = as_float_array(radii, "stencil_radii")
+        if self.radii.ndim != 1 or not 1 <= len(self.radii) <= self.MAX_RADII:
+            raise ValueError(f"stencil_radii: expected 1..{self.MAX_RADII} distances (m), got shape {self.radii.shape}")
+        if not np.isfinite(self.radii).all() or np.any(self.radii <= 0):
+            raise ValueError(f"stencil_radii: expected finite distances > 0 (m), got {self.radii.tolist()}")
+        self.radii = self.radii.copy()
         ang = np.linspace(-np.pi, np.pi, self.n_rays, endpoint=False)
         A, R = np.meshgrid(ang, self.radii, indexing="ij")
         self.points_robot = np.stack([R * np.cos(A), R * np.sin(A)], -1).reshape(-1, 2)
@@ -139,6 +147,12 @@ class TruthSource:
             g[:, 0] = c * gx + s * gy
             g[:, 1] = -s * gx + c * gy
         return d, g, np.zeros(len(points))
+
+    def query_stencil(self, pose2d, offsets):
+        """:meth:`query` at the points ``offsets`` (n, 2) given in the frame of ``pose2d`` (in the
+        map frame), in one call: the same values as ``query(robot_to_world(pose2d, offsets))``."""
+        d, g = self.world.sdf_stencil(pose2d, offsets, frame=self.origin, step=1e-3)
+        return d, g, np.zeros(len(offsets))
 
 
 SDF_SOURCES = ("gpis", "truth", "occupancy_edt")

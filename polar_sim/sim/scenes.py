@@ -55,9 +55,16 @@ class SceneEntry:
     file: str
     builder: str
     description: str
+    #: "module:function" ``(model, seed, **options) -> metadata`` that writes the layout of another
+    #: seed into a model built with ``pooled=True`` (``World.relayout``); "" if the scene has none.
+    relayout: str = ""
 
     def load_builder(self) -> Callable:
         module, func = self.builder.split(":")
+        return getattr(importlib.import_module(module), func)
+
+    def load_relayout(self) -> Callable:
+        module, func = self.relayout.split(":")
         return getattr(importlib.import_module(module), func)
 
 
@@ -72,7 +79,8 @@ SCENES = {
                               "randomised warehouse: shelf rows and racks, thin and curved walls, pillars, "
                               "crates, clutter, an open yard; indoor rover with a 2D lidar"),
     "navworld": SceneEntry("navworld.xml", "polar_sim.sim.navworld:build_navworld",
-                           "seeded rooms, doors and clutter with a start and a reachable goal (GPISNav)"),
+                           "seeded rooms, doors and clutter with a start and a reachable goal (GPISNav)",
+                           "polar_sim.sim.navworld:relayout_navworld"),
     "tabletop": SceneEntry("tabletop.xml", "polar_sim.sim.tabletop:build_tabletop",
                            "table, 4 objects, a scripted mocap hand, static RGB-D camera"),
     "object_orbit": SceneEntry("object_orbit.xml", "polar_sim.sim.tabletop:build_object_orbit",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import mujoco
 import numpy as np
 import trimesh
@@ -140,19 +142,12 @@ def body_trimesh(model, body_id, groups=(GROUP["static"], GROUP["dynamic"], GROU
 def static_geoms(model):
     """Geoms of the static scene: on bodies welded to the world (no joints, not mocap),
     visible (not in the hidden collision group), ground included."""
-    out = []
-    for g in range(model.ngeom):
-        b = model.geom_bodyid[g]
-        root = b
-        static = True
-        while root != 0:
-            if model.body_jntnum[root] > 0 or model.body_mocapid[root] >= 0:
-                static = False
-                break
-            root = model.body_parentid[root]
-        if static and model.geom_group[g] != GROUP["collision"]:
-            out.append(g)
-    return out
+    static = np.ones(model.nbody, bool)
+    for b in range(1, model.nbody):  # parents come before their children
+        static[b] = (model.body_jntnum[b] == 0 and model.body_mocapid[b] < 0
+                     and static[model.body_parentid[b]])
+    keep = static[model.geom_bodyid] & (model.geom_group != GROUP["collision"])
+    return np.flatnonzero(keep).tolist()
 
 
 class SceneSDF:
@@ -168,16 +163,24 @@ class SceneSDF:
     def __init__(self, model, data, terrain=None):
         self._terrain = terrain
         self._terrain_mesh = None
-        self._items = []
-        for g in static_geoms(model):
-            if terrain is not None and _is_ground(model, g) and model.geom_type[g] == _G.mjGEOM_MESH:
-                continue  # represented by the terrain grid
-            R = data.geom_xmat[g].reshape(3, 3).copy()
-            self._items.append((g, int(model.geom_type[g]), model.geom_size[g].copy(), R,
-                                data.geom_xpos[g].copy(), name_of(model, mujoco.mjtObj.mjOBJ_GEOM, g)))
+        ids = static_geoms(model)
+        if terrain is not None:  # ground meshes are represented by the terrain grid
+            ids = [g for g in ids if not (model.geom_type[g] == _G.mjGEOM_MESH and _is_ground(model, g))]
+        self._ids = np.array(ids, dtype=np.int64)
+        # The static geoms' poses, read once (they do not move).
+        self._type = model.geom_type[self._ids].astype(np.int64)
+        self._size = model.geom_size[self._ids].copy()
+        self._R = data.geom_xmat[self._ids].reshape(-1, 3, 3).copy()
+        self._x = data.geom_xpos[self._ids].copy()
         self._model = model
         self._meshes = {}
         self._sections = {}
+
+    @functools.cached_property
+    def _items(self):
+        """(geom, type, size (3,), R (3, 3), position (3,), name) of every static geom."""
+        return [(int(g), int(t), s, R, x, name_of(self._model, mujoco.mjtObj.mjOBJ_GEOM, int(g)))
+                for g, t, s, R, x in zip(self._ids, self._type, self._size, self._R, self._x)]
 
     # -- 3D ---------------------------------------------------------------------------------
     def __call__(self, points, return_geom=False):
@@ -230,30 +233,23 @@ class SceneSDF:
 
     # -- 2D section -------------------------------------------------------------------------
     def _section_tables(self):
-        """Vertical boxes, vertical cylinders/capsules and spheres as arrays (for one broadcast
-        per shape kind), and the remaining geoms for mesh sectioning."""
+        """Vertical boxes, vertical cylinders/capsules and spheres as arrays (for the compiled
+        section), and the remaining geoms for mesh sectioning; ground and planes left out."""
         if hasattr(self, "_tables"):
             return self._tables
-        boxes, discs, other = [], [], []
-        for g, t, s, R, x, name in self._items:
-            if _is_ground(self._model, g) or t == _G.mjGEOM_PLANE:
-                continue
-            vertical = abs(abs(R[2, 2]) - 1.0) < 1e-9
-            if t == _G.mjGEOM_BOX and vertical:
-                boxes.append((x, R[:2, :2], s))
-            elif t == _G.mjGEOM_SPHERE:
-                discs.append((x, s[0], 0.0, 2))
-            elif t in (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE) and vertical:
-                discs.append((x, s[0], s[1], 0 if t == _G.mjGEOM_CYLINDER else 1))
-            else:
-                other.append((g, R, x))
-        bt = None
-        if boxes:
-            bt = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]), np.array([b[2] for b in boxes]))
+        t, R = self._type, self._R
+        ground = np.array([t_ == _G.mjGEOM_PLANE or _is_ground(self._model, int(g)) for g, t_ in zip(self._ids, t)],
+                          dtype=bool)
+        vertical = np.abs(np.abs(R[:, 2, 2]) - 1.0) < 1e-9
+        box = ~ground & (t == _G.mjGEOM_BOX) & vertical
+        disc = ~ground & ((t == _G.mjGEOM_SPHERE) | (np.isin(t, (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE)) & vertical))
+        bt = (self._x[box], R[box, :2, :2], self._size[box]) if box.any() else None
         dt = None
-        if discs:
-            dt = (np.array([c[0] for c in discs]), np.array([c[1] for c in discs]),
-                  np.array([c[2] for c in discs]), np.array([c[3] for c in discs]))
+        if disc.any():
+            kind = np.where(t[disc] == _G.mjGEOM_CYLINDER, 0, np.where(t[disc] == _G.mjGEOM_CAPSULE, 1, 2))
+            dt = (self._x[disc], self._size[disc, 0], np.where(kind == 2, 0.0, self._size[disc, 1]), kind)
+        rest = ~ground & ~box & ~disc
+        other = [(int(g), R_, x) for g, R_, x in zip(self._ids[rest], R[rest], self._x[rest])]
         self._tables = (bt, dt, other)
         return self._tables
 
@@ -307,6 +303,15 @@ class SceneSDF:
             if d is not None:
                 np.minimum(out, d, out=out)
         return out
+
+    def section_stencil(self, offsets, pose, frame, z, step):
+        """:func:`polar_sim.sim.sdf.section_stencil` in the plane at height ``z`` (pose and frame as
+        (x, y, cos, sin) arrays, frame empty for the world; step 0 for no gradient), or None when
+        the scene has shapes other than vertical boxes, discs and spheres (the caller then
+        composes the points and calls :meth:`section` / :meth:`section_gradient`)."""
+        if self._section_tables()[2]:
+            return None
+        return _sdf.section_stencil(offsets, pose, frame, *self._cut(z), float(step))
 
     def section_gradient(self, points2d, z, step):
         """Distance (n,) and gradient (n, 2) in the plane at height ``z``: the gradient is the
