@@ -25,10 +25,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.gpis_accuracy
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 M2D = ["near_rmse_m", "near_median_abs_m", "near_rmse_wellseen_m", "far_mae_m", "grad_near_median_deg",
        "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m", "near_coverage95",

@@ -31,10 +31,7 @@ from polar_sim.runner.localise import relation_scores, relocalise
 from polar_sim.runner.pictures2d import map_figure
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 MAP_COLS = ["mapper", "update_cpu_ms_median", "update_cpu_ms_p99", "heldout_abs_sdf_median_m", "heldout_abs_sdf_p90_m",
             "heldout_within_5cm"]

@@ -31,10 +31,7 @@ from polar_sim.runner.localise import (budget_match, error_cdf_figure, localise_
                                       pooled_errors)
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 FAIL_M = 0.5
 COLS = ["method", "seeds", "steps", "pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg",

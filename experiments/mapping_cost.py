@@ -23,10 +23,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 WARMUP = 5
 COLS = ["method", "tiles", "area_x", "seed", "n_scans", "travelled_m", "cpu_ms_median", "cpu_ms_p90", "cpu_ms_p99",

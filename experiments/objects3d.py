@@ -24,10 +24,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 OBJECTS = ["mug", "box", "can", "bottle", "drill", "bracket", "cube"]
 COLS = ["object", "method", "seed", "chamfer_m", "surface_to_mesh_m", "mesh_to_surface_m", "surface_to_mesh_all_m",

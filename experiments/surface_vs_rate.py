@@ -24,10 +24,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 #: The grid maps GPIS is compared with, and their labels.
 GRIDS = {"grid5": "grid 5 cm", "grid10": "grid 10 cm", "edt5": "EDT"}

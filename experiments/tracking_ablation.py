@@ -21,10 +21,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_ablation
-    from polar_sim.experiments import _tracking_common as C
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
+from polar_sim.experiments import _tracking_common as C
 
 ABLATIONS = ["shape-only", "no-motion", "spatial-prior", "spatial-prior-0.1", "alpha-beta", "no-hold", "plain-icp"]
 ORDER = C.VARIANTS + ABLATIONS

@@ -18,12 +18,8 @@ from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_segmentation
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_pictures as pictures
 
 ORDER = C.VARIANTS + ["shape-only"]
 HAND_MAX, ECE_MAX = 0.05, 0.05

@@ -17,12 +17,8 @@ from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_variants
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_pictures as pictures
 
 #: distinct = asymmetric and non-convex; cuboid = flat faces; revolved = symmetric about an axis
 SHAPE = {"drill": "distinct", "mug": "distinct", "bracket": "distinct", "blocks": "distinct", "box": "cuboid",

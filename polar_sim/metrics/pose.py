@@ -401,6 +401,8 @@ def vsd(depth_est, depth_gt, depth_test, K, diameter, *, taus=BOP_VSD_TAUS, delt
     delta : visibility tolerance, metres (15 mm in BOP19).
     cost : "step" (BOP) or "tlinear".
 
+    Notes
+    -----
     Visibility (BOP19): a rendered pixel is visible if it has depth and the test depth is missing
     or not more than ``delta`` in front of it; the estimate's visible mask also includes the pixels
     where the true model is visible and the estimate has depth. The error is the mean cost over the

@@ -22,9 +22,6 @@ def _passed(res):
 
 
 def _common():
-    from polar_sim.runner.registry import _package
-
-    _package()
     from polar_sim.experiments import _tracking_common as C
 
     return C
