@@ -18,7 +18,8 @@ Actions: random, forward-biased, seeded (``v`` uniform in [0, 1] of ``max_speed`
 uniform in [-1, 1]); HalfCheetah's ``action_space.sample()`` seeded the same way. MuJoCo's
 threads are not used; run with ``OMP_NUM_THREADS=1``.
 
-Writes ``benchmarks/results/env_throughput.md`` (tables) and ``.json`` (every block).
+Writes ``benchmarks/results/env_throughput.md`` (tables) and ``.json`` (every block);
+``env_throughput_single`` / ``env_throughput_vector`` with ``--part``.
 
 Usage: python benchmarks/bench_env_throughput.py [--rounds 5] [--steps 2000] [--part single|vector|all]
        [--configs room_v1_truth,room_v1_slam,...]
@@ -187,8 +188,9 @@ def _commit():
 
 
 def write(results, args):
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.with_suffix(".json").write_text(json.dumps(results, indent=1))
+    out = OUT if args.part == "all" else OUT.with_name(f"{OUT.name}_{args.part}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(results, indent=1))
     lines = [f"# Environment throughput ({results['date']}, commit {results['commit']})", "",
              f"`{results['command']}`", ""]
     if "single" in results:
@@ -212,8 +214,8 @@ def write(results, args):
                              f"{r['ceiling']:.2f} | {r['load']:.1f} |")
             lines.append(f"| {n} | median | | | **{v['ratio_median']:.2f}** | {v['ceiling_median']:.2f} | |")
         lines.append("")
-    OUT.with_suffix(".md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {OUT.with_suffix('.md')}")
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out.with_suffix('.md')}")
 
 
 def main():
