@@ -21,7 +21,8 @@ def probability_maps(path, rec, probs, captions, iou):
     frames = sorted(probs)
     if not frames:
         return
-    fig, axes = plt.subplots(len(frames), 3, figsize=(13, 1.5 * len(frames) + 0.5), squeeze=False)
+    fig, axes = plt.subplots(len(frames), 3, figsize=(13, 1.5 * len(frames) + 0.5), squeeze=False,
+                             gridspec_kw={"wspace": 0.3})   # room for the colour bar's ticks before the third column
     rows = {i: f for i, f in rec.frames(stop=frames[-1] + 1, keys=("rgb", "ground_mask")) if i in probs}
     for row, i in zip(axes, frames):
         p, gt = probs[i], rows[i]["ground_mask"]
@@ -32,33 +33,48 @@ def probability_maps(path, rec, probs, captions, iou):
         row[2].imshow(err)
         row[0].set_ylabel(f"frame {i}\n{captions.get(i, '')}", fontsize=7)
         row[2].set_ylabel(f"IoU {iou[i]:.2f}", fontsize=7)
+        row[2].yaxis.set_label_position("right")     # clear of the colour bar on its left
         for a in row:
             a.set_xticks([])
             a.set_yticks([])
     axes[0, 0].set_title("camera image (simulated)", fontsize=8)
     axes[0, 1].set_title("calibrated P(ground)", fontsize=8)
-    axes[0, 2].set_title("P > 0.5 vs truth: grey hit, red false ground, blue missed ground", fontsize=8)
+    axes[0, 2].set_title("P > 0.5 vs truth:\ngrey hit, red false ground, blue missed ground", fontsize=8)
     fig.colorbar(im, ax=axes[:, 1], fraction=0.02, label="P(ground)")
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
 
 
 def per_route_bars(table, key, target, ylabel, title):
-    """A bar chart (log scale) of ``key`` per route, one bar per method, with the target as a dashed line;
-    returns the figure."""
+    """A bar chart of ``key`` per route, one bar per method, with the target as a dashed line;
+    returns the figure. Errors span decades (1 % to 200 %), so the axis is logarithmic with plain
+    1-2-5 tick labels; the legend sits beside the axes, never over a bar."""
+    import textwrap
+
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+
     plt = _plt()
     routes, meths = sorted({r["route"] for r in table}), sorted({r["method"] for r in table})
     fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(routes) + 3), 3.6))
     w = 0.8 / len(meths)
+    vals = [target]
     for j, m in enumerate(meths):
         v = [next((r[key] for r in table if r["route"] == rt and r["method"] == m), np.nan) for rt in routes]
+        vals += [x for x in v if np.isfinite(x) and x > 0]
         ax.bar(np.arange(len(routes)) + (j - (len(meths) - 1) / 2) * w, v, w, label=m)
     ax.axhline(target, color="k", ls="--", lw=0.8, label=f"target {target} %")
     ax.set_xticks(np.arange(len(routes)), routes, rotation=30, ha="right", fontsize=8)
+    lo, hi = min(vals) / 1.5, max(vals) * 1.5
     ax.set_yscale("log")
-    ax.set_ylabel(ylabel)
+    ax.set_ylim(lo, hi)
+    ticks = [m * 10.0 ** e for e in range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)
+             for m in (1, 2, 5) if lo <= m * 10.0 ** e <= hi]
+    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.set_ylabel(textwrap.fill(ylabel, 28), fontsize=9)
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7, ncol=3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     ax.grid(alpha=0.3, axis="y")
     return fig
 
@@ -113,5 +129,7 @@ def scale_errorbars(table, cfgs, split, label):
         ax.set(xlabel="RANSAC iterations N", ylabel="ΔV_mean (m/s)", title=label(cfg))
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Raw RANSAC speed error ({split} split, simulated routes; mean ± std over repetitions)", fontsize=9)
+    fig.tight_layout()    # the panels' labels clear of each other, the title above the panels' titles
+    fig.suptitle(f"Raw RANSAC speed error ({split} split, simulated routes; mean ± std over repetitions)", fontsize=9,
+                 y=1.02)
     return fig

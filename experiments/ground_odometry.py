@@ -126,11 +126,11 @@ def findings(table, ctx):
         ["no monocular baseline run: the VISO2-M part is not tested"]
     verdict = "held" if order and worse else "partly held" if six or two or worse else "not held"
     rs = {m: p[m][rkey] for m in have}
-    return [Finding("Ch. 4, KITTI table", PUBLISHED, "; ".join(ours), verdict, note),
+    return [Finding("Ch. 4, KITTI table", PUBLISHED, "; ".join(ours), verdict, note, n=n, n_of="routes"),
             Finding("Ch. 4, KITTI table", "rotation error equal across u2, w2, u6, w6",
                     ", ".join(f"{m} {rs[m]:.4f} deg/m" for m in have),
                     "held" if max(rs.values()) <= 1.1 * min(rs.values()) else "not held",
-                    f"{ctx.split} split, {seg}; equal = within 10 %")]
+                    f"{ctx.split} split, {seg}; equal = within 10 %", n=n, n_of="routes")]
 
 
 EXPERIMENT = Experiment(

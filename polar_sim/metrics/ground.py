@@ -11,6 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import rankdata
 
+from polar_sim._validation import as_float_array
 from polar_sim.metrics.calibration import _inputs
 
 __all__ = [
@@ -146,7 +147,7 @@ def laplace_scale(errors):
 
     errors : (n,) finite, e.g. raw RANSAC speed minus true speed (m/s) over frames with a fit.
     """
-    e = np.asarray(errors, dtype=np.float64).ravel()
+    e = as_float_array(errors, "errors").ravel()    # strings and complex numbers: TypeError
     if e.size == 0:
         raise ValueError("errors: expected at least one value")
     if not np.isfinite(e).all():

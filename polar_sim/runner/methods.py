@@ -222,7 +222,8 @@ register_method("vo", "mono", _held_scale_vo,
                             "the true speed once and then held through the structure; needs speed_truth=")
 
 # -- tracker (the tracking experiments) --
-#: Built-in trackers: ObjectTracker configurations (keyword arguments over its defaults).
+#: Built-in trackers: ObjectTracker configurations (``set_params`` names over its defaults: the
+#: top-level parameters, and a stage config's fields as ``stage__field``).
 TRACKERS = {
     "ww": ({}, "ObjectTracker, the default: W head, confidence-weighted self-labels"),
     "wu": ({"appearance": "wu"}, "ObjectTracker, W head (weighted sum of per-scale heads), uniform self-labels"),
@@ -230,15 +231,17 @@ TRACKERS = {
     "su": ({"appearance": "su"}, "ObjectTracker, S head, uniform self-labels"),
     "h": ({"appearance": "h"}, "ObjectTracker with the 216-bin HSV Naive Bayes (the ground chapter's classifier)"),
     "shape-only": ({"appearance": "none"}, "ablation: appearance term off (prior x depth only)"),
-    "no-motion": ({"motion": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
-    "spatial-prior": ({"spatial_prior": True}, "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
-    "spatial-prior-0.1": ({"spatial_prior": True, "epsilon": 0.1}, "ablation: the silhouette prior softened to epsilon 0.1"),
-    "alpha-beta": ({"motion": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
-    "no-hold": ({"hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
-    "lost-by-silhouette": ({"coverage": "silhouette"},
+    "no-motion": ({"motion__filter": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
+    "spatial-prior": ({"attention__spatial_prior": True},
+                      "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
+    "spatial-prior-0.1": ({"attention__spatial_prior": True, "attention__epsilon": 0.1},
+                          "ablation: the silhouette prior softened to epsilon 0.1"),
+    "alpha-beta": ({"motion__filter": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
+    "no-hold": ({"registration__hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "lost-by-silhouette": ({"guard__coverage": "silhouette"},
                            "ablation: lost when too few inliers per pixel of the whole predicted silhouette, hidden "
                            "pixels included (the rule before the visible-pixel coverage)"),
-    "plain-icp": ({"appearance": "none", "registration": "plain"}, "baseline: robust ICP on every ROI point"),
+    "plain-icp": ({"appearance": "none", "registration__method": "plain"}, "baseline: robust ICP on every ROI point"),
 }
 
 
@@ -246,8 +249,8 @@ def _tracker(config):
     def factory(model_points, K, initial_pose, *, model_normals=None, random_state=0, **kw):
         from polar_sim.tracking import ObjectTracker
 
-        return ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state,
-                             **{**config, **kw})
+        tr = ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state)
+        return tr.set_params(**{**config, **kw})
     return factory
 
 
