@@ -30,7 +30,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from polar_sim import metrics  # noqa: E402
-from polar_sim.ground import CalibrationConfig, ClassifierConfig, GroundVO  # noqa: E402
+from polar_sim.ground import CalibrationConfig, ClassifierConfig, DenseConfig, GroundVO  # noqa: E402
 from polar_sim.ground.synthetic import make_sequence  # noqa: E402
 from polar_sim.metrics.ground import classifier_auc, classifier_iou, ground_success, laplace_scale  # noqa: E402
 
@@ -39,7 +39,9 @@ CONDITIONS = {"u2": dict(model="2param", sampling="uniform"), "w2": dict(model="
               # w6 as before issue 13 (no calibration of ground_prob, the spec's classifier training): the cost
               # of the calibration is the difference to w6.
               "w6 nocal": dict(model="6param", sampling="weighted", calibration=CalibrationConfig(method="none"),
-                               classifier=ClassifierConfig(train_depth=None, decay_samples=None))}
+                               classifier=ClassifierConfig(train_depth=None, decay_samples=None)),
+              # w6 without the dense ground alignment (issue 35): its cost is the difference to w6.
+              "w6 no dense": dict(model="6param", sampling="weighted", dense=DenseConfig(enabled=False))}
 
 
 def build(K, h, kw, seed=0):

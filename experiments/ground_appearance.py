@@ -23,8 +23,8 @@ from polar_sim.runner.report import savefig
 
 TARGET_IOU, TARGET_ECE = 0.85, 0.05
 WARMUP_S, BEFORE_M, AFTER_M = 5.0, 40.0, 10.0
-#: Families whose IoU miss is recorded in benchmarks/RESULTS.md (full size, test split).
-RECORDED_IOU_MISSES = ("uniform", "stripes", "checker")
+#: Families whose IoU miss, and splits whose pooled ECE miss, are recorded in RESULTS (full size, issue 35).
+RECORDED_IOU_MISSES, RECORDED_ECE_MISSES = ("stripes", "checker"), ("test",)
 DEV_ROUTES = ("terrain_00", "terrain_04", "flat_00", "flat_02") + G.DEV_FAMILY_ROUTES
 OURS = ("w6", "u6", "w6_nocal", "w6_ng6h")  # GroundVO methods: the routes are already at working size
 
@@ -132,7 +132,8 @@ def checks(table, ctx):
                   # a miss only on families recorded as missing it is known; any other family is a regression
                   known_miss=bool(missed) and set(missed) <= set(RECORDED_IOU_MISSES)),
             Check(f"w6 ECE of P(ground) ≤ {TARGET_ECE} ({ctx.split}, settled frames pooled)", pooled <= TARGET_ECE,
-                  f"{pooled:.4f}{n}; worst family {worst_ece}: {ece[worst_ece]:.4f}")]
+                  f"{pooled:.4f}{n}; worst family {worst_ece}: {ece[worst_ece]:.4f}",
+                  known_miss=ctx.split in RECORDED_ECE_MISSES and ctx.size == "full")]
 
 
 EXPERIMENT = Experiment(

@@ -22,6 +22,7 @@ from polar_sim.runner.report import savefig
 
 TARGET_T_PCT, TARGET_R_DEGM, TARGET_MS = 2.0, 0.01, 15.0
 OURS = ("u2", "w2", "u6", "w6", "mono")
+RECORDED_ROTATION_MISSES = ("test_checker",)  # w6 rotation misses recorded in RESULTS (test, full)
 PUBLISHED = "w6 6.21 < u6 7.01 < w2 7.15 < u2 7.19 %; VISO2-M 12.58 % worse"  # translation error, KITTI table
 
 
@@ -90,15 +91,16 @@ def checks(table, ctx):
                       f"{t:.2f} % vs {tm:.2f} %", known_miss=ctx.split == "test")]
     t, r = p["w6"]["t_pct"], p["w6"]["r_degm"]
     others = {m: p[m]["t_pct"] for m in OURS if m in p and m != "w6"}
-    # Recorded as missed on the held-out routes in benchmarks/RESULTS.md (w6 7.58 %, 0.0235 deg/m,
-    # u6 6.58 % below it): the scale fails on the never-tuned ground families, the tracks on checker.
-    held_out = ctx.split == "test"
-    return [Check(f"w6 pooled translation error ≤ {TARGET_T_PCT} % ({ctx.split})", t <= TARGET_T_PCT, f"{t:.3f} %",
-                  known_miss=held_out),
-            Check(f"w6 pooled rotation error ≤ {TARGET_R_DEGM} deg/m ({ctx.split})", r <= TARGET_R_DEGM, f"{r:.5f} deg/m",
-                  known_miss=held_out),
+    per_route = {row["route"]: row["r_degm"] for row in table if row["method"] == "w6"}
+    over = sorted(k for k, v in per_route.items() if not v <= TARGET_R_DEGM)
+    # RESULTS (issue 35, test split, dense ground alignment): 1.76 %, 0.00995 deg/m; checker 0.0425 deg/m.
+    return [Check(f"w6 pooled translation error ≤ {TARGET_T_PCT} % ({ctx.split})", t <= TARGET_T_PCT, f"{t:.3f} %"),
+            Check(f"w6 pooled rotation error ≤ {TARGET_R_DEGM} deg/m ({ctx.split})", r <= TARGET_R_DEGM, f"{r:.5f} deg/m"),
+            Check(f"w6 rotation error ≤ {TARGET_R_DEGM} deg/m on every route ({ctx.split})", not over,
+                  "; ".join(f"{k} {per_route[k]:.4f}" for k in over) or f"worst {max(per_route.values()):.5f} deg/m",
+                  known_miss=bool(over) and set(over) <= set(RECORDED_ROTATION_MISSES)),
             Check("w6 has the lowest pooled translation error", all(t < v for v in others.values()),
-                  "; ".join(f"{m} {v:.3f} %" for m, v in others.items()), known_miss=held_out),
+                  "; ".join(f"{m} {v:.3f} %" for m, v in others.items()), known_miss=ctx.split == "test"),
             Check(f"per-frame CPU ≤ {TARGET_MS} ms (621x188, median)", cpu <= TARGET_MS, f"{cpu:.1f} ms", timing=True)]
 
 

@@ -8,11 +8,11 @@ Ground Vehicles* (ICRA 2015) from the spec ``docs/specs/ground.md``; numpy/OpenC
 >>> e = vo.process(rgb, t)                                                  # doctest: +SKIP
 """
 
-from polar_sim.ground.config import (CalibrationConfig, ClassifierConfig, FilterConfig, GroundModelConfig,
-                                     MotionConfig, TrackingConfig)
+from polar_sim.ground.config import (CalibrationConfig, ClassifierConfig, DenseConfig, FilterConfig,
+                                     GroundModelConfig, MotionConfig, TrackingConfig)
 from polar_sim.ground.models import GROUND_MODELS, GroundFit, fit_ground, ransac_iterations
 from polar_sim.ground.vo import STATUSES, GroundEstimate, GroundVO
 
 __all__ = ["GroundVO", "GroundEstimate", "STATUSES", "GROUND_MODELS", "GroundFit", "fit_ground", "ransac_iterations",
            "TrackingConfig", "MotionConfig", "GroundModelConfig", "FilterConfig", "ClassifierConfig",
-           "CalibrationConfig"]
+           "CalibrationConfig", "DenseConfig"]

@@ -33,6 +33,18 @@ class LevelCamera:
         self.R_lc = np.array([[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]])
         self.K = np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    def scaled(self, factor):
+        """The camera of this image resized by ``factor`` (e.g. 1/2 with ``cv2.INTER_AREA``: pixel i of the
+        small image averages pixels factor⁻¹ i .. factor⁻¹ (i + 1) - 1 of this one)."""
+        out = object.__new__(LevelCamera)
+        out.__dict__.update(self.__dict__)
+        shift = 0.5 * (1.0 / factor - 1.0)  # centre of the first averaged block, in this image's pixels
+        out.fx, out.fy = self.fx * factor, self.fy * factor
+        out.cx, out.cy = (self.cx - shift) * factor, (self.cy - shift) * factor
+        out.horizon = None if self.horizon is None else (self.horizon - shift) * factor
+        out.K = np.array([[out.fx, 0.0, out.cx], [0.0, out.fy, out.cy], [0.0, 0.0, 1.0]])
+        return out
+
     def level(self, xy):
         """Normalised coordinates (u, v) in the level frame of processed-image pixels (n, 2)."""
         r = np.stack([(xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy, np.ones(len(xy))], axis=1)

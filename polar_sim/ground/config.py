@@ -3,7 +3,7 @@
 Each config checks every field in ``__post_init__`` (type, range, finiteness, and an upper bound on
 every size, so nothing is allocated from an absurd value) and raises ``ValueError``/``TypeError``
 naming the field. ``GroundVO`` stores them as its parameters ``tracking``, ``motion``, ``ground``,
-``filters``, ``classifier`` and ``calibration``; ``get_params(deep=True)`` / ``set_params`` reach a
+``filters``, ``classifier``, ``calibration`` and ``dense``; ``get_params(deep=True)`` / ``set_params`` reach a
 field as ``stage__field`` (``vo.set_params(tracking__max_features=600)``). The stage switches
 ``track_gates``, ``depth_fusion``, ``ransac_draw``, ``rules``, ``pose_steps``, ``hue_wrap`` and
 ``ground_labels`` choose per stage between the spec with its fixes (``"fixed"``) and the published
@@ -21,7 +21,7 @@ from polar_sim.ground._checks import as_unit_interval
 from polar_sim.ground.models import default_iterations
 
 __all__ = ["TrackingConfig", "MotionConfig", "GroundModelConfig", "FilterConfig", "ClassifierConfig",
-           "CalibrationConfig", "SWITCH", "MAX_FEATURES", "MAX_RANSAC_ITER"]
+           "CalibrationConfig", "DenseConfig", "SWITCH", "MAX_FEATURES", "MAX_RANSAC_ITER"]
 
 #: Values of every stage switch.
 SWITCH = ("fixed", "published")
@@ -164,6 +164,9 @@ class GroundModelConfig(_Stage):
         level frame (the principal row for a level camera).
     ransac_draw : {"fixed", "published"}, default="fixed"
         "published": the cumulative draw with redraws and raw P_G weights in the 6param LS.
+    var_scale : float, default=10.0
+        Factor on the fit's speed variance (from the final least squares on the inliers, which ignores
+        the RANSAC selection and the model's own error) before it is fused with the dense speed.
     """
 
     n_iter: int | None = None
@@ -173,6 +176,7 @@ class GroundModelConfig(_Stage):
     min_inliers: int = 10
     horizon_row: float | None = None
     ransac_draw: str = "fixed"
+    var_scale: float = 10.0
 
     _PUBLISHED = dict(weight_exponent=2.0, ransac_draw="published")
 
@@ -184,6 +188,7 @@ class GroundModelConfig(_Stage):
         as_int(self.min_inliers, "min_inliers", minimum=2, maximum=MAX_FEATURES)
         _optional(self.horizon_row, lambda v, n: as_positive_float(v, n, allow_zero=True), "horizon_row")
         check_choice(self.ransac_draw, SWITCH, "ransac_draw")
+        as_positive_float(self.var_scale, "var_scale")
 
     @classmethod
     def published(cls, model="6param", **overrides):
@@ -331,3 +336,120 @@ class CalibrationConfig(_Stage):
             raise ValueError(f"window: expected an odd window side, got {self.window!r}")
         as_unit_interval(self.decay, "decay")
         as_positive_float(self.prior_weight, "prior_weight", allow_zero=True)
+
+
+@dataclass(frozen=True)
+class DenseConfig(_Stage):
+    """Dense, direct alignment of the ground between consecutive images (:mod:`polar_sim.ground.dense`),
+    fused with the sparse (RANSAC) speed by their uncertainties, and its self-labels of ground pixels.
+    Not in the published method (``published()``: off).
+
+    Parameters
+    ----------
+    enabled : bool, default=True
+        Run the dense alignment.
+    model : {"pitch", "plane", "pitch_roll"}, default="pitch"
+        Motion fitted (:data:`polar_sim.ground.dense.WARP_MODELS`): the unicycle step (arc length, yaw
+        change) and the chassis' pitch change between the images (hills); "plane" without the pitch
+        change, "pitch_roll" also with the roll change.
+    max_depth : float, default=15.0
+        Ground pixels up to this flat-ground depth (m) are aligned: the near ground, where the plane
+        holds best and the parallax is largest.
+    levels : int, default=2
+        Pyramid levels, coarse to fine (1 to 4).
+    smoothing : float, default=1.0
+        Gaussian smoothing of the images before alignment, px (0 to 10).
+    block, max_pixels, min_gradient : int, int, float, default=2, 1500, 0.05
+        Template pixels: the strongest gradient of every ``block`` x ``block`` cell of the ground region
+        above ``min_gradient`` (grey levels per px), at most ``max_pixels`` (10 to 100,000).
+    min_pixels : int, default=200
+        Pixels a fit needs.
+    max_iter : int, default=10
+        Gauss–Newton iterations per level (1 to 100).
+    residual_floor : float, default=0.3
+        Lower bound of the residuals' robust scale, grey levels.
+    gradient_weight : float, default=0.0
+        c of the per-pixel weight c² / (c² + |∇I|²), grey levels per px: strong edges, the most
+        sensitive to unmodelled appearance change, count less (0: all alike).
+    prob_floor : float, default=0.25
+        A template pixel's weight is prob_floor + (1 − prob_floor) P(ground) (the previous image's map).
+    var_scale : float, default=2.0
+        Factor on the fit's variance before fusion (its Hessian ignores that neighbouring pixels'
+        errors are correlated).
+    spread_scale : float, default=4.0
+        The plane model's error: the speed variance gains (spread_scale x the fit's band spread)², the
+        disagreement of the nearer and farther halves of the ground (a slope or crest ahead).
+    alias_sigmas, alias_margin, alias_var_scale : float, default=3.0, 0.2, 100.0
+        Aliasing guard: another minimum of the cost along the path, within ``alias_sigmas`` standard
+        deviations of the predicted arc length (the speed filter's), whose cost is within
+        ``alias_margin`` (relative) of the solution's, multiplies the fit's variance by
+        ``alias_var_scale``; 0 turns the test off.
+    gate : float, default=3.0
+        Sparse and dense speeds that differ by more than ``gate`` standard deviations are not averaged:
+        the one with the smaller variance is used alone.
+
+    label_evidence : float, default=4.0
+        Ground self-labels: pixels whose parallax fits the ground better than points at infinity by this
+        much (windowed mean difference of squared residuals, grey levels²); 0 = no dense labels.
+    max_labels : int, default=300
+        Dense ground labels per image (spread over the evidence).
+    track_alias_px : float, default=1.5
+        Aliasing in tracks: a point tracked both plainly and in the ground-warped image, to two positions
+        farther apart than this (processed px, at the KITTI focal length), is dropped.
+    periodic_ncc : float, default=0.7
+        Aliasing in tracks: a new corner whose patch, compared with the patches 1 to 8 px away (at the
+        KITTI focal length) along a direction, correlates less and then again above this (NCC), a
+        period away, lies on a repeating texture and does not enter the motion solve
+        (:func:`polar_sim.ground.frontend.periodic`); 1 turns the test off.
+    """
+
+    enabled: bool = True
+    model: str = "pitch"
+    max_depth: float = 15.0
+    levels: int = 2
+    smoothing: float = 1.0
+    block: int = 2
+    max_pixels: int = 1500
+    min_gradient: float = 0.05
+    min_pixels: int = 200
+    max_iter: int = 10
+    residual_floor: float = 0.3
+    gradient_weight: float = 0.0
+    prob_floor: float = 0.25
+    var_scale: float = 2.0
+    spread_scale: float = 4.0
+    alias_sigmas: float = 3.0
+    alias_margin: float = 0.2
+    alias_var_scale: float = 100.0
+    gate: float = 3.0
+    label_evidence: float = 4.0
+    max_labels: int = 300
+    track_alias_px: float = 1.5
+    periodic_ncc: float = 0.7
+
+    _PUBLISHED = dict(enabled=False)
+
+    def __post_init__(self):
+        as_bool(self.enabled, "enabled")
+        check_choice(self.model, ("pitch", "plane", "pitch_roll"), "model")
+        as_positive_float(self.max_depth, "max_depth")
+        as_int(self.levels, "levels", minimum=1, maximum=4)
+        as_float(self.smoothing, "smoothing", minimum=0.0, maximum=10.0)
+        as_int(self.block, "block", minimum=1, maximum=16)
+        as_int(self.max_pixels, "max_pixels", minimum=10, maximum=MAX_FEATURES)
+        as_positive_float(self.min_gradient, "min_gradient", allow_zero=True)
+        as_int(self.min_pixels, "min_pixels", minimum=3, maximum=MAX_FEATURES)
+        as_int(self.max_iter, "max_iter", minimum=1, maximum=100)
+        as_positive_float(self.residual_floor, "residual_floor")
+        as_positive_float(self.gradient_weight, "gradient_weight", allow_zero=True)
+        as_unit_interval(self.prob_floor, "prob_floor")
+        as_positive_float(self.var_scale, "var_scale")
+        as_positive_float(self.spread_scale, "spread_scale", allow_zero=True)
+        as_positive_float(self.alias_sigmas, "alias_sigmas", allow_zero=True)
+        as_positive_float(self.alias_margin, "alias_margin", allow_zero=True)
+        as_float(self.alias_var_scale, "alias_var_scale", minimum=1.0)
+        as_positive_float(self.gate, "gate")
+        as_positive_float(self.label_evidence, "label_evidence", allow_zero=True)
+        as_int(self.max_labels, "max_labels", minimum=0, maximum=MAX_FEATURES)
+        as_positive_float(self.track_alias_px, "track_alias_px")
+        as_float(self.periodic_ncc, "periodic_ncc", minimum=-1.0, maximum=1.0)

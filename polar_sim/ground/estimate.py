@@ -55,7 +55,13 @@ class GroundEstimate:
     diagnostics : dict
         Counts and flags of this frame: n_features, n_tracked, n_triplets, n_motion_points,
         n_candidates, n_inliers, static, ransac_iterations, irls_iterations, weighted, status,
-        pose_provisional, middle_index.
+        pose_provisional, middle_index; with the dense fit also dense_ok, dense_aliased, dense_pixels,
+        dense_iterations, n_dense_labels and n_track_aliased.
+    speed_dense : float
+        Speed of the middle frame from the dense alignment of the ground, m/s (NaN without one).
+    speed_measured : float
+        The speed measurement the filter was given: the RANSAC and dense speeds fused by their
+        variances, or either alone, m/s (NaN when the filter only predicted).
     """
 
     t: float
@@ -74,6 +80,8 @@ class GroundEstimate:
     inlier_mask: np.ndarray
     status: str
     diagnostics: dict = field(default_factory=dict)
+    speed_dense: float = np.nan
+    speed_measured: float = np.nan
 
     @property
     def inliers(self):

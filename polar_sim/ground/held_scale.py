@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from polar_sim.ground.config import DenseConfig
 from polar_sim.ground.depth import fuse
 from polar_sim.ground.vo import GroundVO
 
@@ -22,11 +23,14 @@ class HeldScaleVO(GroundVO):
 
     Parameters are those of :class:`GroundVO` plus ``speed_truth`` (n,): true speeds per image index,
     of which the baseline reads one, at the middle frame of the first image whose motion is solved
-    (the only ground truth it sees: a monocular VO's scale has to come from somewhere).
+    (the only ground truth it sees: a monocular VO's scale has to come from somewhere). The dense
+    ground alignment is off by default (``dense``): it reads a metric scale from the ground.
     """
 
     def __init__(self, K, camera_height, *, speed_truth, **kw):
         self.speed_truth = speed_truth
+        # No dense ground alignment: its metric scale comes from the ground, which a monocular VO lacks.
+        kw.setdefault("dense", DenseConfig(enabled=False))
         super().__init__(K, camera_height, **kw)
 
     @classmethod

@@ -22,8 +22,9 @@ from polar_sim.ground._checks import as_time
 from polar_sim.ground.calibration import PlattCalibrator
 from polar_sim.ground.camera import LevelCamera
 from polar_sim.ground.classifier import GroundColourModel, window_index
-from polar_sim.ground.config import (CalibrationConfig, ClassifierConfig, FilterConfig,
+from polar_sim.ground.config import (CalibrationConfig, ClassifierConfig, DenseConfig, FilterConfig,
                                      GroundModelConfig, MotionConfig, TrackingConfig)
+from polar_sim.ground.dense import Pyramid, align_ground, fuse_measurements, ground_evidence, label_points
 from polar_sim.ground.depth import fuse, propagate
 from polar_sim.ground.estimate import STATUSES, GroundEstimate
 from polar_sim.ground.filters import KF1D
@@ -39,7 +40,8 @@ logger = logging.getLogger(__name__)
 
 #: GroundVO's stage-config parameters and their classes (``polar_sim.ground.config``).
 STAGE_CONFIGS = {"tracking": TrackingConfig, "motion": MotionConfig, "ground": GroundModelConfig,
-                 "filters": FilterConfig, "classifier": ClassifierConfig, "calibration": CalibrationConfig}
+                 "filters": FilterConfig, "classifier": ClassifierConfig, "calibration": CalibrationConfig,
+                 "dense": DenseConfig}
 
 _MODEL_ALIASES = {"2p": "2param", "3p": "3param", "6p": "6param", "3p_code": "3param"}
 _F_REF = 359.428  # focal length (px) of the processed KITTI images the pixel thresholds were tuned on
@@ -68,12 +70,26 @@ class _Frame:
     motion_done: bool = False
     speed_raw: float = np.nan
     yaw_raw: float = np.nan
+    speed_dense: float = np.nan
+    speed_measured: float = np.nan
     rates_raw: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     cand_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     cand_dbar: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cand_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     cand_prob: np.ndarray = field(default_factory=lambda: np.zeros(0))
     inl_mask: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+
+@dataclass(frozen=True)
+class _DenseSpeed:
+    """The dense fit's speed (m/s) and yaw rate (rad/s) at the middle frame, their variances, and
+    whether an aliased fit went into them."""
+
+    speed: float
+    speed_var: float
+    yaw_rate: float
+    yaw_var: float
+    aliased: bool
 
 
 @dataclass(frozen=True)
@@ -93,6 +109,7 @@ class _Settings:
     filters: FilterConfig
     classifier: ClassifierConfig
     calibration: CalibrationConfig
+    dense: DenseConfig
     n_iter: int  # RANSAC iterations of the model
     p: float  # RANSAC weight exponent
     depth_q: float
@@ -151,12 +168,15 @@ class GroundVO(Parameterised):
         The colour classifier and its self-supervised training labels.
     calibration : CalibrationConfig
         Calibration of the output ``ground_prob``.
+    dense : DenseConfig
+        Dense alignment of the ground between images, its fusion with the RANSAC speed, its ground
+        self-labels and the aliasing guards (not in the published method).
     """
 
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", seed=0, downsample=2,
                  integration="planar", camera_pitch=0.0, tracking=TrackingConfig(), motion=MotionConfig(),
                  ground=GroundModelConfig(), filters=FilterConfig(), classifier=ClassifierConfig(),
-                 calibration=CalibrationConfig()):
+                 calibration=CalibrationConfig(), dense=DenseConfig()):
         self.K = K
         self.camera_height = camera_height
         self.model = model
@@ -171,6 +191,7 @@ class GroundVO(Parameterised):
         self.filters = filters
         self.classifier = classifier
         self.calibration = calibration
+        self.dense = dense
         self._settings()  # fail early; _build checks again (set_params may change them)
 
     # ------------------------------------------------------------------------------------------------
@@ -230,7 +251,7 @@ class GroundVO(Parameterised):
         return _Settings(
             K=K, h=h, model=model, sampling=self.sampling, ds=self.downsample, integration=self.integration,
             pitch=float(pitch), tracking=self.tracking, motion=m, ground=self.ground, filters=self.filters,
-            classifier=self.classifier, calibration=self.calibration, n_iter=n_iter,
+            classifier=self.classifier, calibration=self.calibration, dense=self.dense, n_iter=n_iter,
             p=float(self.ground.weight_exponent),
             depth_q=0.02 * hs if m.depth_q is None else float(m.depth_q),
             depth_r=0.6 * hs if m.depth_r is None else float(m.depth_r),
@@ -259,8 +280,11 @@ class GroundVO(Parameterised):
         self.poses_ = [np.eye(4)]
         self.times_ = []
         self.n_frames_ = 0
-        self.prev_grey_ = self.prev_labels_ = self.prev_prob_ = self.prev_score_ = None
+        self.prev_grey_ = self.prev_labels_ = self.prev_prob_ = self.prev_score_ = self.prev_pyr_ = None
         self.rates_ = np.zeros(3)
+        self.dense_mask_ = self._dense_region((hp, wp))
+        self.dense_fits_ = (None, None)  # (fit, dt) of the image pairs (k-2, k-1) and (k-1, k)
+        self.dense_labels_ = np.zeros((0, 2))  # ground self-labels of the previous image from the dense fit
 
     def trajectory(self):
         """Poses of all processed images, (n, 4, 4): camera k in the first camera's frame (KITTI)."""
@@ -313,6 +337,9 @@ class GroundVO(Parameterised):
                               n_inliers=0, static=False, ransac_iterations=0, irls_iterations=0, weighted=False,
                               pose_provisional=False, middle_index=k - 1))
         dt = t - self.times_[-1] if k > 0 else 0.0
+        pyr = Pyramid(g, c.dense.levels, c.dense.smoothing) if c.dense.enabled else None
+        if k > 0 and pyr is not None:
+            self._align_dense(pyr, dt, fr.diag)
         if k > 0 and len(self.tracks_["xy"]):
             if k >= 2 and self.tracks_["has"].any():
                 self._propagate_depths()
@@ -323,7 +350,7 @@ class GroundVO(Parameterised):
         if k >= 2 and fr.status == "init":
             fr.status = "no_features"  # nothing tracked into this frame (black or textureless image)
         if k >= 2 and not fr.motion_done and fr.status != "static":
-            self._coast()
+            self._coast(fr)
         if not fr.motion_done:
             self.rates_ = np.zeros(3)
         self._integrate_pose(k, dt, fr.diag)
@@ -333,7 +360,7 @@ class GroundVO(Parameterised):
         fr.diag["status"] = fr.status
         if fr.status != "ok":
             logger.debug("frame %d (t=%.3f s): %s", k, t, fr.status)
-        self.prev_grey_, self.prev_labels_, self.dt_prev_ = g, labels, dt
+        self.prev_grey_, self.prev_labels_, self.dt_prev_, self.prev_pyr_ = g, labels, dt, pyr
         self.times_.append(t)
         self.n_frames_ = k + 1
         return self._estimate(fr, t, k, prob)
@@ -345,6 +372,7 @@ class GroundVO(Parameterised):
         prob_out = cv2.resize(prob, (W, H), interpolation=cv2.INTER_LINEAR) if ds == 2 else prob.copy()
         return GroundEstimate(t=t, index=k, speed=self.speed_filter_.x, yaw_rate=self.yaw_filter_.x,
                               speed_raw=float(fr.speed_raw), yaw_rate_raw=float(fr.yaw_raw), rates_raw=fr.rates_raw,
+                              speed_dense=float(fr.speed_dense), speed_measured=float(fr.speed_measured),
                               pose=self.poses_[-1].copy(), ground_prob=prob_out, candidates=fr.cand_xy * ds,
                               candidate_dbar=fr.cand_dbar, candidate_uv=fr.cand_uv, candidate_prob=fr.cand_prob,
                               inlier_mask=fr.inl_mask, status=fr.status, diagnostics=fr.diag)
@@ -379,6 +407,11 @@ class GroundVO(Parameterised):
         guess[:, 1] = np.clip(guess[:, 1], 0, gh - 1)
         kw = dict(win=tc.klt_window, levels=tc.klt_levels, fb_max=tc.fb_max)
         x_new, ok, err = frontend.track(self.prev_grey_, g, x_prev, guess, return_err=True, **kw)
+        dense = self._dense_pair_motion()
+        if dense is not None:
+            # The ground's own arc length over this image pair warps the ground better than the filtered speed.
+            # (The filtered yaw rate stays: the tracks measure it better than the near ground does.)
+            vx = dense[0] / dt
         if tc.ground_warp and vx > 0:
             # Ground-stabilised tracking of points below the horizon: keep whichever of the plain and the
             # homography-warped track matches its patch better.
@@ -387,6 +420,13 @@ class GroundVO(Parameterised):
                 Hg = cam.level_homography(frontend.ground_homography(np.eye(3), vx, wx, dt, c.h))
                 qw, okw, errw = frontend.track_ground_warped(self.prev_grey_, g, x_prev[low], Hg, **kw)
                 better = okw & (~ok[low] | (errw < err[low]))
+                if c.dense.enabled:
+                    # Aliasing: a repeating texture lets both tracks match, a period apart; drop the point.
+                    far = np.linalg.norm(qw - x_new[low], axis=1) > c.dense.track_alias_px * self.pixel_scale_
+                    alias = okw & ok[low] & far
+                    ok[low[alias]] = False
+                    better &= ~alias
+                    diag["n_track_aliased"] = int(alias.sum())
                 x_new[low[better]] = qw[better]
                 ok[low[better]] = True
         diag["n_tracked"] = int(ok.sum())
@@ -431,13 +471,20 @@ class GroundVO(Parameterised):
         self.tracks_["has"][:] = False
         fr.rates_raw = np.zeros(3)
 
-    def _coast(self):
-        """No motion solved: the filters coast (the fix of B10: no zero yaw-rate measurement)."""
+    def _coast(self, fr):
+        """No motion solved: the filters coast (the fix of B10: no zero yaw-rate measurement), or follow
+        the dense alignment of the ground alone."""
         self.speed_filter_.predict()
         self.yaw_filter_.predict()
         if self.cfg_.published("rules"):
             self.yaw_filter_.update(0.0)  # B10: the published code feeds ω = 0 when motion was not solved
         self.tracks_["has"][:] = False
+        dense = self._dense_speed()
+        if dense is not None and not dense.aliased:
+            fr.speed_dense = fr.speed_measured = dense.speed
+            self.speed_filter_.update(dense.speed, var=dense.speed_var)
+            self.yaw_filter_.update(dense.yaw_rate)
+            fr.status = "ok"
 
     # -- steps 8-10: motion, ground and scale, depths, classifier ------------------------------------
 
@@ -451,7 +498,7 @@ class GroundVO(Parameterised):
         span = t - self.times_[-2]  # t_k - t_{k-2}
         u, v = cam.level(x1)
         # Points near the principal axes of the (level) image carry no depth in one component (spec §3.1).
-        sel = (np.abs(u * cam.fx) > 3.0 * ps) & (np.abs(v * cam.fy) > 3.0 * ps)
+        sel = (np.abs(u * cam.fx) > 3.0 * ps) & (np.abs(v * cam.fy) > 3.0 * ps) & ~self.tracks_["periodic"][idx]
         diag["n_motion_points"] = int(sel.sum())
         if len(idx) < c.motion.min_triplets or sel.sum() < 10:
             return None
@@ -480,14 +527,15 @@ class GroundVO(Parameterised):
         vf.predict()
         yf.predict()
         accepted = fit.ok and fr.diag["n_inliers"] >= self.cfg_.ground.min_inliers
-        if accepted:
-            vf.update(fit.speed)
+        measured = self._measured_speed(fr, fit if accepted else None)
+        if measured is not None:
+            vf.update(measured[0], var=measured[1])
         yf.update(fr.yaw_raw)
         self.rates_ = np.array([fr.rates_raw[0], yf.x, fr.rates_raw[2]])
-        if accepted:
+        if measured is not None:
             self._fuse_depths(m, idx, fit.speed)
-            self._learn_ground(m, idx, x1, v, ci, below, fit, labels)
-        fr.status = "ok" if accepted else "no_ground"
+            self._learn_ground(m, idx, x1, v, ci, below, fit if accepted else None, labels)
+        fr.status = "ok" if measured is not None else "no_ground"
         fr.cand_xy, fr.cand_dbar, fr.inl_mask = x1[ci], m.dbar[ci], fit.inliers.copy()
         fr.cand_uv = np.stack([u[ci], v[ci]], axis=1)
 
@@ -543,19 +591,20 @@ class GroundVO(Parameterised):
         """Ground counters and the self-supervised classifier update (spec §4.8, §5.3), and the
         calibrator's out-of-sample self-labels."""
         c, trk, cl = self.cfg_, self.tracks_, self.cfg_.classifier
-        trk["gnd"][idx[ci[fit.inliers]]] += 1
-        g_xy = x1[ci[fit.inliers]]
+        inl = fit.inliers if fit is not None else np.zeros(len(ci), dtype=bool)
+        trk["gnd"][idx[ci[inl]]] += 1
+        g_xy = x1[ci[inl]]
         if cl.train_depth is not None:
             # Far inliers are no evidence of ground: within the RANSAC noise a point at the horizon fits
             # the ground model whatever it is (sky edges, far obstacles). Learn ground only nearer than
             # train_depth (metres, flat-ground depth h / v of the level frame).
-            g_xy = g_xy[v[ci[fit.inliers]] * cl.train_depth > c.h]
+            g_xy = g_xy[v[ci[inl]] * cl.train_depth > c.h]
         if c.published("ground_labels"):
             ng_xy = trk["xy"][(trk["gnd"] < 0) & trk["has"], 1]
             lab = labels  # B8: frame-k labels sampled at frame-(k-1) positions
         else:
             ng_sel = m.valid & ~below
-            if cl.ng_from_outliers:
+            if cl.ng_from_outliers and fit is not None:
                 clear = np.zeros(len(v), dtype=bool)
                 clear[ci] = fit.residuals > cl.ng_outlier_sigma * fit.sigma
                 if cl.ng_outlier_history:
@@ -563,6 +612,10 @@ class GroundVO(Parameterised):
                 ng_sel |= clear
             ng_xy = x1[ng_sel]
             lab = self.prev_labels_
+        if len(self.dense_labels_):
+            # Ground where the dense fit's parallax says so: these pixels learn ground, never non-ground.
+            ng_xy = ng_xy[~self._dense_ground_at(ng_xy)]
+            g_xy = np.concatenate([g_xy, self.dense_labels_])
         if c.calibration.method == "platt" and self.prev_score_ is not None:
             # Out-of-sample self-labels: the map of image k-1 was made before learning from them.
             sh = self.prev_score_.shape
@@ -570,6 +623,98 @@ class GroundVO(Parameterised):
             sc = self.prev_score_.ravel()
             self.calibrator_.update(np.r_[sc[gi], sc[ni]], np.r_[np.ones(len(gi), bool), np.zeros(len(ni), bool)])
         self.classifier_.update(lab, g_xy, ng_xy)
+
+    # -- dense ground alignment ----------------------------------------------------------------------
+
+    def _dense_region(self, shape):
+        """Pixels (H, W) bool of a processed image that the dense fit may align: below the horizon, flat-
+        ground depth up to ``max_depth``, 4 px from the borders."""
+        c, cam = self.cfg_, self.camera_
+        H, W = shape
+        yy, xx = np.mgrid[0:H, 0:W]
+        xy = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+        v = cam.level(xy)[1].reshape(H, W)
+        near = (v > 0) & (v * c.dense.max_depth >= c.h)
+        if cam.horizon is not None:
+            near &= yy > cam.horizon
+        return near & (xx >= 4) & (xx < W - 4) & (yy >= 4) & (yy < H - 4)
+
+    def _align_dense(self, pyr, dt, diag):
+        """Align the ground of the previous image to this one from the filters' prediction; keep the last
+        two image pairs' fits and the previous image's ground self-labels."""
+        c, d = self.cfg_, self.cfg_.dense
+        w = None
+        if self.classifier_.n_updates > 0:
+            w = d.prob_floor + (1.0 - d.prob_floor) * self.prev_prob_
+        fit = align_ground(self.prev_pyr_, pyr, self.camera_, c.h, self.speed_filter_.x * dt, self.yaw_filter_.x * dt,
+                           mask=self.dense_mask_, weights=w, block=d.block, max_pixels=d.max_pixels,
+                           min_gradient=d.min_gradient, min_pixels=d.min_pixels, max_iter=d.max_iter,
+                           residual_floor=d.residual_floor, gradient_weight=d.gradient_weight, model=d.model,
+                           alias_range=d.alias_sigmas * np.sqrt(self.speed_filter_.P + self.speed_filter_.q) * dt,
+                           alias_margin=d.alias_margin)
+        self.dense_fits_ = (self.dense_fits_[1], (fit, dt))
+        diag.update(dense_ok=fit.ok, dense_aliased=fit.aliased, dense_pixels=fit.n_pixels,
+                    dense_iterations=fit.iterations)
+        self.dense_labels_ = np.zeros((0, 2))
+        if fit.ok and not fit.aliased and d.label_evidence > 0 and d.max_labels > 0:
+            self.evidence_ = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_)
+            self.dense_labels_ = label_points(self.evidence_, d.label_evidence, d.max_labels)
+        diag["n_dense_labels"] = int(len(self.dense_labels_))
+
+    def _dense_pair_motion(self):
+        """(arc length m, yaw change rad) of the last image pair, if its dense fit is trusted; else None."""
+        last = self.dense_fits_[1]
+        if last is None or not last[0].ok or last[0].aliased:
+            return None
+        return last[0].s, last[0].a
+
+    def _dense_speed(self):
+        """The dense speed and yaw rate of the middle frame k-1: the arc lengths and yaw changes of the
+        two image pairs around it over their time span (the central difference of the sparse flow),
+        with their variances; None unless both pairs were fitted."""
+        pairs = self.dense_fits_
+        if any(p is None or not p[0].ok for p in pairs):
+            return None
+        span = pairs[0][1] + pairs[1][1]
+        d = self.cfg_.dense
+        var = np.zeros((2, 2))
+        for f, _ in pairs:
+            # The fit's own variance, and the plane model's error where the ground is not that plane.
+            v = d.var_scale * f.cov
+            v[0, 0] += (d.spread_scale * np.nan_to_num(f.band_spread, nan=0.0)) ** 2
+            var += v * (d.alias_var_scale if f.aliased else 1.0)
+        var /= span ** 2
+        return _DenseSpeed(sum(f.s for f, _ in pairs) / span, float(var[0, 0]), sum(f.a for f, _ in pairs) / span,
+                           float(var[1, 1]), any(f.aliased for f, _ in pairs))
+
+    def _measured_speed(self, fr, fit):
+        """The speed measurement of this frame and its variance: the RANSAC speed (``fit``, None if not
+        accepted) and the dense speed fused by their variances; None if neither."""
+        c = self.cfg_
+        dense = self._dense_speed() if c.dense.enabled else None
+        if dense is not None:
+            fr.speed_dense = dense.speed
+            fr.diag["speed_dense_var"] = dense.speed_var
+        if fit is not None:
+            fr.diag["speed_raw_var"] = c.ground.var_scale * fit.speed_var
+        if fit is None and dense is None:
+            return None
+        if dense is None:
+            z = (fit.speed, 0.0)  # the RANSAC speed alone: the filter's nominal noise, as without the dense fit
+        elif fit is None:
+            z = (dense.speed, dense.speed_var)
+        else:
+            z = fuse_measurements(fit.speed, c.ground.var_scale * fit.speed_var, dense.speed, dense.speed_var,
+                                  c.dense.gate)
+        fr.speed_measured = z[0]
+        return z
+
+    def _dense_ground_at(self, xy):
+        """Whether the dense fit's evidence marks each point (n, 2) of the previous image as ground."""
+        e = self.evidence_
+        r = np.clip(np.rint(xy[:, 1]).astype(np.intp), 0, e.shape[0] - 1)
+        q = np.clip(np.rint(xy[:, 0]).astype(np.intp), 0, e.shape[1] - 1)
+        return e[r, q] > self.cfg_.dense.label_evidence
 
     # -- steps 11-12: pose, ground map, new features -------------------------------------------------
 
@@ -616,6 +761,13 @@ class GroundVO(Parameterised):
         existing = trk["xy"][:, 2] if len(trk["xy"]) else np.zeros((0, 2))
         new = frontend.detect_new(g, existing, max_new=c.tracking.max_features - len(existing), cell=self.cell_)
         if len(new):
-            tracks.append(trk, new, c.depth_p_new if c.published("depth_fusion") else c.depth_p_reset)
+            per = None
+            if c.dense.enabled and c.dense.periodic_ncc < 1.0:
+                # Aliasing in tracks: a corner on a texture that repeats within a few pixels can be tracked
+                # a period off, so it does not enter the motion solve.
+                per = frontend.periodic(g, new, half=c.tracking.klt_window // 2,
+                                        radius=max(4, int(round(8 * self.pixel_scale_))), threshold=c.dense.periodic_ncc)
+                diag["n_periodic"] = int(per.sum())
+            tracks.append(trk, new, c.depth_p_new if c.published("depth_fusion") else c.depth_p_reset, per)
         diag["n_features"] = int(len(trk["xy"]))
         return len(new)

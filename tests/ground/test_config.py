@@ -6,8 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from polar_sim.ground import (CalibrationConfig, ClassifierConfig, FilterConfig, GroundModelConfig, GroundVO,
-                              MotionConfig, TrackingConfig)
+from polar_sim.ground import (CalibrationConfig, ClassifierConfig, DenseConfig, FilterConfig, GroundModelConfig,
+                              GroundVO, MotionConfig, TrackingConfig)
 from polar_sim.ground.config import MAX_FEATURES, MAX_RANSAC_ITER
 from polar_sim.ground.vo import STAGE_CONFIGS
 
@@ -37,6 +37,15 @@ BAD = [
     (CalibrationConfig, "method", "isotonic"), (CalibrationConfig, "window", 4), (CalibrationConfig, "window", 10**9),
     (CalibrationConfig, "decay", 1.5), (CalibrationConfig, "decay", -0.1), (CalibrationConfig, "prior_weight", -1.0),
     (CalibrationConfig, "prior_weight", "5"),
+    (GroundModelConfig, "var_scale", 0.0),
+    (DenseConfig, "enabled", 1), (DenseConfig, "model", "homography"), (DenseConfig, "max_depth", 0.0),
+    (DenseConfig, "levels", 5), (DenseConfig, "smoothing", 11.0), (DenseConfig, "block", 0),
+    (DenseConfig, "max_pixels", 2**63), (DenseConfig, "min_gradient", -1.0), (DenseConfig, "min_pixels", 2),
+    (DenseConfig, "max_iter", 10**6), (DenseConfig, "residual_floor", 0.0), (DenseConfig, "gradient_weight", float("nan")),
+    (DenseConfig, "prob_floor", 1.5), (DenseConfig, "var_scale", float("inf")), (DenseConfig, "spread_scale", -1.0),
+    (DenseConfig, "alias_sigmas", -3.0), (DenseConfig, "alias_margin", "0.2"), (DenseConfig, "alias_var_scale", 0.5),
+    (DenseConfig, "gate", 0.0), (DenseConfig, "label_evidence", float("nan")), (DenseConfig, "max_labels", 2**63),
+    (DenseConfig, "track_alias_px", 0.0), (DenseConfig, "periodic_ncc", 1.5),
 ]
 
 
@@ -53,6 +62,8 @@ def test_size_limits_are_named_in_the_message():
         TrackingConfig(max_features=2**63)
     with pytest.raises(ValueError, match=f"n_iter: expected an integer <= {MAX_RANSAC_ITER}"):
         GroundModelConfig(n_iter=2**63)
+    with pytest.raises(ValueError, match=f"max_pixels: expected an integer <= {MAX_FEATURES}"):
+        DenseConfig(max_pixels=2**63)
     # Within each bound, their product is bounded too: the RANSAC residuals of one frame.
     with pytest.raises(ValueError, match="ground__n_iter.*tracking__max_features"):
         GroundVO(K, 1.0, tracking=TrackingConfig(max_features=MAX_FEATURES), ground=GroundModelConfig(n_iter=10**4))

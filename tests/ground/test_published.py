@@ -32,7 +32,7 @@ def test_published_preset_is_the_stage_configs(corridor):
     assert p["filters__speed_prior_var"] == pytest.approx(2 * p["filters__speed_q"])
     assert p["classifier__ng_from_outliers"] is False  # B9
     assert p["classifier__train_depth"] is None and p["classifier__decay_samples"] is None
-    assert p["calibration__method"] == "none"
+    assert p["calibration__method"] == "none" and p["dense__enabled"] is False  # no dense stage in the paper
     assert GroundVO.published(corridor["K"], 1.0, model="2param").ground.n_iter == 16
     assert GroundVO.published(corridor["K"], 1.0, filters__speed_q=0.5).filters.speed_prior_var == 1.0
     assert GroundVO.published(corridor["K"], 1.0, filters__speed_q=0.5, filters__speed_prior_var=7.0) \
