@@ -16,7 +16,8 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.pictures_calibration import plot_reliability
+from polar_sim.runner.report import markdown_table, percent, savefig, write_csv_table
 
 from polar_sim.experiments import _tracking_common as C
 from polar_sim.experiments import _tracking_tables as T
@@ -87,9 +88,9 @@ def summarize(table, ctx):
     ww = T.by(head, "method", ref)
     rels = [_bins(ww, ctx, k) for k in ("cal_bins", "raw_bins")]
     if all(b[0].sum() for b in rels):   # a method without a P(target) map has no reliability diagram
-        metrics.plot_reliability([metrics.pooled_reliability(*b) for b in rels],
-                                 ["P(target), calibrated", "raw prediction map"], ax=ax[2],
-                                 title=f"{ref}, ROI pixels ({ctx.split})")
+        plot_reliability([metrics.pooled_reliability(*b) for b in rels],
+                         ["P(target), calibrated", "raw prediction map"], ax=ax[2],
+                         title=f"{ref}, ROI pixels ({ctx.split})")
     fig.tight_layout()
     return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_segmentation")])
 
@@ -109,12 +110,13 @@ def findings(table, ctx):
     if "ww" not in rows:
         return []   # the finding is about the thesis's Ww
     w, s = rows["ww"], rows.get("shape-only")
-    ours = (f"Ww under touch: IoU > 0.5 on {100 * w['occl_iou_ok']:.1f} % of {w['occl_frames']} frames, hand labelled "
-            f"target {100 * w['hand_as_target']:.1f} %" + (f" (shape only: {100 * s['occl_iou_ok']:.1f} %, "
-                                                            f"{100 * s['hand_as_target']:.1f} %)" if s else ""))
+    ours = (f"Ww under touch: IoU > 0.5 on {percent(w['occl_iou_ok'])} of {w['occl_frames']} frames, hand labelled "
+            f"target {percent(w['hand_as_target'])}" + (f" (shape only: {percent(s['occl_iou_ok'])}, "
+                                                          f"{percent(s['hand_as_target'])})" if s else ""))
     ok = w["occl_iou_ok"] >= 0.9 and w["hand_as_target"] <= HAND_MAX
     return [Finding("Ch. 1-2, Ch. 5 (Fig. 5.7)", "accurate segmentation under occlusion by touch", ours,
-                    "held" if ok else "partly held", "a scripted simulated hand; IoU success at 0.5")]
+                    "held" if ok else "partly held", "a scripted simulated hand; IoU success at 0.5",
+                    n=int(w["occl_frames"]), n_of="frames under touch")]
 
 
 EXPERIMENT = Experiment(

@@ -15,7 +15,7 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import fmt, markdown_table, write_csv_table
+from polar_sim.runner.report import fmt, markdown_table, percent, write_csv_table
 
 from polar_sim.experiments import _tracking_common as C
 from polar_sim.experiments import _tracking_tables as T
@@ -113,10 +113,13 @@ def findings(table, ctx):
     size = f"Spearman(diameter, ADD(-S) AUC) = {fmt(rho)} over {n} sequences" if ok else (
         f"Spearman(diameter, ADD(-S) AUC) undefined over {n} sequences ({len(set(T.col(srows, 'diameter_cm')))} "
         f"diameters, {len(set(T.col(srows, 'add_auc')))} AUC values)")
+    frames, seqs = vr[0]["frames"], vr[0]["sequences"]
+    ceiling = f"every variant at {percent(hi)}" if lo >= 0.999 else f"every variant at {percent(lo)}" if hi <= 0.001 else ""
     return [Finding("Ch. 5, Fig. 5.6", "the four implementations perform similarly",
-                    f"ADD(-S) < 0.1 d {100 * lo:.1f}-{100 * hi:.1f} % over Su, Sw, Wu, Ww ({ctx.split})",
+                    f"ADD(-S) < 0.1 d {percent(lo)} to {percent(hi)} over Su, Sw, Wu, Ww ({ctx.split})",
                     "held" if hi - lo <= 0.03 else "partly held",
-                    "simulated tabletop sequences, hand-crafted multi-scale features instead of a CNN"),
+                    "simulated tabletop sequences, hand-crafted multi-scale features instead of a CNN",
+                    n=int(frames), n_of=f"frames of {seqs} sequence{'s' if seqs != 1 else ''}", saturated=ceiling),
             Finding("Ch. 5, Fig. 5.8", "larger objects of distinct shape show higher success rates",
                     f"Ww, one point per sequence: {size}; shape not tested",
                     ("held" if rho > 0.3 else "partly held" if rho > 0 else "not held") if ok

@@ -86,3 +86,33 @@ def test_nested_stage_params():
         with pytest.raises(ValueError, match=match):
             t.set_params(**bad)
         assert t.stage == Stage(gain=2.0) and t.alpha == 3.0     # nothing changed
+
+
+# A stage config parameter (a frozen dataclass) is reached as stage__field by get_params(deep=True) and
+# set_params, as scikit-learn's nested estimators are; errors name stage__field; nothing changes on error.
+def test_nested_stage_configs():
+    import dataclasses
+
+    @dataclasses.dataclass(frozen=True)
+    class Stage:
+        width: int = 3
+
+        def __post_init__(self):
+            if not (isinstance(self.width, int) and self.width > 0):
+                raise ValueError(f"width: expected a positive int, got {self.width!r}")
+
+    class Nested(Parameterised):
+        def __init__(self, *, alpha=1.0, stage=Stage()):
+            self.alpha = alpha
+            self.stage = stage
+
+    n = Nested()
+    assert n.get_params() == {"alpha": 1.0, "stage": Stage(), "stage__width": 3}
+    assert n.get_params(deep=False) == {"alpha": 1.0, "stage": Stage()}
+    n.set_params(stage__width=5, alpha=2.0)
+    assert n.stage == Stage(5) and n.alpha == 2.0
+    for bad, match in (({"stage__width": 0}, "stage__width: expected"), ({"stage__depth": 1}, "stage__depth: unknown"),
+                       ({"alpha": 3.0, "other__x": 1}, "other__x: unknown")):
+        with pytest.raises(ValueError, match=match):
+            n.set_params(**bad)
+        assert n.stage == Stage(5) and n.alpha == 2.0

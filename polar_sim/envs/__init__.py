@@ -8,7 +8,7 @@ registers by itself, which is what ``spawn``/``forkserver`` vector-env workers n
 
 from gymnasium.envs.registration import register
 
-__all__ = ["ENV_IDS", "ENV_SUMMARIES", "register_envs"]
+__all__ = ["ENV_IDS", "ENV_SUMMARIES", "register_envs", "pretrained", "pretrained_ids"]
 
 _NAV = "polar_sim.envs.gpis_nav:GPISNavEnv"
 _LIDAR = "polar_sim.envs.lidar_nav:LidarNavEnv"
@@ -21,6 +21,10 @@ ENV_IDS = {
     "polar_sim/GPISNav-v1": (_NAV, 600, {}),
     "polar_sim/GPISNav-Rooms2-v1": (_NAV, 600, {"tier": "rooms2"}),
     "polar_sim/GPISNav-Room-v1": (_NAV, 300, {"tier": "room"}),
+    "polar_sim/LidarNav-v2": (_LIDAR, 600, {"version": 2}),
+    "polar_sim/GPISNav-v2": (_NAV, 600, {"version": 2}),
+    "polar_sim/GPISNav-Rooms2-v2": (_NAV, 600, {"tier": "rooms2", "version": 2}),
+    "polar_sim/GPISNav-Room-v2": (_NAV, 300, {"tier": "room", "version": 2}),
     "polar_sim/RoverDrive-v0": ("polar_sim.envs.rover_drive_v0:RoverDriveEnv", 1000, {}),
     "polar_sim/GroundVO-v0": ("polar_sim.envs.ground_vo_v0:GroundVOEnv", 1000, {}),
     "polar_sim/TabletopReach-v0": ("polar_sim.envs.tabletop_reach_v0:TabletopReachEnv", 300, {}),
@@ -35,6 +39,10 @@ ENV_SUMMARIES = {
     "polar_sim/GPISNav-v1": "online GPIS map at the ESTIMATED pose (ICP-G on the map), 3x3 rooms; noisy sensors",
     "polar_sim/GPISNav-Rooms2-v1": "GPISNav-v1 on the 2x2-room tier",
     "polar_sim/GPISNav-Room-v1": "GPISNav-v1 on the one-room-with-clutter tier (a memoryless policy can solve it)",
+    "polar_sim/LidarNav-v2": "LidarNav-v1 with the kinematic rover (exact unicycle, MuJoCo contacts): faster",
+    "polar_sim/GPISNav-v2": "GPISNav-v1 with the kinematic rover (exact unicycle, MuJoCo contacts): faster",
+    "polar_sim/GPISNav-Rooms2-v2": "GPISNav-Rooms2-v1 with the kinematic rover: faster, for learning",
+    "polar_sim/GPISNav-Room-v2": "GPISNav-Room-v1 with the kinematic rover: faster, for learning",
     "polar_sim/RoverDrive-v0": "car-sized rover along a route over hills; raw camera image",
     "polar_sim/GroundVO-v0": "RoverDrive-v0 with GroundVO monocular odometry as the robot's pose",
     "polar_sim/TabletopReach-v0": "hand to a pre-grasp pose over a moving tabletop object; raw RGB-D",
@@ -53,3 +61,5 @@ def register_envs():
 
 
 register_envs()
+
+from polar_sim.envs.shipped import pretrained, pretrained_ids  # noqa: E402  (after the ids exist)

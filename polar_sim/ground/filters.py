@@ -37,21 +37,23 @@ class KF1D:
         """Random-walk prediction: the variance grows by q."""
         self.P += self.q
 
-    def gain(self, z):
-        """Kalman gain and the measurement noise the update would use for measurement ``z``."""
+    def gain(self, z, var=0.0):
+        """Kalman gain and the measurement noise the update would use for measurement ``z`` whose own
+        variance is ``var`` (the nominal noise ``r`` is the floor)."""
         innov = float(z) - self.x
-        r = self.r
+        r = max(self.r, float(var))
         if self.adaptive == "code":
-            if abs(innov) > math.sqrt(self.r):
+            if abs(innov) > math.sqrt(r):
                 r = innov * innov
         elif self.adaptive == "innovation":
-            if innov * innov > self.P + self.r:
+            if innov * innov > self.P + r:
                 r = innov * innov - self.P
         return self.P / (self.P + r), r
 
-    def update(self, z):
-        """Fuse measurement ``z``; returns the gain used."""
-        k, r = self.gain(z)
+    def update(self, z, var=0.0):
+        """Fuse measurement ``z`` (its variance ``var``, if larger than the nominal ``r``, is used);
+        returns the gain used."""
+        k, r = self.gain(z, var)
         self.x = (r * self.x + self.P * float(z)) / (self.P + r)
         self.P = r * self.P / (self.P + r)
         return k

@@ -15,7 +15,8 @@ import numpy as np
 #: Lucas–Kanade stopping rule (iterations, step in px).
 KLT_MAX_ITER, KLT_EPS = 20, 0.01
 
-__all__ = ["track", "ground_homography", "track_ground_warped", "detect_new", "straightness_gate", "is_static"]
+__all__ = ["track", "ground_homography", "track_ground_warped", "detect_new", "periodic", "straightness_gate",
+           "is_static"]
 
 
 def track(prev_img, img, pts, guess, *, win=11, levels=3, fb_max=0.5, return_err=False):
@@ -119,6 +120,49 @@ def detect_new(grey, existing, *, max_new, cell, quality=0.001, block=3, border=
     _, first = np.unique(cid, return_index=True)  # strongest corner of each free cell
     keep = np.sort(first)[:max_new]
     return c[keep]
+
+
+_DIRECTIONS = ((1, 0), (0, 1), (1, 1), (1, -1))  # a period shows in both senses of a direction
+
+
+def periodic(grey, pts, *, half=5, radius=8, min_shift=3, threshold=0.8, rise=0.3):
+    """Whether each point (n, 2) of a grey image (H, W) lies on a repeating texture: along one of 4
+    directions, the normalised cross-correlation of its (2 half + 1)² patch with the patch r px away
+    first falls and then rises again (by more than ``rise``, to above ``threshold``) at some r from
+    ``min_shift`` to ``radius``: a second peak, a period away. (A merely smooth patch correlates
+    highly with its neighbours too, but falls off monotonically.) KLT can lock such a point one period
+    off. Points too near the border are not tested (False). Returns (n,) bool."""
+    n = len(pts)
+    out = np.zeros(n, dtype=bool)
+    if n == 0:
+        return out
+    H, W = grey.shape
+    c = np.rint(pts).astype(np.intp)
+    m = half + radius
+    ok = (c[:, 0] >= m) & (c[:, 0] < W - m) & (c[:, 1] >= m) & (c[:, 1] < H - m)
+    if not ok.any():
+        return out
+    g = grey.astype(np.float32)
+    off = np.arange(-half, half + 1)
+    oy, ox = np.meshgrid(off, off, indexing="ij")
+    cc = c[ok]
+
+    def patches(dx, dy):
+        p = g[cc[:, 1, None] + dy + oy.ravel()[None, :], cc[:, 0, None] + dx + ox.ravel()[None, :]]
+        p = p - p.mean(axis=1, keepdims=True)
+        return p / np.maximum(np.sqrt((p * p).sum(axis=1, keepdims=True)), 1e-6)
+
+    base = patches(0, 0)
+    found = np.zeros(len(cc), dtype=bool)
+    for dx, dy in _DIRECTIONS:
+        low = np.ones(len(cc))
+        for r in range(1, radius + 1):
+            ncc = np.maximum((base * patches(r * dx, r * dy)).sum(axis=1), (base * patches(-r * dx, -r * dy)).sum(axis=1))
+            if r >= min_shift:
+                found |= (ncc > threshold) & (ncc - low > rise)
+            low = np.minimum(low, ncc)
+    out[ok] = found
+    return out
 
 
 def _angle_diff(a, b, wrap):

@@ -81,6 +81,8 @@ class GroundFit:
     sigma : inlier threshold on ``residuals``.
     iterations : RANSAC iterations run.
     ok : a model was found.
+    speed_var : variance of ``speed``, (m/s)², from the final least squares on the inliers (the
+        residuals' variance propagated to the scale coefficient); inf if no model.
     """
 
     speed: float
@@ -90,6 +92,7 @@ class GroundFit:
     sigma: float
     iterations: int
     ok: bool
+    speed_var: float = np.inf
 
 
 def _failed(n, sigma, iterations):
@@ -135,6 +138,22 @@ def _sample_code(rng, weights, n_iter, size, model):
 def _ridge_solve(A, b, w, lam_diag):
     AtW = A.T * w
     return np.linalg.solve(AtW @ A + np.diag(lam_diag), AtW @ b)
+
+
+def _coef_variance(A, b, coef, w, lam_diag, column):
+    """Variance of ``coef[column]`` of the weighted ridge least squares of ``A coef = b`` (the sandwich
+    σ² M⁻¹ Aᵀ W² A M⁻¹, M = Aᵀ W A + Λ, σ² the residuals' variance); inf when under-determined."""
+    n, p = A.shape
+    if n <= p:
+        return np.inf
+    r = A @ coef - b
+    s2 = float(r @ r) / (n - p)
+    try:
+        Minv = np.linalg.inv((A.T * w) @ A + np.diag(lam_diag))
+    except np.linalg.LinAlgError:
+        return np.inf
+    cov = s2 * Minv @ ((A.T * (w * w)) @ A) @ Minv
+    return float(cov[column, column])
 
 
 def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=None, lam=0.1,
@@ -205,6 +224,7 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
             wi = wi / max(float(wi.mean()), 1e-300)
         coef = _ridge_solve(A[best_inl], b[best_inl], wi, lam_diag)
         resid = np.abs(A @ coef - b) / np.sqrt(1.0 + np.sum(coef[:5] ** 2))
+        var = _coef_variance(A[best_inl], b[best_inl], coef, wi, lam_diag, sc)
     else:
         # Minimal samples are solved exactly; the candidate model is the LS refit on its inliers.
         M = np.zeros((n_iter, A.shape[1]))
@@ -223,5 +243,6 @@ def fit_ground(u, v, dbar, h, *, model="6param", weights=None, n_iter=None, rng=
             return _failed(n, sigma, n_iter)
         best_inl = inl[best]
         resid = np.abs(A @ coef - b)
+        var = _coef_variance(A[best_inl], b[best_inl], coef, np.ones(int(best_inl.sum())), np.zeros(A.shape[1]), sc)
     speed = 2.0 * s * float(coef[sc])
-    return GroundFit(speed, coef, best_inl.copy(), resid, sigma, n_iter, True)
+    return GroundFit(speed, coef, best_inl.copy(), resid, sigma, n_iter, True, 4.0 * s * s * var)

@@ -18,7 +18,7 @@ import numpy as np
 
 from polar_sim._validation import as_rng
 
-__all__ = ["CorridorScene", "unicycle_poses", "intrinsics", "make_sequence"]
+__all__ = ["CorridorScene", "unicycle_poses", "arc_lengths", "intrinsics", "make_sequence", "GROUND_KINDS"]
 
 
 def _periodic_noise(rng, size, sigmas, weights):
@@ -42,6 +42,37 @@ def _texture(rng, size, base, amp, tint):
     pyr = [tex]
     while pyr[-1].shape[0] > 8:
         pyr.append(cv2.pyrDown(pyr[-1], borderType=cv2.BORDER_REFLECT101))  # (no wrap border in pyrDown)
+    return pyr
+
+
+#: Ground textures of :class:`CorridorScene`: multi-octave noise, a faint grain on one colour (few
+#: corners), square tiles with grout lines, and painted stripes across the path; the last two repeat
+#: along the path (``tile`` and ``stripe_period`` texels).
+GROUND_KINDS = ("noise", "faint", "checker", "stripes")
+
+
+def _ground_texture(kind, rng, size, base, *, tile=32, stripe_period=128, stripe_width=3):
+    """The ground texture pyramid of ``kind`` (:data:`GROUND_KINDS`); ``rng`` draws the noise texture in
+    every case, so the walls drawn after it are the same whatever the ground."""
+    noise = _texture(rng, size, base, 38.0, (10.0, 6.0, 2.0))
+    if kind == "noise":
+        return noise
+    grain = (noise[0] - np.asarray(base, np.float32)) / 38.0  # about unit-variance fine detail
+    ii, jj = np.mgrid[0:size, 0:size]
+    if kind == "faint":
+        tex = np.asarray(base, np.float32) + 2.5 * grain  # +-2.5 grey levels (std), one colour
+    elif kind == "checker":
+        light = ((ii // tile + jj // tile) % 2 == 0)[..., None]
+        grout = ((ii % tile < 2) | (jj % tile < 2))[..., None]
+        tex = np.where(light, np.float32([170, 165, 155]), np.float32([95, 95, 100]))
+        tex = np.where(grout, np.float32([45, 45, 48]), tex) + 4.0 * grain
+    else:  # stripes across the path: texture rows are the forward coordinate
+        line = ((ii % stripe_period) < stripe_width)[..., None]
+        tex = np.where(line, np.float32([230, 228, 215]), np.float32([70, 70, 72])) + 12.0 * grain
+    tex = np.clip(tex, 0, 255).astype(np.float32)
+    pyr = [tex]
+    while pyr[-1].shape[0] > 8:
+        pyr.append(cv2.pyrDown(pyr[-1], borderType=cv2.BORDER_REFLECT101))
     return pyr
 
 
@@ -75,24 +106,37 @@ def intrinsics(width, height, fovy_deg=60.0):
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
-def unicycle_poses(n, dt, speed, yaw_rate):
+def unicycle_poses(n, dt, speed, yaw_rate, accel=None):
     """Exact camera poses (n, 4, 4) of a unicycle at constant speed (m/s) and yaw rate (rad/s).
 
     Pose k is camera k in camera 0's frame (OpenCV axes, KITTI convention); yaw about +y, ω > 0 turns
-    right (toward +x).
+    right (toward +x). With ``accel`` (m/s²) the unicycle starts from rest and speeds up at ``accel``
+    to ``speed`` along the same circle (curvature ω / speed), as a vehicle pulling away.
     """
     t = np.arange(n) * dt
-    psi = yaw_rate * t
-    if abs(yaw_rate) < 1e-12:
-        x, z = np.zeros(n), speed * t
+    dist = arc_lengths(t, speed, accel)
+    curv = yaw_rate / speed if speed > 0 else 0.0
+    psi = curv * dist
+    if abs(curv) < 1e-12:
+        x, z = np.zeros(n), dist
     else:
-        x = speed / yaw_rate * (1.0 - np.cos(psi))
-        z = speed / yaw_rate * np.sin(psi)
+        x = (1.0 - np.cos(psi)) / curv
+        z = np.sin(psi) / curv
     T = np.tile(np.eye(4), (n, 1, 1))
     c, s = np.cos(psi), np.sin(psi)
     T[:, 0, 0], T[:, 0, 2], T[:, 2, 0], T[:, 2, 2] = c, s, -s, c
     T[:, 0, 3], T[:, 2, 3] = x, z
     return T
+
+
+def arc_lengths(t, speed, accel=None):
+    """Distance (m) driven at times ``t`` (s): at constant ``speed``, or from rest at ``accel`` (m/s²)
+    up to ``speed``."""
+    t = np.asarray(t, dtype=np.float64)
+    if accel is None:
+        return speed * t
+    t1 = speed / accel  # end of the acceleration
+    return np.where(t < t1, 0.5 * accel * t * t, 0.5 * accel * t1 * t1 + speed * (t - t1))
 
 
 @dataclass
@@ -113,6 +157,10 @@ class CorridorScene:
         Size of one texel of the finest texture level, m.
     seed : int
         Texture randomness.
+    ground : {"noise", "faint", "checker", "stripes"}
+        Ground texture (:data:`GROUND_KINDS`): the default noise; a faint grain on one colour (almost no
+        corners, as a plain concrete floor); 0.64 m tiles with grout lines; painted stripes every
+        2.56 m across the path (the last two repeat along the path).
     """
 
     camera_height: float = 1.0
@@ -125,10 +173,13 @@ class CorridorScene:
     ground_rgb: tuple = (120, 108, 92)
     wall_rgb: tuple = (70, 105, 150)
     sky_rgb: tuple = (185, 210, 240)
+    ground: str = "noise"
 
     def __post_init__(self):
+        if self.ground not in GROUND_KINDS:
+            raise ValueError(f"ground: expected one of {', '.join(GROUND_KINDS)}, got {self.ground!r}")
         rng = as_rng(self.seed)
-        self._ground = _texture(rng, self.tex_size, self.ground_rgb, 38.0, (10.0, 6.0, 2.0))
+        self._ground = _ground_texture(self.ground, rng, self.tex_size, self.ground_rgb)
         self._wall = _texture(rng, self.tex_size, self.wall_rgb, 45.0, (25.0, 8.0, -12.0))
 
     def render(self, T_world_cam, K, width, height, *, noise_std=0.0, rng=None):
@@ -235,11 +286,13 @@ class CorridorScene:
 
 
 def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, yaw_rate=0.1, dt=0.1,
-                  camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, seed=0):
+                  camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, seed=0, ground="noise", accel=None):
     """Render a synthetic sequence along an exact unicycle path.
 
     ``pitch`` (rad, > 0 down) tilts the camera about its x axis relative to the level vehicle frame
-    (the optical centre stays on the path, ``camera_height`` above the ground).
+    (the optical centre stays on the path, ``camera_height`` above the ground). ``ground`` is the
+    ground texture (:data:`GROUND_KINDS`). With ``accel`` (m/s²) the camera starts from rest and speeds
+    up to ``speed`` on the same circle; ``speeds`` (n,) holds the true speed at every image.
 
     Returns a dict: ``rgb`` (n, H, W, 3) uint8, ``ground_mask`` (n, H, W) bool, ``depth`` (n, H, W)
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
@@ -247,8 +300,8 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     """
     K = intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
-    scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed)
-    level = unicycle_poses(n_frames, dt, speed, yaw_rate)
+    scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground)
+    level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)
     M = np.eye(4)
     cp, sp = np.cos(pitch), np.sin(pitch)
     M[:3, :3] = [[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]]  # camera -> level rotation
@@ -260,5 +313,7 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     depth = np.empty((n_frames, height, width), np.float32)
     for i, T in enumerate(world_cam):
         rgb[i], mask[i], depth[i] = scene.render(T, K, width, height, noise_std=noise_std, rng=rng)
-    return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=np.arange(n_frames) * dt, K=K,
-                camera_height=camera_height, speed=speed, yaw_rate=yaw_rate, pitch=pitch)
+    times = np.arange(n_frames) * dt
+    speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
+    return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
+                speed=speed, yaw_rate=yaw_rate, pitch=pitch, speeds=speeds)

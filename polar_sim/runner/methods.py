@@ -172,11 +172,11 @@ register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G o
 # -- vo (the ground experiments) --
 
 
-def _groundvo_factory(model, sampling, **fixed):
+def _groundvo_factory(model, sampling):
     def factory(K, camera_height, *, seed=0, **params):
         from polar_sim.ground import GroundVO
 
-        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **{**fixed, **params})
+        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **params)
 
     factory.__name__ = f"groundvo_{model}_{sampling}"
     return factory
@@ -197,16 +197,24 @@ for _name, (_model, _sampling) in {"u2": ("2param", "uniform"), "w2": ("2param",
     register_method("vo", _name, _groundvo_factory(_model, _sampling),
                     description=f"GroundVO, {_model} ground model, {_sampling} RANSAC sampling")
 def _w6_nocal(K, camera_height, *, seed=0, **params):
-    from polar_sim.ground import GroundVO
+    from polar_sim.ground import CalibrationConfig, ClassifierConfig, GroundVO
 
-    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calibration="none",
-                    train_depth="off", decay_samples="off", ng_outlier_sigma=3.0, ng_outlier_history=False, **params)
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed,
+                    calibration=CalibrationConfig(method="none"),
+                    classifier=ClassifierConfig(train_depth=None, decay_samples=None), **params)
+
+
+def _w6_ng6h(K, camera_height, *, seed=0, **params):
+    from polar_sim.ground import ClassifierConfig, GroundVO
+
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed,
+                    classifier=ClassifierConfig(ng_outlier_sigma=6.0, ng_outlier_history=True), **params)
 
 
 register_method("vo", "w6_nocal", _w6_nocal,
                 description="w6 with the spec's classifier training (no depth limit, plain decay by alpha) "
                             "and uncalibrated ground_prob: the earlier behaviour, for comparison")
-register_method("vo", "w6_ng6h", _groundvo_factory("6param", "weighted", ng_outlier_sigma=6.0, ng_outlier_history=True),
+register_method("vo", "w6_ng6h", _w6_ng6h,
                 description="w6 with the stricter non-ground outlier rule (6 sigma, never-inlier tracks): "
                             "better on weakly textured ground, not the default")
 register_method("vo", "mono", _held_scale_vo,

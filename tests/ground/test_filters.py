@@ -40,3 +40,15 @@ def test_kf_from_wide_prior_converges_on_constant_measurements():
         kf.predict()
         kf.update(8.0)
     assert abs(kf.x - 8.0) < 0.3
+
+
+def test_kf_measurement_variance_above_the_nominal_noise_is_used():
+    # A measurement with its own variance larger than r is fused with that variance (and the adaptive
+    # rule starts from it); a smaller one keeps the nominal r, so variance 0 is the plain update.
+    kf = KF1D(0.0, 2.0, 0.15, 3.0, adaptive="innovation")
+    assert kf.gain(1.0, var=30.0) == (2.0 / 32.0, 30.0)
+    assert kf.gain(1.0, var=0.5) == kf.gain(1.0) == (2.0 / 5.0, 3.0)
+    k, r = kf.gain(10.0, var=30.0)  # innovation² 100 > P + 30: r = 100 - P
+    assert r == 98.0
+    kf.update(1.0, var=30.0)
+    assert np.isclose(kf.x, 2.0 / 32.0) and np.isclose(kf.P, 30.0 * 2.0 / 32.0)

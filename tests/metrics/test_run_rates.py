@@ -117,6 +117,7 @@ def test_pooled_ece_of_stacked_frame_counts():
     assert metrics.pooled_ece(stack) == pytest.approx((0.2 + 0.3 + 0.95) / 7, abs=1e-15)
     assert metrics.pooled_ece(stack[None]) == metrics.pooled_ece(stack)
     assert np.isnan(metrics.pooled_ece(np.zeros((4, 3, 15))))
-    for bad in (np.zeros((3,)), np.zeros((2, 4, 15)), np.full((1, 3, 15), "x"), -np.ones((1, 3, 15))):
-        with pytest.raises(ValueError, match="counts"):
+    for bad, err in ((np.zeros((3,)), ValueError), (np.zeros((2, 4, 15)), ValueError),
+                     (np.full((1, 3, 15), "x"), TypeError), (-np.ones((1, 3, 15)), ValueError)):
+        with pytest.raises(err, match="counts"):
             metrics.pooled_ece(bad)

@@ -1,0 +1,34 @@
+"""``vo`` plug-ins for the dense ground alignment's dev comparison (issue 35, item 1).
+
+GroundVO's default runs the dense alignment (``DenseConfig``); these plug-ins are the variants it was
+compared with on ``dev`` routes, for ``polar-sim run ground_odometry`` / ``ground_appearance`` (run
+from the repository root)::
+
+    polar-sim run ground_odometry --split dev --set 'method=[w6,benchmarks.bench_ground_dense:w6_nodense]'
+
+- ``w6_nodense``: w6 without the dense stage (bit-identical to w6 before the dense stage existed).
+- ``w6_nolabels``: w6 with the dense speed but without the dense ground self-labels.
+- ``w6_plane``: w6 with the dense fit's plane model (no pitch change between images).
+"""
+
+
+def _w6(K, camera_height, seed, params, **dense):
+    from polar_sim.ground import DenseConfig, GroundVO
+
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, dense=DenseConfig(**dense),
+                    **params)
+
+
+def w6_nodense(K, camera_height, *, seed=0, **params):
+    """w6 without the dense ground alignment."""
+    return _w6(K, camera_height, seed, params, enabled=False)
+
+
+def w6_nolabels(K, camera_height, *, seed=0, **params):
+    """w6 with the dense speed, without the dense ground self-labels."""
+    return _w6(K, camera_height, seed, params, label_evidence=0.0)
+
+
+def w6_plane(K, camera_height, *, seed=0, **params):
+    """w6 with the dense fit's plane model (arc length and yaw change only)."""
+    return _w6(K, camera_height, seed, params, model="plane")

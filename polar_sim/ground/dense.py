@@ -1,0 +1,496 @@
+"""Dense, direct alignment of the ground between two images through the plane-induced homography.
+
+The ground is the plane y = h of the level frame (camera height h, y down). A camera moving along a
+unicycle arc of length s with a yaw change a between two images maps a ground pixel of the first
+image to the second by H(s, a) = M R_yᵀ (I − p(s, a) nᵀ / h) M⁻¹, with p the second camera's
+position in the first's level frame, n = (0, 1, 0) and M the level-frame-to-pixel map (the same
+homography as :func:`polar_sim.ground.frontend.ground_homography`). :func:`align_ground` finds
+(s, a) by Gauss–Newton on the photometric error of ground pixels of the first image against the
+second one (forward additive, analytic Jacobian, Tukey weights), coarse to fine, from a predicted
+(s, a). Every textured pixel of the ground counts, not only corners, so the metric distance s holds
+where a corner detector finds almost nothing on the ground (a faint grain on one colour).
+
+The fit returns its covariance (from the Gauss–Newton Hessian and the residuals) and an aliasing
+flag: on a texture that repeats along the path (tiles, painted stripes) shifts of s by a period fit
+too. The flag is raised when the cost along s has another minimum, within ``alias_range`` of the
+solution, whose cost is within ``alias_margin`` of the best; the caller then down-weights the fit.
+
+:func:`ground_evidence` turns a converged fit into per-pixel self-labels: ground where the pixel
+agrees with the second image under the ground homography clearly better than under the rotation-only
+homography of points at infinity (parallax that only the ground explains).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+__all__ = ["DenseFit", "Pyramid", "WARP_MODELS", "align_ground", "ground_evidence", "label_points", "fuse_measurements",
+           "select_pixels"]
+
+_TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency at the normal law)
+_N = np.array([0.0, 1.0, 0.0])  # ground normal in the level frame (y down)
+
+
+@dataclass(frozen=True)
+class DenseFit:
+    """Result of :func:`align_ground`.
+
+    Attributes
+    ----------
+    ok : bool
+        A fit converged on enough pixels (``n_pixels`` >= the minimum, finite, non-singular).
+    s, a : float
+        Arc length along the path (m) and yaw change (rad, about +y) between the two images.
+    cov : ndarray of shape (2, 2)
+        Covariance of (s, a), from the Gauss–Newton Hessian scaled by the robust residual variance.
+    n_pixels : int
+        Ground pixels with a non-zero weight at the solution.
+    sigma : float
+        Robust scale of the photometric residuals at the solution, grey levels.
+    aliased : bool
+        The cost along s has another minimum as good as the solution's (a periodic texture).
+    iterations : int
+        Gauss–Newton iterations run (all levels).
+    params : tuple
+        All fitted parameters: (s, a) and the pitch and roll changes of the models that have them.
+    band_spread : float
+        Half the difference of s fitted on the nearer and on the farther half of the pixels, m: where
+        the ground is not the plane the model assumes (a slope or a crest ahead), the two disagree.
+    """
+
+    ok: bool
+    s: float
+    a: float
+    cov: np.ndarray
+    n_pixels: int
+    sigma: float
+    aliased: bool
+    iterations: int
+    params: tuple = ()
+    band_spread: float = np.nan
+
+
+def _failed(s0, a0, iterations=0):
+    return DenseFit(False, float(s0), float(a0), np.full((2, 2), np.inf), 0, np.nan, False, iterations)
+
+
+def _gradients(img):
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    return gx, gy
+
+
+class Pyramid:
+    """A grey image (H, W) uint8 prepared for :func:`align_ground`: per level (0 = full size, then
+    halved with ``cv2.INTER_AREA``) the image Gaussian-smoothed by ``sigma`` px of that level's full-size
+    scale (2^level sigma), as float32, and its gradients. Made once per image, used by the two image
+    pairs it belongs to."""
+
+    def __init__(self, grey, levels, sigma):
+        self.shape = grey.shape
+        self.img, self.grad = [], []
+        src = grey.astype(np.float32)
+        for lv in range(levels):
+            f = 2 ** lv
+            img = cv2.GaussianBlur(src, (0, 0), sigma * f) if sigma > 0 else src
+            if f > 1:
+                img = cv2.resize(img, (grey.shape[1] // f, grey.shape[0] // f), interpolation=cv2.INTER_AREA)
+            self.img.append(img)
+            self.grad.append(_gradients(img))
+
+    @property
+    def levels(self):
+        return len(self.img)
+
+
+def select_pixels(grad, mask, *, block, max_pixels, min_gradient):
+    """Template pixels (m, 2) (column, row) inside ``mask`` (H, W) bool of an image with gradients
+    ``grad`` ((H, W), (H, W)): in every ``block`` x ``block`` cell the pixel of largest gradient, if above
+    ``min_gradient`` (grey levels per px); at most ``max_pixels``, evenly spread over them. Spreading
+    the pixels over the ground keeps a few strong edges (an obstacle's foot) from dominating a faint
+    ground."""
+    rows_any = np.flatnonzero(mask.any(axis=1))
+    if len(rows_any) == 0:
+        return np.zeros((0, 2))
+    r0 = rows_any[0] - rows_any[0] % block  # only the rows of the mask, on the block grid
+    r1 = rows_any[-1] + 1
+    m, gx, gy = mask[r0:r1], grad[0][r0:r1], grad[1][r0:r1]
+    H, W = m.shape
+    hb, wb = H // block, W // block
+    if hb == 0 or wb == 0:
+        return np.zeros((0, 2))
+    mag = np.where(m, gx * gx + gy * gy, 0.0).astype(np.float32)  # squared: the same order, no root
+    cells = mag[:hb * block, :wb * block].reshape(hb, block, wb, block).transpose(0, 2, 1, 3).reshape(hb, wb, -1)
+    arg = cells.argmax(axis=2)
+    best = np.take_along_axis(cells, arg[..., None], axis=2)[..., 0]
+    rows = r0 + np.arange(hb)[:, None] * block + arg // block
+    cols = np.arange(wb)[None, :] * block + arg % block
+    keep = best > min_gradient * min_gradient
+    xy = np.stack([cols[keep], rows[keep]], axis=1).astype(np.float64)
+    if len(xy) > max_pixels:
+        # An even subset, not the strongest: on a faint ground the strongest are all off the ground.
+        xy = xy[np.linspace(0, len(xy) - 1, max_pixels).astype(np.intp)]
+    return xy
+
+
+def _rot_x(b):
+    cb, sb = np.cos(b), np.sin(b)
+    return np.array([[1.0, 0.0, 0.0], [0.0, cb, -sb], [0.0, sb, cb]])
+
+
+def _rot_z(c):
+    cc, sc = np.cos(c), np.sin(c)
+    return np.array([[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]])
+
+
+#: Parameters of each warp model: the unicycle step (s, a) over a level plane, plus the pitch change b
+#: of the chassis between the images (hills), plus its roll change c (side slopes); or (s, a, b) over a
+#: curved ground through the point h below the camera (``"surface"``: slope, curvature and side slope).
+WARP_MODELS = {"plane": 2, "pitch": 3, "pitch_roll": 4, "surface": 6}
+#: Prior standard deviations of the surface model's shape (forward slope, forward curvature 1/m, side
+#: slope) around the level plane.
+SURFACE_PRIOR_SD = (0.05, 0.002, 0.03)
+
+
+class _Warp:
+    """The ground homography of one pyramid level as a function of the motion parameters p, and its
+    derivatives: p = (s, a) arc length (m) and yaw change (rad) of a unicycle step over the plane y = h
+    of the level frame; ``model="pitch"`` adds the pitch change b (rad, about the level x axis) between
+    the images, ``"pitch_roll"`` also the roll change c (about z): a chassis that pitches and rolls
+    over uneven ground, the ground still the plane h below the camera."""
+
+    def __init__(self, cam, h, model="plane"):
+        self.M = cam.K @ cam.R_lc.T  # level-frame normalised coordinates -> pixels
+        self.Minv = np.linalg.inv(self.M)
+        self.h = h
+        self.n_params = WARP_MODELS[model]
+
+    def level(self, p):
+        """The homography (3, 3) in level-frame normalised coordinates."""
+        s, a = p[0], p[1]
+        ca, sa = np.cos(a), np.sin(a)
+        if abs(a) < 1e-4:  # (1 - cos a)/a and sin a/a by their series
+            f1, f2 = a / 2 - a ** 3 / 24, 1 - a * a / 6
+        else:
+            f1, f2 = (1 - ca) / a, sa / a
+        R = np.array([[ca, 0.0, -sa], [0.0, 1.0, 0.0], [sa, 0.0, ca]])  # R_y(a)ᵀ
+        if len(p) > 2:
+            R = _rot_x(p[2]).T @ R
+        if len(p) > 3:
+            R = _rot_z(p[3]).T @ R
+        pos = s * np.array([f1, 0.0, f2])
+        return R @ (np.eye(3) - np.outer(pos, _N) / self.h)
+
+    def matrices(self, p):
+        """The pixel homography H(p) (3, 3) and its derivatives (n_params, 3, 3) (central differences)."""
+        p = np.asarray(p, dtype=np.float64)
+        H = self.M @ self.level(p) @ self.Minv
+        dH = np.empty((len(p), 3, 3))
+        for i, e in enumerate((1e-6, 1e-7, 1e-7, 1e-7)[:len(p)]):  # steps in m, then rad
+            d = np.zeros(len(p))
+            d[i] = e
+            dH[i] = self.M @ ((self.level(p + d) - self.level(p - d)) / (2 * e)) @ self.Minv
+        return H, dH
+
+    def points(self, xh, p, jacobian=False):
+        """Positions (m, 2) in the second image of pixels ``xh`` (m, 3) (homogeneous) of the first under
+        p; with ``jacobian`` also their derivatives (n_params, m, 2)."""
+        H, dH = self.matrices(p) if jacobian else (self.M @ self.level(np.asarray(p, float)) @ self.Minv, None)
+        X = xh @ H.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = X[:, :2] / X[:, 2:3]
+            if not jacobian:
+                return x
+            J = np.empty((len(dH), len(xh), 2))
+            for i in range(len(dH)):
+                dX = xh @ dH[i].T
+                J[i] = (dX[:, :2] - x * dX[:, 2:3]) / X[:, 2:3]
+        return x, J
+
+
+class _SurfaceWarp:
+    """The warp of ground pixels over a curved ground y = h + c1 z + c2 z² + c3 x (level frame of the
+    first image, through the point h below the camera) under the step (s, a) and pitch change b:
+    p = (s, a, b, c1, c2, c3). A pixel's depth is the ray's first intersection with the surface; the
+    shape carries a Gaussian prior (``prior_sd``) around the level plane, as the 6-parameter RANSAC
+    model carries a ridge."""
+
+    n_params = 6
+
+    def __init__(self, cam, h, prior_sd=SURFACE_PRIOR_SD):
+        self.M = cam.K @ cam.R_lc.T
+        self.Minv = np.linalg.inv(self.M)
+        self.h = h
+        self.prior_sd = np.r_[np.inf, np.inf, np.inf, prior_sd]
+
+    def _project(self, rays, p):
+        s, a, b, c1, c2, c3 = p
+        ca, sa = np.cos(a), np.sin(a)
+        f1, f2 = (a / 2 - a ** 3 / 24, 1 - a * a / 6) if abs(a) < 1e-4 else ((1 - ca) / a, sa / a)
+        R = _rot_x(b).T @ np.array([[ca, 0.0, -sa], [0.0, 1.0, 0.0], [sa, 0.0, ca]])
+        u, v = rays[:, 0], rays[:, 1]
+        B = v - c1 - c3 * u
+        with np.errstate(invalid="ignore", divide="ignore"):
+            Z = 2.0 * self.h / (B + np.sqrt(B * B - 4.0 * c2 * self.h))  # the near root, stable for c2 -> 0
+            Z = np.where(np.isfinite(Z) & (Z > 0), Z, np.nan)
+            X = rays * Z[:, None] - s * np.array([f1, 0.0, f2])
+            P = X @ (self.M @ R).T
+            return P[:, :2] / P[:, 2:3]
+
+    def points(self, xh, p, jacobian=False):
+        """As :meth:`_Warp.points` (forward differences for the Jacobian)."""
+        r = xh @ self.Minv.T
+        rays = r / r[:, 2:3]
+        p = np.asarray(p, dtype=np.float64)
+        x = self._project(rays, p)
+        if not jacobian:
+            return x
+        J = np.empty((6, len(xh), 2))
+        for i, e in enumerate((1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-6)):
+            q = p.copy()
+            q[i] += e
+            J[i] = (self._project(rays, q) - x) / e
+        return x, J
+
+
+def _make_warp(model, cam, h):
+    return _SurfaceWarp(cam, h) if model == "surface" else _Warp(cam, h, model)
+
+
+def _sample(img, xy):
+    """Bilinear samples of ``img`` at ``xy`` (m, 2) float (NaN outside the image)."""
+    if len(xy) == 0:
+        return np.zeros(0)
+    mx = np.ascontiguousarray(xy[:, 0], dtype=np.float32).reshape(1, -1)
+    my = np.ascontiguousarray(xy[:, 1], dtype=np.float32).reshape(1, -1)
+    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    return out.ravel().astype(np.float64)
+
+
+def _tukey(r, scale):
+    u = r / (_TUKEY_C * scale)
+    return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+
+
+def _cost(warp, tmpl, img, xh, prior_w, p, scale):
+    """Mean Tukey cost of the template pixels at p (pixels leaving the image count as outliers)."""
+    v = _sample(img, warp.points(xh, p)) - tmpl
+    u = np.where(np.isfinite(v), v / (_TUKEY_C * scale), np.inf)
+    rho = np.where(np.abs(u) < 1.0, 1.0 - (1.0 - u * u) ** 3, 1.0)
+    return float(np.sum(prior_w * rho) / np.sum(prior_w))
+
+
+def _gauss_newton(warp, tmpl, img, grad, xh, prior_w, p, *, max_iter, floor, min_pixels, tol):
+    """Gauss–Newton on the motion parameters p at one level; returns (p, H (k, k), sigma, n, iterations)
+    or None. Stops when a step moves the template's pixels by less than ``tol`` px (median)."""
+    p = np.array(p, dtype=np.float64)
+    H = np.zeros((len(p), len(p)))
+    sigma, n, it = np.nan, 0, 0
+    for it in range(1, max_iter + 1):
+        x0, Jp = warp.points(xh, p, jacobian=True)
+        r = _sample(img, x0) - tmpl
+        Jp = np.nan_to_num(Jp)
+        gx, gy = _sample(grad[0], x0), _sample(grad[1], x0)
+        ok = np.isfinite(r) & np.isfinite(gx) & np.isfinite(gy)
+        if ok.sum() < min_pixels:
+            return None
+        r, gx, gy, w0 = r[ok], gx[ok], gy[ok], prior_w[ok]
+        if it == 1:  # the residual scale of the prediction's basin, kept for the level
+            sigma = max(1.4826 * float(np.median(np.abs(r))), floor)
+        w = w0 * _tukey(r, sigma)
+        n = int(np.count_nonzero(w))
+        if n < min_pixels:
+            return None
+        Jp = Jp[:, ok]
+        J = (gx[None, :] * Jp[..., 0] + gy[None, :] * Jp[..., 1]).T  # (m, k)
+        Jw = J * w[:, None]
+        H = Jw.T @ J
+        g = Jw.T @ r
+        prior = getattr(warp, "prior_sd", None)
+        if prior is not None:  # MAP: photometric cost in units of its variance, plus the shape prior
+            P = sigma * sigma / prior ** 2
+            H = H + np.diag(P)
+            g = g + P * p
+        if not np.all(np.isfinite(H)) or np.linalg.cond(H) > 1e12:
+            return None
+        step = -np.linalg.solve(H, g)
+        p = p + step
+        if np.median(np.abs(np.tensordot(step, Jp, axes=1)).sum(axis=1)) < tol:
+            break
+    # The noise scale at the solution (for the covariance and the self-labels): the weighted RMS of the
+    # final residuals under the Tukey weights of a robust scale, i.e. the spread of the inliers.
+    r = _sample(img, warp.points(xh, p)) - tmpl
+    ok = np.isfinite(r)
+    r, w0 = r[ok], prior_w[ok]
+    if len(r):
+        w = w0 * _tukey(r, max(1.4826 * float(np.median(np.abs(r))), floor))
+        sigma = max(float(np.sqrt(np.sum(w * r * r) / max(np.sum(w), 1e-300))), floor)
+    return p, H, sigma, n, it
+
+
+def _aliased(warp, tmpl, img, xh, prior_w, p, scale, *, alias_range, alias_margin, steps=6, max_pixels=400):
+    """Another minimum of the cost along s within ``alias_range`` m of the solution p as low (within
+    ``alias_margin``, relative) as the solution's (on an evenly spread subset of the pixels)."""
+    if len(xh) > max_pixels:
+        sub = np.linspace(0, len(xh) - 1, max_pixels).astype(np.intp)
+        tmpl, xh, prior_w = tmpl[sub], xh[sub], prior_w[sub]
+    offs = np.linspace(-alias_range, alias_range, 2 * steps + 1)
+    shifted = np.tile(p, (len(offs), 1))
+    shifted[:, 0] += offs
+    c = np.array([_cost(warp, tmpl, img, xh, prior_w, q, scale) for q in shifted])
+    best = c[steps]
+    far = np.abs(offs) > 1.5 * alias_range / steps  # beyond the solution's own basin
+    local = np.r_[False, (c[1:-1] <= c[:-2]) & (c[1:-1] <= c[2:]), False]
+    return bool(np.any(local & far & (c <= best + alias_margin * (1.0 - best) + 1e-12)))
+
+
+def _band_spread(warp, tmpl, cur, xh, w, p, floor, min_pixels, iterations=3):
+    """Half the difference of s re-fitted (from p) on the pixels nearer and farther than the median
+    image row (the depth bands of a level ground); NaN if a band fails."""
+    near = xh[:, 1] >= np.median(xh[:, 1])
+    s = []
+    for band in (near, ~near):
+        res = _gauss_newton(warp, tmpl[band], cur.img[0], cur.grad[0], xh[band], w[band], p, max_iter=iterations,
+                            floor=floor, min_pixels=min_pixels, tol=0.0)
+        if res is None:
+            return float("nan")
+        s.append(res[0][0])
+    return 0.5 * abs(s[0] - s[1])
+
+
+def _level_pixels(prev, lv, mask, weights, *, block, max_pixels, min_gradient, gradient_weight):
+    """Template pixels of level ``lv`` of ``prev``: homogeneous positions (m, 3), values (m,), weights (m,)."""
+    f = 2 ** lv
+    if f > 1:
+        mask = cv2.resize(mask.astype(np.uint8), prev.img[lv].shape[::-1], interpolation=cv2.INTER_NEAREST) > 0
+    xy = select_pixels(prev.grad[lv], mask, block=block, max_pixels=max_pixels, min_gradient=min_gradient)
+    w = np.ones(len(xy))
+    if weights is not None and len(xy):
+        full = np.clip(np.rint(xy * f).astype(np.intp), 0, [weights.shape[1] - 1, weights.shape[0] - 1])
+        w = weights[full[:, 1], full[:, 0]].astype(np.float64)
+    if gradient_weight > 0 and len(xy):
+        # Strong edges are the most sensitive to what the warp does not model (a texture's blur that
+        # changes with distance, sub-pixel shading): weigh a pixel by c² / (c² + |∇I|²), as DSO does.
+        g2 = _sample(prev.grad[lv][0], xy) ** 2 + _sample(prev.grad[lv][1], xy) ** 2
+        w = w * gradient_weight ** 2 / (gradient_weight ** 2 + g2)
+    return np.c_[xy, np.ones(len(xy))], _sample(prev.img[lv], xy), w
+
+
+def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_pixels=1500, min_gradient=0.05,
+                 min_pixels=200, max_iter=10, residual_floor=0.3, tol=0.05, gradient_weight=0.0, model="plane",
+                 alias_range=0.0, alias_margin=0.2):
+    """Align the ground of ``prev`` to ``cur`` (two :class:`Pyramid`) through the ground homography.
+
+    Parameters
+    ----------
+    cam : LevelCamera
+        The full-size images' camera.
+    h : float
+        Camera height above the ground, m.
+    s0, a0 : float
+        Predicted arc length (m) and yaw change (rad) between the images.
+    mask : ndarray of shape (H, W), bool
+        Pixels of ``prev`` that may be ground (below the horizon, within the depth band).
+    weights : ndarray of shape (H, W), optional
+        Prior weight of each pixel of ``prev`` being ground (e.g. the learned P(ground)); 1 if None.
+    block, max_pixels, min_gradient, min_pixels : see :func:`select_pixels`; a fit needs ``min_pixels``.
+    max_iter, tol : int, float
+        Gauss–Newton iterations per level, and the convergence test: a step that moves the pixels by
+        less than ``tol`` px (median).
+    residual_floor : float
+        Lower bound of the robust residual scale, grey levels (8-bit quantisation).
+    gradient_weight : float
+        c of the gradient weight c² / (c² + |∇I|²) of each pixel, grey levels per px (0: none).
+    model : {"plane", "pitch", "pitch_roll", "surface"}
+        The parameters (:data:`WARP_MODELS`): also the chassis' pitch change, and its roll change; or a
+        curved ground.
+    alias_range, alias_margin : float
+        Aliasing test along s (m; 0 = no test) and its relative cost margin (see the module docstring).
+
+    Returns
+    -------
+    DenseFit
+    """
+    p, its = np.r_[s0, a0, np.zeros(WARP_MODELS[model] - 2)].astype(np.float64), 0
+    for lv in range(prev.levels - 1, -1, -1):
+        warp = _make_warp(model, cam.scaled(2.0 ** -lv) if lv else cam, h)
+        xh, tmpl, w = _level_pixels(prev, lv, mask, weights, block=block, max_pixels=max_pixels,
+                                    min_gradient=min_gradient, gradient_weight=gradient_weight)
+        if len(xh) < min_pixels:
+            return _failed(s0, a0, its)
+        res = _gauss_newton(warp, tmpl, cur.img[lv], cur.grad[lv], xh, w, p, max_iter=max_iter,
+                            floor=residual_floor, min_pixels=min_pixels, tol=tol)
+        if res is None:
+            return _failed(s0, a0, its)
+        p, Hm, scale, n, it = res
+        its += it
+    if not np.all(np.isfinite(p)):
+        return _failed(s0, a0, its)
+    cov = (scale ** 2 * np.linalg.inv(Hm))[:2, :2]
+    spread = _band_spread(warp, tmpl, cur, xh, w, p, residual_floor, min_pixels // 2)
+    aliased = alias_range > 0 and _aliased(warp, tmpl, cur.img[0], xh, w, p, scale, alias_range=alias_range,
+                                           alias_margin=alias_margin)
+    return DenseFit(True, float(p[0]), float(p[1]), cov, n, float(scale), aliased, its, tuple(float(x) for x in p),
+                    spread)
+
+
+def ground_evidence(prev, cur, cam, h, fit, mask, *, window=7, agreement=2.0):
+    """Per-pixel ground evidence (H, W) float32 of ``prev`` (a :class:`Pyramid`) under a converged fit:
+    the windowed mean of (squared residual under the rotation alone, where points at infinity go) −
+    (squared residual under the fitted ground motion), grey levels², where the fitted motion agrees
+    with the pixel (windowed mean squared residual within ``agreement`` times the fit's residual scale)
+    inside ``mask``; 0 elsewhere. Large where the pixel's parallax is the ground's; near 0 where the
+    image has no texture to tell."""
+    p = np.array(fit.params or (fit.s, fit.a))
+    warp = _make_warp({2: "plane", 3: "pitch", 4: "pitch_roll", 6: "surface"}[len(p)], cam, h)
+    rows = np.flatnonzero(mask.any(axis=1))
+    out = np.zeros(prev.shape, np.float32)
+    if len(rows) == 0:
+        return out
+    r0, r1 = max(rows[0] - window, 0), min(rows[-1] + window + 1, prev.shape[0])
+    yy, xx = np.mgrid[r0:r1, 0:prev.shape[1]]
+    xh = np.stack([xx.ravel(), yy.ravel(), np.ones(xx.size)], axis=1).astype(np.float64)
+    p_inf = p.copy()
+    p_inf[0] = 0.0  # the same rotation, no translation
+    p_img = prev.img[0][r0:r1]
+    res = []
+    for q in (p, p_inf):
+        # The previous image's pixel x matches the current image at warp(x): sample the current image there.
+        x = warp.points(xh, q).astype(np.float32)
+        x[~np.isfinite(x)] = -1.0
+        w = cv2.remap(cur.img[0], x[:, 0].reshape(xx.shape), x[:, 1].reshape(xx.shape), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE)
+        res.append((w - p_img) ** 2)
+    g = cv2.blur(res[0], (window, window), borderType=cv2.BORDER_REPLICATE)
+    e = cv2.blur(res[1], (window, window), borderType=cv2.BORDER_REPLICATE) - g
+    # Near non-ground (a wall, a box) has parallax too: the ground motion must also fit the pixel.
+    agree = g <= (agreement * fit.sigma) ** 2
+    out[r0:r1] = np.where(mask[r0:r1] & agree, e, 0.0)
+    return out
+
+
+def label_points(evidence, threshold, max_labels, step=4):
+    """Up to ``max_labels`` pixel positions (m, 2) (column, row) on a ``step``-px grid where ``evidence``
+    (H, W) exceeds ``threshold``, spread evenly over them (deterministic)."""
+    grid = evidence[::step, ::step]
+    rows, cols = np.nonzero(grid > threshold)
+    if len(rows) > max_labels:
+        pick = np.unique(np.linspace(0, len(rows) - 1, max_labels).astype(np.intp))
+        rows, cols = rows[pick], cols[pick]
+    return np.stack([cols * step, rows * step], axis=1).astype(np.float64)
+
+
+def fuse_measurements(z1, var1, z2, var2, gate):
+    """Inverse-variance fusion of two measurements of one quantity: returns (value, variance). Two that
+    differ by more than ``gate`` standard deviations of their difference are not averaged: the one with
+    the smaller variance is returned alone (one of them is an outlier, and the mean would be wrong too)."""
+    v1, v2 = max(float(var1), 1e-300), max(float(var2), 1e-300)
+    if not np.isfinite(v1) and not np.isfinite(v2):
+        return (float(z1), v1) if v1 <= v2 else (float(z2), v2)
+    if (z1 - z2) ** 2 > gate * gate * (v1 + v2):
+        return (float(z1), v1) if v1 <= v2 else (float(z2), v2)
+    w1, w2 = 1.0 / v1, 1.0 / v2
+    return float((w1 * z1 + w2 * z2) / (w1 + w2)), float(1.0 / (w1 + w2))
