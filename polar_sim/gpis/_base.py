@@ -15,9 +15,11 @@ import numpy as np
 from polar_sim._validation import as_points, as_positive_float, check_updated
 from polar_sim.params import Parameterised
 from polar_sim.gpis import _io
-from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
-from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
-                                     gather_training, query_gp)
+from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights, knn
+from polar_sim.gpis._kernels import (_slot_samples, apply_new, apply_reeval, candidates,
+                                     dirty_slots, gather_training)
+from polar_sim.gpis._icp import register_2d
+from polar_sim.gpis._query import PARALLEL_POINTS, faithful, query_gp
 from polar_sim.gpis._localgp import NOGRAD_VALUE_NOISE, GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
 
@@ -187,6 +189,7 @@ class GPISMapBase(Parameterised):
         self.free_ = FreeSpace(self.dim, self._free_res(), reach=self._reach(p))
         self.n_updates_ = 0
         self.version_ = 0
+        self._index_samples()
 
     # -- helpers --------------------------------------------------------------------------------
     def _hc(self):
@@ -218,8 +221,8 @@ class GPISMapBase(Parameterised):
         changed = []                      # world positions whose training sets changed
         # stage 2: re-evaluate visible samples
         cent, ptr, samp = candidates(scan.origin, scan.rmax, tr.geo, tr.cgrid, tr.gshape,
-                                     tr.goff, tr.node_sample, tr.node_internal, tr.level_off,
-                                     self._hc())
+                                     tr.goff, tr.node_internal, tr.level_off, self._hc(),
+                                     tr.slot_head, tr.link, tr.s_node)
         if len(cent):
             vis = self._child_visible(cent, scan)
             sel = np.repeat(vis, np.diff(ptr))
@@ -262,6 +265,7 @@ class GPISMapBase(Parameterised):
         else:
             self._retrain_dirty(np.concatenate(changed))
         self.free_.mark(scan.origin_sensor, getattr(scan, "free_hits", scan.hits))
+        self._index_samples()
         self.n_updates_ += 1
         self.version_ += 1
 
@@ -318,8 +322,8 @@ class GPISMapBase(Parameterised):
         if len(slots) == 0:
             return
         R = self._TRAIN_R * self._hc()
-        ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff,
-                                   tr.node_sample, tr.slot_coord, tr.pos, self._train_cap())
+        ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_head,
+                                   tr.link, tr.s_node, tr.slot_coord, tr.pos, self._train_cap())
         nonempty = np.diff(ptr) > 0
         slots = slots[nonempty]
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
@@ -407,10 +411,9 @@ class GPISMapBase(Parameterised):
         d = self.dim
         if n == 0:
             return np.zeros(0), np.zeros((0, d)), np.zeros(0)
-        far = np.abs(pts).max(1) > FAR_COORD
-        if far.any():
+        if np.abs(pts).max() > FAR_COORD:
             # squared distances of such points overflow; the map knows nothing there: the prior
-            return self._far_prior(pts, far)
+            return self._far_prior(pts, np.abs(pts).max(1) > FAR_COORD)
         if self._pub("query_mode"):
             out = self._gp_query(pts)
             return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
@@ -453,26 +456,71 @@ class GPISMapBase(Parameterised):
 
     def _faithful(self, pts):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
-        kd, idx = self._kd()
-        tr = self.tree_
-        if kd is None:
-            dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
-                                            self._surfel_radius(), self.free_,
-                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE,
-                                            sign_h=self._sign_width())
-            return dist, grad, var_far
+        tr, g = self.tree_, self.gps_
+        sptr, sidx = self._sample_index_
+        var_unobs = 1.0 + float(self.map_noise)
+        n, d = pts.shape
+        if len(sidx) == 0:
+            return far_field(pts, None, tr.pos, tr.nrm, tr.sp, tr.sg, self._surfel_radius(),
+                             self.free_, var_unobs)
         near, far = self._blend_band()
-        dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
-                                         self._surfel_radius(), self.free_,
-                                         1.0 + float(self.map_noise), near, far,
-                                         gate=self._SIGN_GATE, sign_h=self._sign_width(),
-                                         behind=self._BEHIND)
-        sel = np.flatnonzero(w > 0)
-        if len(sel):
-            out = self._gp_query(pts[sel])
-            blend_gp(sel, out, w, float(self.fbias), 1.0 + float(self.map_noise) - 1e-12, dist,
-                     grad, var, self._T_BLEND if self._VAR_BLEND else 0.0)
+        t_info = self._T_BLEND if self._VAR_BLEND else 0.0
+        k = min(4, len(sidx))
+        if n >= PARALLEL_POINTS:            # the GP part on all cores
+            gi = np.empty((n, k), np.int64)
+            knn(pts, k, tr.geo, tr.cgrid, tr.gshape, tr.goff, sptr, sidx, tr.pos, gi)
+            dist, grad, var, w = far_weights(pts, gi, tr.pos, tr.nrm, tr.sp, tr.sg,
+                                             self._surfel_radius(), self.free_, var_unobs, near,
+                                             far, gate=self._SIGN_GATE, sign_h=self._sign_width(),
+                                             behind=self._BEHIND)
+            sel = np.flatnonzero(w > 0)
+            if len(sel):
+                out = self._gp_query(pts[sel])
+                blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
+                         t_info)
+            return dist, grad, var
+        dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
+        faithful(pts, *self._faithful_args(), dist, grad, var)
         return dist, grad, var
+
+    def _faithful_args(self):
+        """The default query's kernel arguments after the points (``_query.faithful``)."""
+        tr, g, fr = self.tree_, self.gps_, self.free_
+        sptr, sidx = self._sample_index_
+        self._sync_slot_arrays()
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        near, far = self._blend_band()
+        return (min(4, len(sidx)), sptr, sidx, tr.pos, tr.nrm, tr.sp, tr.sg, float(self._SIGN_GATE),
+                bool(np.isfinite(self._SIGN_GATE)), float(self._surfel_radius()), fr.grid, fr.gshape,
+                fr.goff, float(fr.res), 1.0 + float(self.map_noise), float(near), float(far),
+                float(self._sign_width()), float(self._BEHIND), float(W), self._T_BLEND, False,
+                float(self.map_scale), v0, g0, float(self.fbias),
+                self._T_BLEND if self._VAR_BLEND else 0.0, tr.geo, tr.cgrid, tr.gshape, tr.goff,
+                tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
+                g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(g.m_max, 1))
+
+    def _register_native(self, pts, x0, opts):
+        """ICP-G of the base-frame points pts (n, 2) from the pose x0 in compiled code, for
+        :func:`polar_sim.registration.register_sdf` (same algorithm, same bits as its Python
+        loop); None where that loop must run instead: a 3D or published-mode map, one without
+        samples, or poses within reach of ``FAR_COORD``."""
+        if (self.dim != 2 or self._pub("query_mode") or not hasattr(self, "tree_")
+                or len(self._sample_index_[1]) == 0 or len(pts) >= PARALLEL_POINTS
+                or not np.abs(x0).max() + opts.step[0] * opts.max_iterations < 1e90):
+            return None
+        H = np.zeros((3, 3))
+        out = register_2d(pts, np.array(x0, np.float64), opts.max_iterations, opts.min_points,
+                          opts.tolerance, opts.kind, opts.scale, opts.sigma2, opts.max_variance,
+                          opts.step[0], opts.step[1], opts.corr[0], opts.corr[1],
+                          *self._faithful_args(), H)
+        return out[:9] + (H if out[11] else None,) + out[9:]
+
+    def _index_samples(self):
+        """Each cluster slot's samples (CSR), for the query's nearest-sample search; rebuilt
+        whenever the tree changed (the end of an update, a load)."""
+        tr = self.tree_
+        self._sample_index_ = _slot_samples(tr.node_sample, int(tr.counts[2]))
 
     def surface(self, res=None, band=None):
         """Zero level set of :meth:`query` near the observed samples.

@@ -20,7 +20,45 @@ def check_params(est, vec2=()):
 
     Floats must be finite and > 0 (>= 0 for fbias, noise floors, min_range, blend_near);
     ``vec2`` names hold 2-vectors. Raises ``ValueError``/``TypeError`` naming the parameter.
+    The result is remembered with an exact fingerprint of the values it was computed from
+    (every update asks again, and the answer changes only when a parameter does).
     """
+    memo = est.__dict__.get("_checked_memo")
+    vals = [getattr(est, k) for k in est._PARAMS]
+    if memo is not None and all(a is b and type(a) not in (np.ndarray, list)
+                                for a, b in zip(vals, memo[0])):
+        return dict(memo[2])            # the very same immutable objects: nothing changed
+    key = _fingerprint(est)
+    if key is not None and memo is not None and memo[1] == key:
+        est.__dict__["_checked_memo"] = (vals, key, memo[2])
+        return dict(memo[2])
+    out = _check(est, vec2)
+    if key is not None:
+        est.__dict__["_checked_memo"] = (vals, key, out)
+    return dict(out)
+
+
+def _fingerprint(est):
+    """The parameters' values with their types (arrays by dtype, shape and bytes); None when a
+    value is of another kind (it is then checked afresh every time)."""
+    key = []
+    for k in est._PARAMS:
+        v = getattr(est, k)
+        if isinstance(v, np.ndarray):
+            key.append((k, np.ndarray, v.dtype.str, v.shape, v.tobytes()))
+        elif isinstance(v, (tuple, list)) and all(type(x) in _PLAIN for x in v):
+            key.append((k, type(v), tuple((type(x), x) for x in v)))
+        elif type(v) in _PLAIN:
+            key.append((k, type(v), v))
+        else:
+            return None
+    return tuple(key)
+
+
+_PLAIN = (bool, int, float, str, type(None), np.float64, np.int64, np.bool_)
+
+
+def _check(est, vec2):
     out = {}
     for k in est._PARAMS:
         v = getattr(est, k)

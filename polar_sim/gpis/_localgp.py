@@ -91,6 +91,26 @@ def _cholesky(K):
 
 
 @nb.njit(cache=True)
+def _gradient_first(idx, hasg):
+    """``idx`` reordered with the samples that have a gradient observation first (stable), and
+    their mask."""
+    n = idx.shape[0]
+    out = np.empty(n, np.int64)
+    mask = np.zeros(n, np.uint8)
+    k = 0
+    for u in range(n):
+        if hasg[u]:
+            out[k] = idx[u]
+            mask[k] = 1
+            k += 1
+    for u in range(n):
+        if not hasg[u]:
+            out[k] = idx[u]
+            k += 1
+    return out, mask
+
+
+@nb.njit(cache=True)
 def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout,
                nograd=NOGRAD_VALUE_NOISE, vfloor=0.0):
     """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds
@@ -100,7 +120,10 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
     spec's 2.0), <= 0 their own position noise plus ``-nograd``. ``vfloor`` is added to every
     value noise taken from a sample's position noise (default mode: the GP's model error)."""
     n = idx.shape[0]
-    hasg, m = _obs_layout(idx, nrm, sg, dim)
+    hasg0, m = _obs_layout(idx, nrm, sg, dim)
+    # the samples with a gradient observation first: the gradient observation j of every
+    # component is then that of value observation j, and the query reads them contiguously
+    idx, hasg = _gradient_first(idx, hasg0)
     a = np.sqrt(3.0) / scale
     # observation list: values first, then component 1 of gradient samples, then 2, ...
     y = np.empty(m)

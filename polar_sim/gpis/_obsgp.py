@@ -52,37 +52,83 @@ class ObsGP1D:
         M = int((rg[:, 1] - rg[:, 0]).max()) + 1
         G = len(ranges)
         X = np.zeros((G, M))
-        A = np.zeros((G, M))
-        Kinv = np.zeros((G, M, M))
+        C = np.zeros(G)
+        sums = np.zeros((5, G, M + 1))
         _fit_groups(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(rho, np.float64),
-                    rg, float(scale), float(noise), X, A, Kinv)
-        mask = np.arange(M)[None, :] <= (rg[:, 1] - rg[:, 0])[:, None]
-        self.X, self.A, self.Kinv = X, A, Kinv
-        self.nobs = mask.sum(1).astype(np.int64)
+                    rg, float(scale), float(noise), X, C, sums)
+        self.X, self.C, self.sums = X, C, sums
+        self.nobs = (rg[:, 1] - rg[:, 0] + 1).astype(np.int64)
+
+    def args(self):
+        """The GP's arrays and constants, in the order the 1D kernels take them (``bounds``,
+        ``margin``, ``X``, ``C``, ``sums``, ``nobs``, ``scale``, ``noise``; see
+        ``_predict_one``); an empty GP has a single bound and answers nothing."""
+        if self.empty:
+            return (np.zeros(1), float(self.margin), np.zeros((1, 1)), np.zeros(1),
+                    np.zeros((5, 1, 2)), np.zeros(1, np.int64), float(self.scale),
+                    float(self.noise))
+        return (self.bounds, float(self.margin), self.X, self.C, self.sums, self.nobs,
+                float(self.scale), float(self.noise))
 
     def predict(self, phi):
         """(rho_hat, var) at angles phi (any shape)."""
         phi = np.asarray(phi, np.float64)
         shp = phi.shape
         flat = np.ascontiguousarray(phi.ravel())
-        rho = np.full(flat.shape, np.nan)
-        var = np.full(flat.shape, UNOBSERVABLE)
-        if not self.empty:
-            _predict_1d(flat, self.bounds, self.margin, self.X, self.A, self.Kinv, self.nobs,
-                        self.scale, self.noise, rho, var)
+        rho = np.empty(flat.shape)
+        var = np.empty(flat.shape)
+        _predict_1d(flat, *self.args(), rho, var)
         return rho.reshape(shp), var.reshape(shp)
 
 
 @nb.njit(cache=True)
-def _fit_groups(x, rho, ranges, scale, noise, X, A, Kinv):
-    """OU GP of each group: inverse covariance (via Cholesky) and weights K^-1 rho."""
+def _predict_one(x, b, margin, X, C, sums, nobs, scale, noise):
+    """(rho_hat, var) of the OU GP at angle x; (NaN, UNOBSERVABLE) outside its groups.
+
+    The OU kernel factorises on either side of x: with t = (x - c) / l, an observation at
+    X_j <= x has k_j = e^-t u_j, u_j = e^((X_j - c) / l), and one at X_j > x has k_j = e^t v_j,
+    v_j = e^-((X_j - c) / l). So with a = #{X_j <= x} the mean k.alpha and the quadratic form
+    k' K^-1 k are sums over the split at a, precomputed for every a (``_split_sums``): O(1) per
+    point instead of O(n^2).
+    """
+    G = b.shape[0] - 1
+    if not (G >= 1 and x >= b[0] + margin and x <= b[G] - margin):
+        return np.nan, UNOBSERVABLE
+    g = np.searchsorted(b, x) - 1          # b[g] < x <= b[g + 1]
+    if g < 0 or g >= G or x == b[g + 1]:
+        return np.nan, UNOBSERVABLE
+    a = np.searchsorted(X[g, :nobs[g]], x, side="right")
+    t = (x - C[g]) / scale
+    e = np.exp(t)
+    ei = np.exp(-t)
+    m = ei * sums[0, g, a] + e * sums[1, g, a]
+    q = ei * ei * sums[2, g, a] + 2.0 * sums[3, g, a] + e * e * sums[4, g, a]
+    return m, 1.0 + noise - q
+
+
+@nb.njit(cache=True)
+def _predict_1d(phi, b, margin, X, C, sums, nobs, scale, noise, rho, var):
+    for i in range(phi.shape[0]):
+        rho[i], var[i] = _predict_one(phi[i], b, margin, X, C, sums, nobs, scale, noise)
+
+
+@nb.njit(cache=True)
+def _fit_groups(x, rho, ranges, scale, noise, X, C, sums):
+    """OU GP of each group: its inverse covariance (via Cholesky), the weights K^-1 rho, and
+    the split sums of ``_predict_one`` (``_split_sums``)."""
     for g in range(ranges.shape[0]):
         a = ranges[g, 0]
         n = ranges[g, 1] - a + 1
+        xc = 0.5 * (x[a] + x[a + n - 1])
+        u = np.empty(n)
+        v = np.empty(n)
+        for j in range(n):
+            u[j] = np.exp((x[a + j] - xc) / scale)
+            v[j] = np.exp(-(x[a + j] - xc) / scale)
         L = np.zeros((n, n))
-        for i in range(n):
+        for i in range(n):             # x is sorted: exp(-|x_i - x_j| / l) = v_i u_j for j <= i
             for j in range(i + 1):
-                L[i, j] = np.exp(-abs(x[a + i] - x[a + j]) / scale)
+                L[i, j] = v[i] * u[j]
             L[i, i] += noise
         for j in range(n):                      # in-place Cholesky (lower)
             s = L[j, j]
@@ -101,44 +147,55 @@ def _fit_groups(x, rho, ranges, scale, noise, X, A, Kinv):
                 for k in range(c, i):
                     s -= L[i, k] * Li[k, c]
                 Li[i, c] = s / L[i, i]
+        Kinv = np.empty((n, n))
         for i in range(n):
             X[g, i] = x[a + i]
-            for j in range(n):
+            for j in range(i + 1):         # K^-1 = L^-T L^-1, symmetric
                 s = 0.0
-                for k in range(max(i, j), n):
+                for k in range(i, n):
                     s += Li[k, i] * Li[k, j]
-                Kinv[g, i, j] = s
+                Kinv[i, j] = s
+                Kinv[j, i] = s
+        alpha = np.empty(n)
         for i in range(n):
             s = 0.0
             for j in range(n):
-                s += Kinv[g, i, j] * rho[a + j]
-            A[g, i] = s
+                s += Kinv[i, j] * rho[a + j]
+            alpha[i] = s
+        C[g] = xc
+        _split_sums(u, v, alpha, Kinv, sums[:, g])
 
 
-@nb.njit(cache=True, fastmath=True)
-def _predict_1d(phi, b, margin, X, A, Kinv, nobs, scale, noise, rho, var):
-    G = b.shape[0] - 1
-    k = np.empty(X.shape[1])
-    for i in range(phi.shape[0]):
-        x = phi[i]
-        if not (x >= b[0] + margin and x <= b[G] - margin):
-            continue
-        g = np.searchsorted(b, x) - 1          # b[g] < x <= b[g + 1]
-        if g < 0 or g >= G or x == b[g + 1]:
-            continue
-        n = nobs[g]
-        m = 0.0
-        for j in range(n):
-            k[j] = np.exp(-abs(x - X[g, j]) / scale)
-            m += k[j] * A[g, j]
-        q = 0.0
-        for j in range(n):
-            t = 0.0
-            for l in range(n):
-                t += Kinv[g, j, l] * k[l]
-            q += k[j] * t
-        rho[i] = m
-        var[i] = 1.0 + noise - q
+@nb.njit(cache=True)
+def _split_sums(u, v, alpha, Kinv, out):
+    """For every split a = 0..n of the sorted observations into L = {j < a} and R = {j >= a},
+    with u_j = e^((X_j - c) / l), v_j = e^-((X_j - c) / l): out[0, a] = sum_L u alpha, out[1, a] =
+    sum_R v alpha, out[2, a] = u_L' K^-1 u_L, out[3, a] = u_L' K^-1 v_R, out[4, a] = v_R' K^-1 v_R
+    (each updated from its neighbour: O(n^2) in all)."""
+    n = u.shape[0]
+    pu = np.empty(n)                 # pu[a] = sum_{i < a} K_ai u_i
+    pv = np.empty(n)                 # pv[a] = sum_{j > a} K_aj v_j
+    for a in range(n):
+        s = 0.0
+        for i in range(a):
+            s += Kinv[a, i] * u[i]
+        pu[a] = s
+        s = 0.0
+        for j in range(a + 1, n):
+            s += Kinv[a, j] * v[j]
+        pv[a] = s
+    out[0, 0] = 0.0
+    out[2, 0] = 0.0
+    out[3, 0] = 0.0
+    for a in range(n):               # observation a moves from R to L
+        out[0, a + 1] = out[0, a] + u[a] * alpha[a]
+        out[2, a + 1] = out[2, a] + u[a] * (2.0 * pu[a] + Kinv[a, a] * u[a])
+        out[3, a + 1] = out[3, a] - v[a] * pu[a] + u[a] * pv[a]
+    out[1, n] = 0.0
+    out[4, n] = 0.0
+    for a in range(n - 1, -1, -1):
+        out[1, a] = out[1, a + 1] + v[a] * alpha[a]
+        out[4, a] = out[4, a + 1] + v[a] * (2.0 * pv[a] + Kinv[a, a] * v[a])
 
 
 @nb.njit(cache=True)

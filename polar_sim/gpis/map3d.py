@@ -11,6 +11,7 @@ from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import as_directions, check_params
 from polar_sim.gpis._fusion import fuse, normal_noise
 from polar_sim.gpis._kernels import maybe_new
+from polar_sim.gpis._linesearch import line_search
 from polar_sim.gpis._obsgp import ObsGP2D
 
 __all__ = ["GPISMap3D"]
@@ -326,8 +327,12 @@ class GPISMap3D(GPISMapBase):
         P, N = tr.pos[cand], tr.nrm[cand]
         p = (P - scan.t) @ scan.R
         n = N @ scan.R
-        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
-                    lambda q: q @ scan.R.T + scan.t, scan.R, oc_skip=self._OC_SKIP, rhat_dim=3)
+        def search(p, n):
+            return line_search(p, n, lambda q: self._oc(q, scan.gp), self.delx, self._OC_SKIP,
+                               depth=True, reproject_bug=self._pub("fusion"))
+
+        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, search, self._fd, scan.R,
+                    scan.t)
 
 
 def _axis(a, tol=1e-4):
