@@ -9,17 +9,17 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 
 import numpy as np
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
 from polar_sim.params import Parameterised
 from polar_sim.gpis import _io
-from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights, knn
-from polar_sim.gpis._kernels import (_slot_samples, apply_new, apply_reeval, candidates,
-                                     dirty_slots, gather_training)
-from polar_sim.gpis._icp import register_2d
-from polar_sim.gpis._query import PARALLEL_POINTS, faithful, query_gp
+from polar_sim.gpis import _icp, _kernels  # noqa: F401  (their kernels, called through K)
+from polar_sim.gpis._distance import FreeSpace, far_field, far_weights
+from polar_sim.gpis._native import K
+from polar_sim.gpis._query import PARALLEL_POINTS, query_gp
 from polar_sim.gpis._localgp import NOGRAD_VALUE_NOISE, GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
 
@@ -35,6 +35,37 @@ MAX_CLUSTER_CELLS = 1 << 27
 MAX_FREE_CELLS = 1 << 29
 
 _STATE = ("tree_", "gps_", "n_updates_")
+
+
+def _grown(lo, hi, goff, gshape, frac, keep_inside):
+    """The extent [lo, hi) (lists of floats, one per axis) a grid at [goff, goff + gshape) grows
+    to for data over [lo, hi): unchanged when the data lies inside (``keep_inside``: the grid's
+    own extent then), else padded by 1/frac of its span on each side that grows
+    (``FreeSpace._cover``, ``Tree._cover``)."""
+    glo = [float(g) for g in goff]
+    ghi = [g + float(n) for g, n in zip(glo, gshape)]
+    if keep_inside and all(a >= g for a, g in zip(lo, glo)) and all(b <= g for b, g in zip(hi, ghi)):
+        return glo, ghi
+    pad = [_floor((b - a) / frac) for a, b in zip(glo, ghi)]
+    if keep_inside:
+        return ([min(a, g - (p if a < g else 0.0)) for a, g, p in zip(lo, glo, pad)],
+                [max(b, g + (p if b > g else 0.0)) for b, g, p in zip(hi, ghi, pad)])
+    return ([min(a, g - p if a < g else g) for a, g, p in zip(lo, glo, pad)],
+            [max(b, g + p if b > g else g) for b, g, p in zip(hi, ghi, pad)])
+
+
+def _floor(x):
+    return float(math.floor(x))
+
+
+def _clip(x, a, b):
+    return min(max(x, a), b)
+
+
+def _refuse_over(n, limit, name, what, const, advice):
+    if n > limit:
+        raise ValueError(f"{name}: this scan would grow the {what.format(n=n)}, over the limit "
+                         f"of {limit} cells ({const}); {advice}")
 
 
 class GPISMapBase(Parameterised):
@@ -124,54 +155,38 @@ class GPISMapBase(Parameterised):
         cluster grid or the free-space grid past their limits, before any state changes.
 
         Both grids cover only what the data needs, clipped to the map's reach (the tree cannot
-        hold samples beyond it), so this triggers only for fine grids over large extents."""
+        hold samples beyond it), so this triggers only for fine grids over large extents. (The
+        clipped extremes are the extremes clipped: the arithmetic runs on the bounding boxes.)"""
         p = self._checked_params()
-        d = self.dim
         name = getattr(scan, "pose_name", "pose")
-        reach = self._reach(p)
         have = hasattr(self, "tree_")
-        # free-space grid (FreeSpace.mark / _cover)
-        res = self._free_res()
         hits = getattr(scan, "free_hits", scan.hits)
-        pts = np.vstack([hits, np.asarray(scan.origin_sensor, float)[None]])
-        lim = np.floor(reach / res) + 2.0
-        lo = np.clip(np.floor(pts.min(0) / res) - 1, -lim, lim)
-        hi = np.clip(np.floor(pts.max(0) / res) + 2, -lim, lim)
-        if (hi > lo).all():
+        o = [float(x) for x in scan.origin_sensor]
+        lo_h, hi_h = (hits.min(0).tolist(), hits.max(0).tolist()) if len(hits) else (o, o)
+        res = self._free_res()
+        lim = _floor(self._reach(p) / res) + 2.0
+        lo = [_clip(_floor(min(a, b) / res) - 1, -lim, lim) for a, b in zip(lo_h, o)]
+        hi = [_clip(_floor(max(a, b) / res) + 2, -lim, lim) for a, b in zip(hi_h, o)]
+        if all(b > a for a, b in zip(lo, hi)):
             if have and self.free_.grid.size:
-                glo = self.free_.goff.astype(float)
-                ghi = glo + self.free_.gshape
-                if not ((lo >= glo).all() and (hi <= ghi).all()):
-                    pad = np.floor((ghi - glo) / 4)
-                    lo = np.minimum(lo, glo - np.where(lo < glo, pad, 0))
-                    hi = np.maximum(hi, ghi + np.where(hi > ghi, pad, 0))
-                else:
-                    lo, hi = glo, ghi
-            n = float(np.prod(hi - lo))
-            if n > MAX_FREE_CELLS:
-                raise ValueError(f"{name}: this scan would grow the free-space grid to {n:.3g} "
-                                 f"cells of {res:g} m, over the limit of {MAX_FREE_CELLS} cells "
-                                 "(MAX_FREE_CELLS); raise free_res")
-        # cluster grid (Tree.reserve / _cover)
-        w = 2.0 * p["cluster_half"]
-        org = -p["init_half"]
-        rc = self.tree_.root[:d] if have else np.zeros(d)
-        limb = 4.0 * p["max_half"]
-        P = np.clip(scan.hits, rc - limb, rc + limb)
-        if len(P):
-            lo = np.floor((P.min(0) - org) / w) - 2
-            hi = np.floor((P.max(0) - org) / w) + 3
+                lo, hi = _grown(lo, hi, self.free_.goff, self.free_.gshape, 4, keep_inside=True)
+            _refuse_over(math.prod(b - a for a, b in zip(lo, hi)), MAX_FREE_CELLS, name,
+                         f"free-space grid to {{n:.3g}} cells of {res:g} m", "MAX_FREE_CELLS",
+                         "raise free_res")
+        if len(scan.hits):
+            w = 2.0 * p["cluster_half"]
+            org = -p["init_half"]
+            rc = self.tree_.root[:self.dim].tolist() if have else [0.0] * self.dim
+            limb = 4.0 * p["max_half"]
+            if scan.hits is not hits:
+                lo_h, hi_h = scan.hits.min(0).tolist(), scan.hits.max(0).tolist()
+            lo = [_floor((_clip(a, c - limb, c + limb) - org) / w) - 2 for a, c in zip(lo_h, rc)]
+            hi = [_floor((_clip(b, c - limb, c + limb) - org) / w) + 3 for b, c in zip(hi_h, rc)]
             if have and self.tree_.cgrid.size > 1:
-                glo = self.tree_.goff.astype(float)
-                ghi = glo + self.tree_.gshape
-                span = ghi - glo
-                lo = np.minimum(lo, np.where(lo < glo, glo - np.floor(span / 2), glo))
-                hi = np.maximum(hi, np.where(hi > ghi, ghi + np.floor(span / 2), ghi))
-            n = float(np.prod(hi - lo))
-            if n > MAX_CLUSTER_CELLS:
-                raise ValueError(f"{name}: this scan would grow the cluster grid to {n:.3g} "
-                                 f"cells of {w:g} m, over the limit of {MAX_CLUSTER_CELLS} cells "
-                                 "(MAX_CLUSTER_CELLS); raise cluster_half or lower max_half")
+                lo, hi = _grown(lo, hi, self.tree_.goff, self.tree_.gshape, 2, keep_inside=False)
+            _refuse_over(math.prod(b - a for a, b in zip(lo, hi)), MAX_CLUSTER_CELLS, name,
+                         f"cluster grid to {{n:.3g}} cells of {w:g} m", "MAX_CLUSTER_CELLS",
+                         "raise cluster_half or lower max_half")
 
     def _init_state(self):
         p = self._checked_params()
@@ -220,7 +235,7 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         changed = []                      # world positions whose training sets changed
         # stage 2: re-evaluate visible samples
-        cent, ptr, samp = candidates(scan.origin, scan.rmax, tr.geo, tr.cgrid, tr.gshape,
+        cent, ptr, samp = K.candidates(np.ascontiguousarray(scan.origin, np.float64), scan.rmax, tr.geo, tr.cgrid, tr.gshape,
                                      tr.goff, tr.node_internal, tr.level_off, self._hc(),
                                      tr.slot_head, tr.link, tr.s_node)
         if len(cent):
@@ -232,28 +247,20 @@ class GPISMapBase(Parameterised):
         touched = []
         if len(cand):
             action, P, N, sp, sg = self._reeval(cand, scan)
-            snap = (tr.pos_t[cand].copy(), tr.nrm_t[cand].copy(), tr.sp_t[cand].copy(),
-                    tr.sg_t[cand].copy())
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
-            new = apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
-            keep = new >= 0
-            touched.append(tr.pos[new[keep]])
+            new = K.apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
             # which changes the trained GPs must see (all of them in legacy mode)
-            dirty = self._significant(action, new, snap, cand)
-            changed.append(snap[0][dirty])
-            nk = new[dirty & keep]
-            changed.append(tr.pos[nk])
-            self._snapshot(nk)
-            kd = keep & ~dirty             # carry the trained snapshot to the new index
-            for a, b in zip((tr.pos_t, tr.nrm_t, tr.sp_t, tr.sg_t), snap):
-                a[new[kd]] = b[kd]
-            self._snapshot(cand[(action == 1) & dirty])
+            ch, kept = K.reeval_changes(cand, action, new, tr.pos, tr.nrm, tr.sp, tr.sg, tr.pos_t,
+                                      tr.nrm_t, tr.sp_t, tr.sg_t, self._retrain_tol(),
+                                      bool(self._pub("retrain") or self._retrain_tol() <= 0))
+            changed.append(ch)
+            touched.append(kept)
         # stage 3: new samples
         P, ok, bad, N, sp, sg = self._new_samples(scan)
         tr.reserve(P[ok])
         self._sync_slot_arrays()
-        new = apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
+        new = K.apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
         kept = new[new >= 0]
         self._snapshot(kept)
         changed.append(tr.pos[kept])
@@ -273,25 +280,6 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         tr.pos_t[idx], tr.nrm_t[idx] = tr.pos[idx], tr.nrm[idx]
         tr.sp_t[idx], tr.sg_t[idx] = tr.sp[idx], tr.sg[idx]
-
-    def _significant(self, action, new, snap, cand):
-        """Re-evaluated samples whose change the GPs must see (default mode: beyond retrain_tol).
-
-        A sample counts when it left the map, or when its position moved more than
-        ``retrain_tol``, its normal turned by more than 0.05 rad, or a noise changed by more
-        than 2x, since the values the GPs were last trained on.
-        """
-        tr = self.tree_
-        if self._pub("retrain") or self._retrain_tol() <= 0:
-            return action >= 1
-        out = (action >= 2) & (new < 0)                      # dropped or lost
-        i = np.where(new >= 0, new, cand)
-        mv = action >= 1
-        dp = np.linalg.norm(tr.pos[i] - snap[0], axis=1) > self._retrain_tol()
-        dn = np.linalg.norm(tr.nrm[i] - snap[1], axis=1) > 0.05
-        rs = (tr.sp[i] > 2 * snap[2]) | (2 * tr.sp[i] < snap[2])
-        rg = (tr.sg[i] > 2 * snap[3]) | (2 * tr.sg[i] < snap[3])
-        return out | (mv & (dp | dn | rs | rg))
 
     def _cluster_coords(self, pts):
         tr = self.tree_
@@ -322,7 +310,7 @@ class GPISMapBase(Parameterised):
         if len(slots) == 0:
             return
         R = self._TRAIN_R * self._hc()
-        ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_head,
+        ptr, idx = K.gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_head,
                                    tr.link, tr.s_node, tr.slot_coord, tr.pos, self._train_cap())
         nonempty = np.diff(ptr) > 0
         slots = slots[nonempty]
@@ -355,7 +343,7 @@ class GPISMapBase(Parameterised):
             return
         tr, g = self.tree_, self.gps_
         self._sync_slot_arrays()
-        slots = dirty_slots(np.ascontiguousarray(changed, np.float64), self._TRAIN_R * self._hc(),
+        slots = K.dirty_slots(np.ascontiguousarray(changed, np.float64), self._TRAIN_R * self._hc(),
                             self._train_cap(), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_coord,
                             tr.node_sample.shape[0], g.gp_obs, g.gp_m, g.X, g.kinds)
         self._train(slots)
@@ -468,7 +456,7 @@ class GPISMapBase(Parameterised):
         k = min(4, len(sidx))
         if n >= PARALLEL_POINTS:            # the GP part on all cores
             gi = np.empty((n, k), np.int64)
-            knn(pts, k, tr.geo, tr.cgrid, tr.gshape, tr.goff, sptr, sidx, tr.pos, gi)
+            K.knn(pts, k, tr.geo, tr.cgrid, tr.gshape, tr.goff, sptr, sidx, tr.pos, gi)
             dist, grad, var, w = far_weights(pts, gi, tr.pos, tr.nrm, tr.sp, tr.sg,
                                              self._surfel_radius(), self.free_, var_unobs, near,
                                              far, gate=self._SIGN_GATE, sign_h=self._sign_width(),
@@ -476,11 +464,11 @@ class GPISMapBase(Parameterised):
             sel = np.flatnonzero(w > 0)
             if len(sel):
                 out = self._gp_query(pts[sel])
-                blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
+                K.blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
                          t_info)
             return dist, grad, var
         dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
-        faithful(pts, *self._faithful_args(), dist, grad, var)
+        K.faithful(pts, *self._faithful_args(), dist, grad, var)
         return dist, grad, var
 
     def _faithful_args(self):
@@ -510,7 +498,7 @@ class GPISMapBase(Parameterised):
                 or not np.abs(x0).max() + opts.step[0] * opts.max_iterations < 1e90):
             return None
         H = np.zeros((3, 3))
-        out = register_2d(pts, np.array(x0, np.float64), opts.max_iterations, opts.min_points,
+        out = K.register_2d(pts, np.array(x0, np.float64), opts.max_iterations, opts.min_points,
                           opts.tolerance, opts.kind, opts.scale, opts.sigma2, opts.max_variance,
                           opts.step[0], opts.step[1], opts.corr[0], opts.corr[1],
                           *self._faithful_args(), H)
@@ -520,7 +508,7 @@ class GPISMapBase(Parameterised):
         """Each cluster slot's samples (CSR), for the query's nearest-sample search; rebuilt
         whenever the tree changed (the end of an update, a load)."""
         tr = self.tree_
-        self._sample_index_ = _slot_samples(tr.node_sample, int(tr.counts[2]))
+        self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
     def surface(self, res=None, band=None):
         """Zero level set of :meth:`query` near the observed samples.

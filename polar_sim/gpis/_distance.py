@@ -26,9 +26,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["FreeSpace", "far_field", "far_weights", "blend_gp"]
 
 
+@entry
 @nb.njit(cache=True)
 def _mark(grid, gshape, goff, res, origin, hits, margin):
     dim = origin.shape[0]
@@ -124,7 +127,7 @@ class FreeSpace:
         if not (hi > lo).all():
             return
         self._cover(lo.astype(np.int64), hi.astype(np.int64))
-        _mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
+        K._mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
               np.ascontiguousarray(hits, np.float64), self.margin)
 
     def observed(self, pts):
@@ -187,6 +190,7 @@ def _imls(pts, i, gi, pos, nrm, sg, gate, h, fallback):
     return num / den if den > np.exp(-9.0) else fallback
 
 
+@entry
 @nb.njit(cache=True)
 def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
              dtrust, sign_h=0.0):
@@ -305,6 +309,7 @@ def _ring_cells(r, c0, lo, hi, a0, a1, cc, out):
     return n
 
 
+@entry
 @nb.njit(cache=True)
 def knn(pts, k, geo, cgrid, gshape, goff, sptr, sidx, pos, out):
     """Indices (n, k) into ``out`` of the k samples nearest each point (nearest first; ties to
@@ -385,7 +390,7 @@ def far_field(pts, gi, pos, nrm, sp, sg, r_s, free, var_unobs, gate=np.inf, sign
         return np.full(n, np.inf), np.zeros((n, d)), np.full(n, var_unobs)
     dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
     # a free cell may straddle the surface: trust it only beyond one cell diagonal
-    _surfels(pts, np.ascontiguousarray(gi, np.int64), pos, nrm, sp, sg, float(gate), float(r_s),
+    K._surfels(pts, np.ascontiguousarray(gi, np.int64), pos, nrm, sp, sg, float(gate), float(r_s),
              free.observed(pts), free.res * np.sqrt(d), float(var_unobs), dist, grad, var,
              np.empty(n), float(sign_h))
     return dist, grad, var
@@ -411,6 +416,7 @@ def _observed(pts, grid, gshape, goff, res, seen):
         seen[i] = inside and grid[flat] > 0
 
 
+@entry
 @nb.njit(cache=True)
 def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, goff, res,
                  cell_diag, var_unobs,
@@ -445,13 +451,14 @@ def far_weights(pts, gi, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, gate
     scales the blend band on the negative side)."""
     n, d = pts.shape
     dist, grad, var, w = np.empty(n), np.empty((n, d)), np.empty(n), np.empty(n)
-    _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
+    K._far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
                  free.grid, free.gshape, free.goff, float(free.res), free.res * np.sqrt(d),
                  float(var_unobs), float(near), float(far), dist, grad, var, w, float(sign_h),
                  float(behind))
     return dist, grad, var, w
 
 
+@entry
 @nb.njit(cache=True)
 def blend_gp(sel, out, w, fbias, has_thr, dist, grad, var, t_info=0.0):
     """Blend the GPIS rows ``out`` (one per selected point) into the surfel answer in place.

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["normal_noise", "fuse", "RangeNoiseModel"]
 
 _BETA = 1.0          # between-beam interpolation error of the observation GP, in beam spacings
@@ -90,7 +92,7 @@ def normal_noise(g, obar, s, r_term, smin_p, smin_g, R, model=None):
     """
     n = g.shape[0]
     N, sp, sg = np.empty(g.shape), np.empty(n), np.empty(n)
-    _normal_noise_rows(np.ascontiguousarray(g, np.float64), np.ascontiguousarray(obar, np.float64),
+    K._normal_noise_rows(np.ascontiguousarray(g, np.float64), np.ascontiguousarray(obar, np.float64),
                        np.ascontiguousarray(s, np.float64), np.ascontiguousarray(r_term, np.float64),
                        float(smin_p), float(smin_g), np.ascontiguousarray(R, np.float64),
                        *model_args(model), N, sp, sg)
@@ -109,6 +111,7 @@ def _beta(model):
     return _BETA if model is None else model.beta
 
 
+@entry
 @nb.njit(cache=True)
 def _normal_noise_rows(g, obar, s, r_term, smin_p, smin_g, R, on, sigma_r, dtheta, floor_p, kappa,
                        c_min, N, sp, sg):
@@ -173,15 +176,16 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None
         return action, Pn, Nn, spn, sgn
     oc, fd_ok, rhat = fd_fn(q[li], scan.gp)                        # step 4
     legacy = bool(m._pub("fusion"))
-    _fuse_rows(li, q, A, rnew, found, np.ascontiguousarray(p, np.float64),
-               np.ascontiguousarray(oc, np.float64), fd_ok, np.ascontiguousarray(rhat, np.float64),
-               P, N, sp_old, sg_old, np.ascontiguousarray(R, np.float64),
-               np.ascontiguousarray(t, np.float64), float(m.delx), legacy, legacy and d == 3,
-               float(m.min_position_noise), float(m.min_grad_noise), float(m.map_noise),
-               *model_args(model), _beta(model), action, Pn, Nn, spn, sgn)
+    c = np.ascontiguousarray
+    K._fuse_rows(li, q, c(A), c(rnew), found, c(p, np.float64), c(oc, np.float64), fd_ok,
+                 c(rhat, np.float64), P, N, sp_old, sg_old, c(R, np.float64), c(t, np.float64),
+                 float(m.delx), legacy, legacy and d == 3, float(m.min_position_noise),
+                 float(m.min_grad_noise), float(m.map_noise), *model_args(model), _beta(model),
+                 action, Pn, Nn, spn, sgn)
     return action, Pn, Nn, spn, sgn
 
 
+@entry
 @nb.njit(cache=True)
 def _fuse_rows(li, q, A, rnew, found, p, oc, fd_ok, rhat, P, N, sp_old, sg_old, R, t, dx, legacy,
                legacy3d, smin_p, smin_g, map_noise, on, sigma_r, dtheta, floor_p, kappa, c_min, beta,

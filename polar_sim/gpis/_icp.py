@@ -11,6 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import entry
 from polar_sim.gpis._query import faithful
 from polar_sim.registration.gauss_newton import (apply_2d, correction_2d, gauss_newton_step, linearise,
                                                  split_2d, transform_2d)
@@ -18,6 +19,7 @@ from polar_sim.registration.gauss_newton import (apply_2d, correction_2d, gauss_
 __all__ = ["register_2d"]
 
 
+@entry
 @nb.njit(cache=True)
 def register_2d(pts, x0, max_iterations, min_points, tol, kind, scale, sigma2, max_var, step_t,
                 step_r, corr_t, corr_r, k, sptr, sidx, pos, nrm, sp, sg, gate, use_trust, r_s, fgrid,

@@ -6,12 +6,14 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
 from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove, slot_members
 
 __all__ = ["apply_new", "apply_reeval", "candidates", "dirty_slots", "gather_training",
-           "maybe_new"]
+           "maybe_new", "reeval_changes"]
 
 
+@entry
 @nb.njit(cache=True)
 def apply_new(P, ok, bad, nrm, sp, sg, geo, root, level_off, L, cgrid, gshape, goff,
               node_sample, node_internal, slot_coord, slot_free, pos, s_slot, s_node, s_free,
@@ -46,6 +48,7 @@ def apply_new(P, ok, bad, nrm, sp, sg, geo, root, level_off, L, cgrid, gshape, g
     return out
 
 
+@entry
 @nb.njit(cache=True)
 def apply_reeval(cand, action, P, nrm, sp, sg, geo, root, level_off, L, cgrid, gshape, goff,
                  node_sample, node_internal, slot_coord, slot_free, pos, s_slot, s_node, s_free,
@@ -87,6 +90,7 @@ def apply_reeval(cand, action, P, nrm, sp, sg, geo, root, level_off, L, cgrid, g
     return out
 
 
+@entry
 @nb.njit(cache=True)
 def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, slot_head, link,
                s_node):
@@ -191,6 +195,7 @@ def _kept_radius2(s, cap, gp_obs, gp_m, X, kinds, c0):
     return far if (cap > 0 and nv == cap) else np.inf
 
 
+@entry
 @nb.njit(cache=True)
 def dirty_slots(pts, R, cap, geo, cgrid, gshape, goff, slot_coord, nslots, gp_obs, gp_m, X, kinds):
     """Sorted slots of the non-empty clusters whose training set may hold one of pts (n, d).
@@ -239,6 +244,7 @@ def dirty_slots(pts, R, cap, geo, cgrid, gshape, goff, slot_coord, nslots, gp_ob
     return np.nonzero(mark)[0].astype(np.int64)
 
 
+@entry
 @nb.njit(cache=True)
 def gather_training(slots, R, geo, cgrid, gshape, goff, slot_head, link, s_node, slot_coord, pos,
                     cap=0):
@@ -305,6 +311,7 @@ def gather_training(slots, R, geo, cgrid, gshape, goff, slot_head, link, s_node,
     return ptr, out[:n]
 
 
+@entry
 @nb.njit(cache=True)
 def _slot_samples(node_sample, nslots):
     """CSR (ptr, idx) of the samples of each cluster slot, in node order."""
@@ -356,6 +363,7 @@ def _too_close_csr(p, cc, hmin, dim, cgrid, gshape, goff, sptr, sidx, pos, q):
     return False
 
 
+@entry
 @nb.njit(cache=True)
 def maybe_new(P, geo, root, level_off, cgrid, gshape, goff, node_sample, node_internal, pos,
               strict):
@@ -405,3 +413,72 @@ def maybe_new(P, geo, root, level_off, cgrid, gshape, goff, node_sample, node_in
             if d2 < hmin * hmin:
                 out[j] = False
     return out
+
+
+@entry
+@nb.njit(cache=True)
+def reeval_changes(cand, action, new, pos, nrm, sp, sg, pos_t, nrm_t, sp_t, sg_t, tol, every):
+    """After stage 2 (``apply_reeval`` gave each candidate's new index, -1 if gone): which
+    changes the trained GPs must see, and the training snapshots (``*_t``) brought up to date.
+
+    A candidate counts when it left the map, or when (re-measured, action >= 1) its position
+    moved more than ``tol``, its normal turned more than 0.05 rad or a noise changed more than
+    2x since the values its GPs were trained on (``every``: any re-measurement counts, as
+    published). Counted samples get a fresh snapshot; the others carry theirs to their new
+    index. Returns the world positions (old snapshot and new position) of the counted ones,
+    and those of every kept sample (the published retraining's "touched").
+    """
+    k, d = cand.shape[0], pos.shape[1]
+    dirty = np.zeros(k, np.bool_)
+    ch = np.empty((2 * k, d))
+    nch = 0
+    for j in range(k):                        # read every snapshot before writing any
+        i = cand[j]
+        a = action[j]
+        if every:
+            dirty[j] = a >= 1
+        elif a >= 2 and new[j] < 0:
+            dirty[j] = True
+        elif a >= 1:
+            c = new[j] if new[j] >= 0 else i
+            dp = 0.0
+            dn = 0.0
+            for q in range(d):
+                dp += (pos[c, q] - pos_t[i, q]) ** 2
+                dn += (nrm[c, q] - nrm_t[i, q]) ** 2
+            dirty[j] = (np.sqrt(dp) > tol or np.sqrt(dn) > 0.05 or sp[c] > 2 * sp_t[i]
+                        or 2 * sp[c] < sp_t[i] or sg[c] > 2 * sg_t[i] or 2 * sg[c] < sg_t[i])
+        if dirty[j]:
+            ch[nch] = pos_t[i]
+            nch += 1
+    carry_p = np.empty((k, d))
+    carry_n = np.empty((k, d))
+    carry_s = np.empty((k, 2))
+    for j in range(k):
+        i = cand[j]
+        carry_p[j] = pos_t[i]
+        carry_n[j] = nrm_t[i]
+        carry_s[j, 0] = sp_t[i]
+        carry_s[j, 1] = sg_t[i]
+    nt = 0
+    touched = np.empty((k, d))
+    for j in range(k):
+        c = new[j]
+        if c >= 0:
+            touched[nt] = pos[c]
+            nt += 1
+        if dirty[j] and (c >= 0 or action[j] == 1):
+            c = c if c >= 0 else cand[j]      # fused or re-inserted: its new values; doubled: in place
+            if new[j] >= 0:
+                ch[nch] = pos[c]
+                nch += 1
+            pos_t[c] = pos[c]
+            nrm_t[c] = nrm[c]
+            sp_t[c] = sp[c]
+            sg_t[c] = sg[c]
+        elif c >= 0:
+            pos_t[c] = carry_p[j]
+            nrm_t[c] = carry_n[j]
+            sp_t[c] = carry_s[j, 0]
+            sg_t[c] = carry_s[j, 1]
+    return ch[:nch], touched[:nt]

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["ObsGP1D", "ObsGP2D", "UNOBSERVABLE"]
 
 UNOBSERVABLE = 1e6
@@ -30,34 +32,13 @@ class ObsGP1D:
 
     def __init__(self, angles, rho, *, scale=0.5, noise=0.01, group=20, overlap=6, margin=0.0175):
         self.scale, self.noise, self.margin = scale, noise, margin
-        x = angles
-        N = len(x)
-        ng = N // group + 1
-        self.empty = ng == 1
+        N = len(angles)
+        self.empty = N // group + 1 == 1
         if self.empty:
             return
-        ranges, bounds = [], [x[0]]
-        for g in range(ng - 2):
-            i0 = group * g
-            ranges.append((i0, i0 + group + overlap - 1))
-            bounds.append(x[i0 + group + overlap // 2])
-        i1 = group * (ng - 2)
-        h = (N - i1) // 2
-        ranges.append((i1, i1 + h + overlap))
-        bounds.append(x[i1 + h + overlap // 2])
-        ranges.append((i1 + h, N - 1))
-        bounds.append(x[N - 1])
-        self.bounds = np.asarray(bounds)
-        rg = np.asarray(ranges, np.int64)
-        M = int((rg[:, 1] - rg[:, 0]).max()) + 1
-        G = len(ranges)
-        X = np.zeros((G, M))
-        C = np.zeros(G)
-        sums = np.zeros((5, G, M + 1))
-        _fit_groups(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(rho, np.float64),
-                    rg, float(scale), float(noise), X, C, sums)
-        self.X, self.C, self.sums = X, C, sums
-        self.nobs = (rg[:, 1] - rg[:, 0] + 1).astype(np.int64)
+        self.bounds, self.X, self.C, self.sums, self.nobs = K._fit(
+            np.ascontiguousarray(angles, np.float64), np.ascontiguousarray(rho, np.float64),
+            float(scale), float(noise), int(group), int(overlap))
 
     def args(self):
         """The GP's arrays and constants, in the order the 1D kernels take them (``bounds``,
@@ -77,7 +58,7 @@ class ObsGP1D:
         flat = np.ascontiguousarray(phi.ravel())
         rho = np.empty(flat.shape)
         var = np.empty(flat.shape)
-        _predict_1d(flat, *self.args(), rho, var)
+        K._predict_1d(flat, *self.args(), rho, var)
         return rho.reshape(shp), var.reshape(shp)
 
 
@@ -106,10 +87,48 @@ def _predict_one(x, b, margin, X, C, sums, nobs, scale, noise):
     return m, 1.0 + noise - q
 
 
+@entry
 @nb.njit(cache=True)
 def _predict_1d(phi, b, margin, X, C, sums, nobs, scale, noise, rho, var):
     for i in range(phi.shape[0]):
         rho[i], var[i] = _predict_one(phi[i], b, margin, X, C, sums, nobs, scale, noise)
+
+
+@entry
+@nb.njit(cache=True)
+def _fit(x, rho, scale, noise, group, overlap):
+    """Partition the N beams (spec §4.2: groups of ``group`` overlapping by ``overlap``, the
+    last two splitting the remainder) and fit each group's GP; returns (bounds (G + 1,), X,
+    centres, split sums, observations per group)."""
+    N = x.shape[0]
+    ng = N // group + 1
+    G = ng
+    ranges = np.empty((G, 2), np.int64)
+    bounds = np.empty(G + 1)
+    bounds[0] = x[0]
+    for g in range(ng - 2):
+        i0 = group * g
+        ranges[g, 0] = i0
+        ranges[g, 1] = i0 + group + overlap - 1
+        bounds[g + 1] = x[i0 + group + overlap // 2]
+    i1 = group * (ng - 2)
+    h = (N - i1) // 2
+    ranges[ng - 2, 0] = i1
+    ranges[ng - 2, 1] = i1 + h + overlap
+    bounds[ng - 1] = x[i1 + h + overlap // 2]
+    ranges[ng - 1, 0] = i1 + h
+    ranges[ng - 1, 1] = N - 1
+    bounds[ng] = x[N - 1]
+    M = 0
+    nobs = np.empty(G, np.int64)
+    for g in range(G):
+        nobs[g] = ranges[g, 1] - ranges[g, 0] + 1
+        M = max(M, nobs[g])
+    X = np.zeros((G, M))
+    C = np.zeros(G)
+    sums = np.zeros((5, G, M + 1))
+    _fit_groups(x, rho, ranges, scale, noise, X, C, sums)
+    return bounds, X, C, sums, nobs
 
 
 @nb.njit(cache=True)
@@ -221,6 +240,7 @@ def _chol_inv_tile(xs, noise, scale, out_Kinv, y, out_a):
         out_a[i] = s
 
 
+@entry
 @nb.njit(cache=True)
 def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale, Mmax,
                TI, TX, TA, TK, TN):
@@ -252,6 +272,7 @@ def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale
                     TK[s, i, j] = Ki[i, j]
 
 
+@entry
 @nb.njit(cache=True)
 def _predict_tiles(qv, qu, bv, bu, margin, TI, TX, TA, TK, TN, scale, noise, rho_out, var_out):
     nr = bv.shape[0] - 1
@@ -378,12 +399,12 @@ class ObsGP2D:
                 self._grow(max(self.n_fit + len(t), 2 * self.TN.shape[0]))
             slots = np.arange(self.n_fit, self.n_fit + len(t))
             self.n_fit += len(t)
-            _fit_tiles(t, slots, self.rows0, self.rows1, self.cols0, self.cols1, self.v, self.u,
+            K._fit_tiles(t, slots, self.rows0, self.rows1, self.cols0, self.cols1, self.v, self.u,
                        self.rho, self.noise, self.scale, self.M, self.TI, self.TX, self.TA,
                        self.TK, self.TN)
         rho = np.empty(len(qv))
         var = np.empty(len(qv))
-        _predict_tiles(qv, qu, self.bv, self.bu, self.margin, self.TI, self.TX, self.TA, self.TK,
+        K._predict_tiles(qv, qu, self.bv, self.bu, self.margin, self.TI, self.TX, self.TA, self.TK,
                        self.TN,
                        self.scale, self.noise, rho, var)
         return rho, var

@@ -8,6 +8,7 @@ import numpy as np
 
 from polar_sim.gpis._distance import _far_weights, blend_gp, knn
 from polar_sim.gpis._localgp import _dot4
+from polar_sim.gpis._native import K, entry
 from polar_sim.gpis._numeric import _exp_neg
 from polar_sim.gpis._tree import _lin
 
@@ -162,7 +163,7 @@ def query_gp(pts, *args):
     """GP query; large batches run on all cores (numba threads), small ones serially."""
     if pts.shape[0] >= PARALLEL_POINTS:
         return _query_gp_par(pts, *args)
-    return _query_gp_ser(pts, *args)
+    return K._query_gp_ser(pts, *args)
 
 
 # reassociation lets the sums over the observations vectorise (no other fast-math licence)
@@ -463,6 +464,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
 # Two entry points with distinct names: numba's cache index does not key on the ``parallel``
 # flag, so one Python function jitted twice with cache=True shares one cache entry, and the
 # "serial" dispatcher could load the threaded build (which stalls on a loaded machine).
+@entry
 @nb.njit(cache=True)
 def _query_gp_ser(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cgrid, gshape,
                   goff, node_sample, node_internal, slot_gen, gp_gen, gp_m, gp_obs, gp_tri, X,
@@ -486,6 +488,7 @@ def _query_gp_par(pts, W, T, legacy, scale, var_f0, var_g0, default_var, geo, cg
 
 
 
+@entry
 @nb.njit(cache=True)
 def faithful(pts, k, sptr, sidx, pos, nrm, sp, sg, gate, use_trust, r_s, fgrid, fshape, foff, fres,
              var_unobs, near, far, sign_h, behind, W, T, legacy, scale, var_f0, var_g0, fbias,

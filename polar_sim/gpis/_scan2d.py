@@ -8,6 +8,7 @@ import numba as nb
 import numpy as np
 
 from polar_sim.gpis._fusion import model_args, normal_noise_one
+from polar_sim.gpis._native import K, entry
 from polar_sim.gpis._obsgp import _predict_one
 
 __all__ = ["occupancy", "line_search", "new_samples"]
@@ -20,7 +21,7 @@ def occupancy(gp, q, var_thre):
     flat = np.ascontiguousarray(q, np.float64).reshape(-1, 2)
     n = flat.shape[0]
     oc, obs, rhat = np.empty(n), np.empty(n, np.bool_), np.empty(n)
-    _occupancy_1d(flat, *gp.args(), float(var_thre), oc, obs, rhat)
+    K._occupancy_1d(flat, *gp.args(), float(var_thre), oc, obs, rhat)
     return oc.reshape(shp), obs.reshape(shp), rhat.reshape(shp)
 
 
@@ -31,7 +32,7 @@ def line_search(gp, p, n, var_thre, step, tol, oc_skip):
     q = np.ascontiguousarray(p, np.float64).copy()
     A, rnew = np.empty(k), np.empty(k)
     found, live = np.empty(k, np.bool_), np.empty(k, np.bool_)
-    _line_search_1d(np.ascontiguousarray(n, np.float64), *gp.args(), float(var_thre), float(step),
+    K._line_search_1d(np.ascontiguousarray(n, np.float64), *gp.args(), float(var_thre), float(step),
                     float(tol), float(oc_skip), q, A, rnew, found, live)
     return live, q, A, rnew, found
 
@@ -44,6 +45,7 @@ def _oc_one(q0, q1, b, margin, X, C, sums, nobs, scale, noise, var_thre):
     return np.tanh(15.0 * r * (r ** -0.5 - rho)), var <= var_thre, 1.0 / rho ** 2
 
 
+@entry
 @nb.njit(cache=True)
 def _occupancy_1d(q, b, margin, X, C, sums, nobs, scale, noise, var_thre, oc, obs, rhat):
     """Occupancy test (spec §3) at sensor-frame points q (n, 2) against the scan's GP: oc, obs
@@ -53,6 +55,7 @@ def _occupancy_1d(q, b, margin, X, C, sums, nobs, scale, noise, var_thre, oc, ob
                                          noise, var_thre)
 
 
+@entry
 @nb.njit(cache=True)
 def _line_search_1d(nrm, b, margin, X, C, sums, nobs, scale, noise, var_thre, step, tol, oc_skip,
                     q, Aout, rnew, found, live):
@@ -103,13 +106,14 @@ def new_samples(gp, s, phi, r, var_thre, delx, R, smin_p, smin_g, model, grad_ga
     k = s.shape[0]
     ok, bad = np.empty(k, np.bool_), np.empty(k, np.bool_)
     nrm, sp, sg = np.empty((k, 2)), np.empty(k), np.empty(k)
-    _new_samples_1d(np.ascontiguousarray(s, np.float64), np.ascontiguousarray(phi, np.float64),
+    K._new_samples_1d(np.ascontiguousarray(s, np.float64), np.ascontiguousarray(phi, np.float64),
                     np.ascontiguousarray(r, np.float64), *gp.args(), float(var_thre), float(delx),
                     np.ascontiguousarray(R, np.float64), float(smin_p), float(smin_g),
                     *model_args(model), float(grad_gate), ok, nrm, sp, sg, bad)
     return ok, nrm, sp, sg, bad
 
 
+@entry
 @nb.njit(cache=True)
 def _new_samples_1d(s, phi, r, b, margin, X, C, sums, nobs, scale, noise, var_thre, dx, R, smin_p,
                     smin_g, on, sigma_r, dtheta, floor_p, kappa, c_min, grad_gate, ok, nrm, sp, sg,

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["Tree"]
 
 _I32 = np.int32
@@ -201,6 +203,7 @@ def _unlink(i, s, link, slot_head):
     link[i, 1] = -1
 
 
+@entry
 @nb.njit(cache=True)
 def rebuild_links(node_sample, nslots, link, slot_head):
     """The cluster lists from the node arrays (each in node order)."""
@@ -248,6 +251,7 @@ def _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
     return c < face_cos
 
 
+@entry
 @nb.njit(cache=True)
 def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_internal,
             slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict, link, slot_head, n_p,
@@ -327,6 +331,7 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
     return i, s
 
 
+@entry
 @nb.njit(cache=True)
 def _remove(i, dim, level_off, cgrid, gshape, goff, node_sample, node_internal, slot_coord,
             slot_free, s_slot, s_node, s_free, counts, link, slot_head):
@@ -481,14 +486,14 @@ class Tree:
         """Insert one point (d,) with normal n (d,) and gradient noise g; returns (sample index,
         slot) or (-1, -1)."""
         n = np.zeros(self.dim) if n is None else np.asarray(n, np.float64)
-        return _insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
+        return K._insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
                        self.goff, self.node_sample, self.node_internal, self.slot_coord,
                        self.slot_free, self.pos, self.s_slot, self.s_node, self.s_free,
                        self.counts, self.strict, self.link, self.slot_head, n, self.nrm, float(g),
                        self.sg)
 
     def remove(self, i):
-        _remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
+        K._remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
                 self.node_internal, self.slot_coord, self.slot_free, self.s_slot, self.s_node,
                 self.s_free, self.counts, self.link, self.slot_head)
 
@@ -539,4 +544,4 @@ class Tree:
         self.n_nodes = int(self.level_off[L + 1])
         self.link = np.full((self.pos.shape[0], 2), -1, _I32)
         self.slot_head = np.full(self.node_sample.shape[0], -1, _I32)
-        rebuild_links(self.node_sample, int(self.counts[2]), self.link, self.slot_head)
+        K.rebuild_links(self.node_sample, int(self.counts[2]), self.link, self.slot_head)

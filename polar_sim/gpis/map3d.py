@@ -10,7 +10,7 @@ from polar_sim._validation import as_depth, as_intrinsics, as_pose, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import as_directions, check_params
 from polar_sim.gpis._fusion import fuse, normal_noise
-from polar_sim.gpis._kernels import maybe_new
+from polar_sim.gpis._native import K
 from polar_sim.gpis._linesearch import line_search
 from polar_sim.gpis._obsgp import ObsGP2D
 
@@ -305,7 +305,7 @@ class GPISMap3D(GPISMapBase):
         _, var = scan.gp.predict(*scan.pix)
         ok = var <= self.obs_var_thre
         # finite differences only where an insert can succeed (see maybe_new)
-        ok &= maybe_new(scan.hits, tr.geo, tr.root, tr.level_off, tr.cgrid, tr.gshape, tr.goff,
+        ok &= K.maybe_new(scan.hits, tr.geo, tr.root, tr.level_off, tr.cgrid, tr.gshape, tr.goff,
                         tr.node_sample, tr.node_internal, tr.pos, tr.strict)
         k = len(ok)
         n, sp, sg = np.zeros((k, 3)), np.zeros(k), np.zeros(k)
