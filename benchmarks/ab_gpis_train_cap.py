@@ -35,7 +35,7 @@ cap_none, cap16, cap24, cap32, cap48, cap64 = (_cap(k) for k in (None, 16, 24, 3
 
 def measure(cap, d):
     from polar_sim.runner.gpis_methods import scan_to_map_odometry
-    from polar_sim.runner.localise import relation_scores
+    from polar_sim.metrics import relation_scores
 
     A, P, R = d["angles"], d["poses"], d["ranges"]
     warm = GPISMap2D(train_cap=cap)             # compile outside the timing

@@ -1,9 +1,9 @@
 """Dev-only sweep of the P(ground) calibration settings (issue 13, item 3; the held-out protocol).
 
 The calibration (``polar_sim.ground.calibration.PlattCalibrator`` inside ``GroundVO``) has three
-settings: the log-odds window ``calib_window`` (a GroundVO parameter), and the calibrator's per-update
-``decay`` and ``prior_weight`` (GroundVO's ``calib_decay``/``calib_prior_weight``: 0.85 and 50 when
-this sweep was run, 0.99 and 5 since, the sweep's best). The calibration does not feed back into the
+settings (GroundVO's ``calibration=CalibrationConfig(window, decay, prior_weight)``): the log-odds
+window, and the calibrator's per-update decay and prior weight (0.85 and 50 when this sweep was run,
+0.99 and 5 since, the sweep's best). The calibration does not feed back into the
 VO (RANSAC weights its draws by the uncalibrated posterior), so one replay per route and window
 drives every (decay, prior_weight) pair at once: the VO's calibrator is replaced after the first
 image by a fan-out that updates one calibrator per pair with the same self-labels and returns the
@@ -50,19 +50,20 @@ def w6_dev_best(K, camera_height, *, seed=0, **params):
     """A ``vo`` plug-in: w6 with the calibration settings this sweep found best on dev (window 7, decay
     0.99, prior weight 5), for ``polar-sim run ground_appearance --set
     method=[benchmarks.bench_ground_calibration:w6_dev_best]`` (run from the repository root)."""
-    from polar_sim.ground import GroundVO
+    from polar_sim.ground import CalibrationConfig, GroundVO
 
     params.setdefault("downsample", 1)
-    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calib_window=7,
-                    calib_decay=0.99, calib_prior_weight=5.0, **params)
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed,
+                    calibration=CalibrationConfig(window=7, decay=0.99, prior_weight=5.0), **params)
 
 
 def sweep_route(name, frames):
     import cv2
 
-    from polar_sim.ground import GroundVO
+    from polar_sim.ground import CalibrationConfig, GroundVO
     from polar_sim.ground.calibration import PlattCalibrator
-    from polar_sim.metrics.ground import class_prob_sums, classifier_iou, reliability_counts
+    from polar_sim.metrics.calibration import reliability_counts
+    from polar_sim.metrics.ground import class_prob_sums, classifier_iou
     from polar_sim.sim.rover_sequences import SPLITS, load_route, route_truth, route_zones
 
     if name not in SPLITS["dev"]:
@@ -78,7 +79,7 @@ def sweep_route(name, frames):
     pairs = list(itertools.product(DECAYS, PRIORS))
     out = {}
     for win in WINDOWS:
-        vo = GroundVO(tr["K"], tr["h"], downsample=1, seed=0, calib_window=win)
+        vo = GroundVO(tr["K"], tr["h"], downsample=1, seed=0, calibration=CalibrationConfig(window=win))
         bins, psums = np.zeros((len(pairs), 3, 15)), np.zeros((len(pairs), 4))
         iou = [[] for _ in pairs]
         for i, f in rec.frames(stop=n, keys=("rgb", "t", "ground_mask")):
@@ -102,7 +103,7 @@ def sweep_route(name, frames):
 
 
 def main():
-    from polar_sim.metrics.ground import pooled_reliability
+    from polar_sim.metrics.calibration import pooled_reliability
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300, help="first frames of each route (default 300)")

@@ -40,7 +40,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from polar_sim import metrics  # noqa: E402
-from polar_sim.tracking import ObjectTracker  # noqa: E402
+from polar_sim.tracking import ObjectTracker, RegistrationConfig  # noqa: E402
 from polar_sim.tracking.synthetic import make_sequence  # noqa: E402
 
 ICG_MS = 1.3
@@ -51,7 +51,7 @@ VARIANTS = {
     "wu": dict(appearance="wu"),
     "ww": dict(appearance="ww"),
     "shape-only": dict(appearance="none"),
-    "plain-icp": dict(appearance="none", registration="plain"),
+    "plain-icp": dict(appearance="none", registration=RegistrationConfig(method="plain")),
 }
 STAGES = ("validate", "predict_attention", "depth_likelihood", "appearance", "registration", "labels",
           "learning", "output")

@@ -19,7 +19,7 @@ import numpy as np
 
 from polar_sim.datasets import load_intel_lab
 from polar_sim.runner.gpis_methods import call_factory, scan_to_map_odometry
-from polar_sim.runner.localise import relation_scores
+from polar_sim.metrics import relation_scores
 from polar_sim.runner.methods import get_method
 
 

@@ -163,7 +163,7 @@ def main():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from polar_sim.envs.learning import ObsNormaliser, load_policy, make_model, ppo_recipe, save_policy, wrap_action
+    from polar_sim.envs.learning import ObsNormaliser, load_model, make_model, ppo_recipe, save_policy, wrap_action
 
     torch.set_num_threads(1)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
@@ -250,7 +250,7 @@ def main():
     venv.close()
 
     # The final policy as saved (reloaded from its file) on the held-out worlds.
-    loaded, norm = load_policy(out / "policy.npz", probe)
+    loaded, norm, _ = load_model(out / "policy.npz", probe)
     probe.close()
     print(f"final policy and baselines on {len(test)} held-out worlds", flush=True)
     final = run_episodes(env_id, eval_kwargs, learned(loaded, norm, args.recurrent, recipe.get("action")), test)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pick_frame", "draw_strip", "stack_pngs", "success_curves"]
+__all__ = ["pick_frame", "draw_strip", "stack_pngs", "success_curves", "variants_figures"]
 
 
 def pick_frame(values, start, end):
@@ -156,3 +156,33 @@ def success_curves(table, ctx, methods, ax_pose=None, ax_iou=None):
             ax.set(xlabel=xl, ylabel="fraction of frames", title=title)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
+
+
+def variants_figures(head, ctx, methods, size_rows, cost, ref):
+    """``tracking_variants``' figures: success curves of ``methods`` beside ADD(-S) AUC against the
+    object's diameter (``size_rows``, one per sequence of ``ref``), and the CPU time per frame
+    against the object's image size (``cost``); returns their markdown lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from polar_sim.runner.report import savefig
+
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+    success_curves(head, ctx, methods, ax[0], ax[1])
+    for r in size_rows:
+        ax[2].scatter(r["diameter_cm"], 100 * r["add_auc"], marker={"distinct": "o", "cuboid": "s"}.get(r["shape"], "^"))
+        ax[2].annotate(r["sequence"], (r["diameter_cm"], 100 * r["add_auc"]), fontsize=6)
+    ax[2].set(xlabel="object diameter, cm", ylabel=f"{ref} ADD(-S) AUC 0-10 cm, %",
+              title="per sequence (o distinct, s cuboid, ^ revolved)")
+    ax[2].grid(alpha=0.3)
+    fig.tight_layout()
+    lines = [savefig(fig, ctx.out_dir, "tracking_variants_curves"), ""]
+    fig, a = plt.subplots(figsize=(5, 4))
+    a.scatter(cost["tgt"] / 1e3, cost["cpu"], s=2, alpha=0.3)
+    a.set(xlabel="object pixels (amodal mask), thousands", ylabel="CPU ms per frame (one thread)",
+          title=f"{ref}: cost against the object's image size")
+    a.grid(alpha=0.3)
+    fig.tight_layout()
+    return lines + [savefig(fig, ctx.out_dir, "tracking_variants_cost")]

@@ -19,10 +19,7 @@ import numpy as np
 from polar_sim.runner import Check, Experiment
 from polar_sim.runner.report import markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 COLS = ["method", "map_scans", "held_out_scans", "endpoints", "abs_sdf_median_m", "abs_sdf_mean_m", "abs_sdf_p90_m",
         "abs_sdf_p99_m", "within_5cm", "midpoints_free", "n_samples", "map_mb", "update_cpu_ms_median",

@@ -23,12 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.runner import Check, Experiment
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import length, markdown_table, number, percent, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.gpis_accuracy
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 M2D = ["near_rmse_m", "near_median_abs_m", "near_rmse_wellseen_m", "far_mae_m", "grad_near_median_deg",
        "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m", "near_coverage95",
@@ -89,6 +86,15 @@ TARGETS = [  # (scene, method, metric, bound, op, "worst" | "mean", label, known
 ]
 
 
+def _value(key, x, bound):
+    """A figure of ``key`` with its unit: deg, %, or a length in the unit of its bound (mm, cm)."""
+    if key.endswith("_deg"):
+        return f"{number(x)} deg"
+    if "coverage" in key:
+        return percent(x)
+    return length(x, "mm" if np.max(bound) < 0.01 else "cm")
+
+
 def checks(table, ctx):
     out = []
     for scene, method, key, bound, op, how, label, known in TARGETS:
@@ -97,8 +103,8 @@ def checks(table, ctx):
             continue
         x = {"worst": max, "best": min, "mean": np.mean}[how](v)
         ok = x <= bound if op == "<=" else (x > bound if op == ">" else bound[0] <= x <= bound[1])
-        unit = "deg" if key.endswith("deg") else ("" if "coverage" in key else "m")
-        out.append(Check(label, bool(ok), f"{how} of {len(v)} seeds: {x:.4g} {unit} (bound {op} {bound})", known_miss=known))
+        out.append(Check(label, bool(ok), f"{how} of {len(v)} seed{'s' if len(v) != 1 else ''}: {_value(key, x, bound)} (bound {op} "
+                         f"{' to '.join(_value(key, b, bound) for b in np.atleast_1d(bound))})", known_miss=known))
     return out
 
 

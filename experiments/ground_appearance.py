@@ -8,16 +8,16 @@ image, and the reliability statistics (15 bins, every 2nd pixel) for the expecte
 (ECE). "Settled" frames are >= 5 s after the start and outside [-40 m, +10 m] of every zone boundary
 (the new texture is visible on the far ground from 40 m before; zones meet along the edges of 20 m
 ground tiles). Per family the settled frames of all its zones are pooled; the worst family is the
-headline. Methods: ``w6``, ``u6``, and ``w6_nocal`` (w6 without the calibration of P(ground), the 30 m
-training limit and the evidence-weighted decay: the earlier behaviour).
-Splits: ``dev`` four default-look routes plus one route of each dev family (speckle, gravel, grass,
-blotches, uniform); ``test`` the twelve held-out routes (seeds >= 10,000; stripes and checker never
-used while tuning). Quick: the split's quick route cut to ``max_frames`` = 120 frames, w6.
+headline. Methods: ``w6``, ``u6``, ``w6_nocal`` (w6 without the calibration of P(ground), the 30 m
+training limit and the evidence-weighted decay). Splits: ``dev`` four default-look routes plus one
+route of each dev family; ``test`` the twelve held-out routes (seeds >= 10,000; stripes and checker
+never used while tuning). Quick: the split's quick route cut to ``max_frames`` = 120 frames, w6.
 """
 
 import numpy as np
 
 from polar_sim.experiments import _ground_common as G
+from polar_sim.experiments import _ground_pictures as pictures
 from polar_sim.runner import Check, Experiment, get_method
 from polar_sim.runner.report import savefig
 
@@ -26,12 +26,14 @@ WARMUP_S, BEFORE_M, AFTER_M = 5.0, 40.0, 10.0
 #: Families whose IoU miss is recorded in benchmarks/RESULTS.md (full size, test split).
 RECORDED_IOU_MISSES = ("uniform", "stripes", "checker")
 DEV_ROUTES = ("terrain_00", "terrain_04", "flat_00", "flat_02") + G.DEV_FAMILY_ROUTES
+OURS = ("w6", "u6", "w6_nocal", "w6_ng6h")  # GroundVO methods: the routes are already at working size
 
 
 def trial(params, seed, ctx):
     G.single_thread()
     from polar_sim.ground.replay import replay
-    from polar_sim.metrics.ground import class_prob_sums, classifier_iou, reliability_counts
+    from polar_sim.metrics.calibration import pooled_reliability, reliability_counts
+    from polar_sim.metrics.ground import class_prob_sums, classifier_iou, iou_summary
     from polar_sim.sim.rover_sequences import settled_frames
 
     rec, tr = G.load(params, ctx)
@@ -51,47 +53,42 @@ def trial(params, seed, ctx):
         if i in pics:
             probs[i] = e.ground_prob.copy()
 
-    replay(get_method("vo", params["method"])(tr["K"], tr["h"], seed=seed,
-                                              **({"downsample": 1} if params["method"] in ("w6", "u6", "w6_nocal", "w6_ng6h") else {})),
+    m = params["method"]
+    replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **({"downsample": 1} if m in OURS else {})),
            rec.frames(keys=("rgb", "t", "ground_mask")), on_frame=score)
     ctx.save_arrays("series", t=t, iou=iou, settled=settled, zone=z["zone"], progress=z["progress"],
                     boundaries=z["boundaries"], bins=bins, psums=psums, families=np.array(G.family_names(rec)))
-    G.plot_probability_maps(ctx.out_dir / "probability_maps.png", rec, probs, pics, iou)
+    pictures.probability_maps(ctx.out_dir / "probability_maps.png", rec, probs, pics, iou)
     s = settled & np.isfinite(iou)
-    after = (t - t[0]) >= WARMUP_S
-    trans = after & ~settled
+    ece = pooled_reliability(*bins[s].sum(axis=0)).ece if s.any() and bins[s][:, 0].sum() else float("nan")
     return {"route_used": G.route_of(params, ctx), "families": ",".join(sorted(set(G.family_names(rec)))), "frames": n,
-            "n_settled": int(s.sum()), "iou_settled_mean": float(np.mean(iou[s])) if s.any() else float("nan"),
-            "iou_settled_p10": float(np.percentile(iou[s], 10)) if s.any() else float("nan"),
-            "share_settled_ge_target": float(np.mean(iou[s] >= TARGET_IOU)) if s.any() else float("nan"),
-            "ece_settled": _ece(bins[s]), "iou_transition_mean": float(np.mean(iou[trans])) if trans.any() else float("nan"),
-            "iou_all_mean": float(np.nanmean(iou[after]))}
-
-
-def _ece(b):
-    from polar_sim.metrics.ground import pooled_reliability
-
-    return pooled_reliability(*b.sum(axis=0)).ece if len(b) and b[:, 0].sum() else float("nan")
+            **iou_summary(iou, settled, (t - t[0]) >= WARMUP_S, TARGET_IOU), "ece_settled": ece}
 
 
 def _families(table, ctx, method):
-    """{family: (n settled frames, mean IoU, summed bins, mean P on ground / non-ground)} (settled frames)."""
-    from polar_sim.metrics.ground import class_mean_prob_bounds, pool_by_family
+    """{family: pooled scores of its settled frames} (``polar_sim.metrics.ground.pool_by_family``)."""
+    from polar_sim.metrics.ground import pool_by_family
 
-    fams = pool_by_family(ctx.arrays(r, "series") for r in table if r["method"] == method)
-    return {k: (f["frames"], f["iou_mean"], f["bins"], (f["psums"][0] / f["psums"][1], f["psums"][2] / f["psums"][3])
-                if f["psums"] is not None else tuple(class_mean_prob_bounds(*f["bins"])[c][0] for c in ("ground", "nonground")))
-            for k, f in fams.items()}
+    return pool_by_family(ctx.arrays(r, "series") for r in table if r["method"] == method)
+
+
+def _family_rows(fams, m):
+    """The per-family summary rows of one method, then its worst family and the pooled ECE."""
+    from polar_sim.metrics.calibration import pooled_reliability
+
+    rows = [dict(method=m, family=k, frames=f["frames"], iou_mean=f["iou_mean"], ece=pooled_reliability(*f["bins"]).ece,
+                 p_ground=f["p_ground"], p_nonground=f["p_nonground"]) for k, f in fams.items()]
+    if rows:
+        wi, we = min(rows, key=lambda r: r["iou_mean"]), max(rows, key=lambda r: r["ece"])
+        rows.append(dict(method=m, family=f"worst (IoU: {wi['family']}; ECE: {we['family']})", iou_mean=wi["iou_mean"],
+                         ece=we["ece"]))
+        rows.append(dict(method=m, family="all (pooled)", frames=sum(f["frames"] for f in fams.values()),
+                         ece=pooled_reliability(*sum(f["bins"] for f in fams.values())).ece))
+    return rows
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from polar_sim.metrics.calibration import plot_reliability
-    from polar_sim.metrics.ground import pooled_reliability
+    from polar_sim.metrics.calibration import pooled_reliability
 
     lines = [f"Split `{ctx.split}`, size `{ctx.size}`. Settled frames: ≥ {WARMUP_S:.0f} s after the start, outside "
              f"[−{BEFORE_M:.0f} m, +{AFTER_M:.0f} m] of each zone boundary. IoU: P(ground) > 0.5 against the true "
@@ -101,49 +98,41 @@ def summarize(table, ctx):
     rels = {}
     for m in sorted({r["method"] for r in table}):
         fams = _families(table, ctx, m)
-        rows = [dict(method=m, family=k, frames=n, iou_mean=iou, ece=pooled_reliability(*b).ece, p_ground=pm[0],
-                     p_nonground=pm[1]) for k, (n, iou, b, pm) in fams.items()]
-        if rows:
-            wi, we = min(rows, key=lambda r: r["iou_mean"]), max(rows, key=lambda r: r["ece"])
-            rows.append(dict(method=m, family=f"worst (IoU: {wi['family']}; ECE: {we['family']})",
-                             iou_mean=wi["iou_mean"], ece=we["ece"]))
-            allb = sum(f[2] for f in fams.values())
-            rows.append(dict(method=m, family="all (pooled)", frames=sum(f[0] for f in fams.values()),
-                             ece=pooled_reliability(*allb).ece))
-            rels[m] = {k: pooled_reliability(*f[2]) for k, f in fams.items()}
-        lines += [G.table(rows, ["method", "family", "frames", "iou_mean", "ece", "p_ground", "p_nonground"]), ""]
+        lines += [G.table(_family_rows(fams, m), ["method", "family", "frames", "iou_mean", "ece", "p_ground",
+                                                   "p_nonground"]), ""]
+        if fams:
+            rels[m] = {k: pooled_reliability(*f["bins"]) for k, f in fams.items()}
     cols = ["route", "method", "families", "n_settled", "iou_settled_mean", "iou_settled_p10", "share_settled_ge_target",
             "ece_settled", "iou_transition_mean", "iou_all_mean"]
     why = {"iou_transition_mean": f"no frame within [−{BEFORE_M:.0f} m, +{AFTER_M:.0f} m] of a zone boundary after the "
                                   f"first {WARMUP_S:.0f} s"}
     lines += ["Per route:", "", G.table(sorted(table, key=lambda r: (r["route"], r["method"])), cols, why), ""]
     for m, rs in rels.items():
-        fig, ax = plt.subplots(figsize=(5.2, 4.6))
-        plot_reliability(list(rs.values()), list(rs), ax=ax,
-                         title=f"P(ground) reliability, {m}, {ctx.split} split (simulated routes, settled frames)")
+        fig = pictures.reliability_figure(rs, f"P(ground) reliability, {m}, {ctx.split} split (simulated routes, "
+                                              "settled frames)")
         lines.append(savefig(fig, ctx.out_dir, f"reliability_{m}"))
     lines += ["", "Probability maps per trial: `trials/*/probability_maps.png`."]
     return "\n".join(lines)
 
 
 def checks(table, ctx):
-    from polar_sim.metrics.ground import pooled_reliability
+    from polar_sim.metrics.calibration import pooled_reliability
 
     fams = _families(table, ctx, "w6")
     if not fams:
         return []
-    worst = min(fams, key=lambda k: fams[k][1])
-    allb = sum(f[2] for f in fams.values())
-    ece = pooled_reliability(*allb).ece
-    worst_ece = max(fams, key=lambda k: pooled_reliability(*fams[k][2]).ece)
-    missed = sorted(k for k, f in fams.items() if not f[1] >= TARGET_IOU)
+    iou = {k: f["iou_mean"] for k, f in fams.items()}
+    ece = {k: pooled_reliability(*f["bins"]).ece for k, f in fams.items()}
+    worst, worst_ece = min(iou, key=iou.get), max(ece, key=ece.get)
+    pooled = pooled_reliability(*sum(f["bins"] for f in fams.values())).ece
+    missed = sorted(k for k, v in iou.items() if not v >= TARGET_IOU)
     n = f" ({len(fams)} famil{'ies' if len(fams) != 1 else 'y'} with settled frames)"
     return [Check(f"w6 settled IoU ≥ {TARGET_IOU} on every family ({ctx.split})", not missed,
-                  f"worst {worst}: {fams[worst][1]:.3f}{n}" + (f"; below: {', '.join(missed)}" if missed else ""),
+                  f"worst {worst}: {iou[worst]:.3f}{n}" + (f"; below: {', '.join(missed)}" if missed else ""),
                   # a miss only on families recorded as missing it is known; any other family is a regression
                   known_miss=bool(missed) and set(missed) <= set(RECORDED_IOU_MISSES)),
-            Check(f"w6 ECE of P(ground) ≤ {TARGET_ECE} ({ctx.split}, settled frames pooled)", ece <= TARGET_ECE,
-                  f"{ece:.4f}{n}; worst family {worst_ece}: {pooled_reliability(*fams[worst_ece][2]).ece:.4f}")]
+            Check(f"w6 ECE of P(ground) ≤ {TARGET_ECE} ({ctx.split}, settled frames pooled)", pooled <= TARGET_ECE,
+                  f"{pooled:.4f}{n}; worst family {worst_ece}: {ece[worst_ece]:.4f}")]
 
 
 EXPERIMENT = Experiment(

@@ -16,12 +16,12 @@ Splits: ``dev`` the ten routes every parameter was chosen on (seed 0); ``test`` 
 import numpy as np
 
 from polar_sim.experiments import _ground_common as G
+from polar_sim.experiments import _ground_pictures as pictures
 from polar_sim.runner import Check, Experiment, Finding, get_method
 from polar_sim.runner.report import savefig
 
 TARGET_T_PCT, TARGET_R_DEGM, TARGET_MS = 2.0, 0.01, 15.0
 OURS = ("u2", "w2", "u6", "w6", "mono")
-KITTI_MIN_M = 100.0  # the shortest KITTI devkit segment
 PUBLISHED = "w6 6.21 < u6 7.01 < w2 7.15 < u2 7.19 %; VISO2-M 12.58 % worse"  # translation error, KITTI table
 
 
@@ -31,7 +31,7 @@ def trial(params, seed, ctx):
     from polar_sim.ground.integration import integrate
     from polar_sim.ground.replay import replay
     from polar_sim.metrics.ground import kitti_scores as _scores
-    from polar_sim.metrics.ground import laplace_scale, oracle_step_speeds
+    from polar_sim.metrics.ground import oracle_step_speeds, speed_error_scales
 
     rec, tr = G.load(params, ctx)
     m = params["method"]
@@ -39,17 +39,15 @@ def trial(params, seed, ctx):
     if m == "mono":
         kw["speed_truth"] = tr["speed_cd"]
     run = replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **kw), rec.frames(keys=("rgb", "t")))
-    est, n = run["poses"], len(rec)
-    out = {"route_used": G.route_of(params, ctx), "length_m": tr["length_m"], "frames": n, **_scores(tr["gt"], est)}
+    est = run["poses"]
+    out = {"route_used": G.route_of(params, ctx), "length_m": tr["length_m"], "frames": len(rec), **_scores(tr["gt"], est)}
     arrays = {"gt": tr["gt"], "est": est}
     if np.isfinite(run["speed"]).all() and np.isfinite(run["yaw_rate"]).all():
         rates = np.where(np.isfinite(run["rates_raw"]), run["rates_raw"], 0.0)
         rates[:, 1] = run["yaw_rate"]  # the filtered yaw rate, as the estimator integrates
         arrays["planar"] = integrate(run["times"], run["speed"], rates, "planar")
         out.update(_scores(tr["gt"], arrays["planar"], "planar_"))
-        mid, ok = np.arange(n) - 1, np.isfinite(run["speed_raw"]) & (np.arange(n) >= 1)
-        out["dv_raw"] = laplace_scale(run["speed_raw"][ok] - tr["speed_cd"][mid[ok]]) if ok.any() else float("nan")
-        out["dv_filtered"] = laplace_scale(run["speed"][1:] - tr["speed_cd"][:-1])
+        out["dv_raw"], out["dv_filtered"] = speed_error_scales(run["speed_raw"], run["speed"], tr["speed_cd"])
         if m == "w6":
             arrays["oracle"] = integrate(run["times"], oracle_step_speeds(tr["t"], tr["step"]), rates, "3d")
             out.update(_scores(tr["gt"], arrays["oracle"], "oracle_"))
@@ -60,65 +58,27 @@ def trial(params, seed, ctx):
     return out
 
 
-def _pooled(table, ctx):
-    """{label: dict(method, routes, t %, deg/m, t % scaled, deg/m scaled, CPU)} pooled over every route."""
-    from polar_sim.metrics.ground import kitti_scores_pooled
-
-    pairs = {}
-    for r in table:
-        z = ctx.arrays(r, "trajectories")
-        for key, lab in (("est", r["method"]), ("planar", r["method"] + " planar"), ("oracle", "oracle scale")):
-            if key in z:
-                pairs.setdefault(lab, []).append((z["gt"], z[key]))
-    cpu = {lab: [r["cpu_ms_median"] for r in table if r["method"] == lab] for lab in pairs}
-    return {lab: dict(method=lab, **kitti_scores_pooled(ps), cpu_ms_median=float(np.median(cpu[lab])) if cpu[lab] else None)
-            for lab, ps in pairs.items()}
-
-
-def _segments(table):
-    """(translation key, rotation key, label, note) of the segments the routes of ``table`` hold: the
-    KITTI 100-800 m segments when a route has one, else the scaled segments (every route under 100 m)."""
-    def finite(x):
-        return isinstance(x, (int, float)) and not isinstance(x, bool) and bool(np.isfinite(x))
-
-    if any(finite(r.get("t_pct")) for r in table):
-        return "t_pct", "r_degm", "100–800 m segments", "KITTI segments of 100–800 m"
-    longest = max((r["length_m"] for r in table if finite(r.get("length_m"))), default=float("nan"))
-    return ("t_pct_scaled", "r_degm_scaled", f"scaled segments: routes under {KITTI_MIN_M:.0f} m",
-            f"scaled segments L_j = j·L_max/8: no route reaches the {KITTI_MIN_M:.0f} m of the shortest KITTI "
-            f"segment (longest {longest:.0f} m)")
-
-
-def _why_absent(table):
-    """{column: reason} for the 100-800 m columns when no route has a 100 m segment."""
-    if _segments(table)[0] == "t_pct":
-        return {}
-    why = f"no {KITTI_MIN_M:.0f} m KITTI segment on routes under {KITTI_MIN_M:.0f} m"
-    return {f"{p}{k}": why for p in ("", "planar_", "oracle_") for k in ("t_pct", "r_degm")}
-
-
 def summarize(table, ctx):
-    pooled = list(_pooled(table, ctx).values())
+    pooled = list(G.pooled_odometry(table, ctx).values())
     cols = ["method", "routes", "t_pct", "r_degm", "t_pct_scaled", "r_degm_scaled", "cpu_ms_median"]
     rcols = ["route", "method", "length_m", "t_pct", "r_degm", "planar_t_pct", "t_pct_scaled", "r_degm_scaled", "ate_m",
              "oracle_t_pct", "dv_raw", "dv_filtered", "cpu_ms_median"]
     rows = sorted(table, key=lambda r: (r["route"], r["method"]))
-    why = _why_absent(table)
+    why = G.why_absent(table)
     lines = [f"Split `{ctx.split}`, size `{ctx.size}`. KITTI devkit errors (segments of 100–800 m every 10 frames; "
              "`t_pct` %, `r_degm` deg/m) with 3-D integration, pooled over all segments of all routes; `*_scaled`: "
              "non-standard segments L_j = j·L_max/8 per route (the only ones a route under 100 m has); `planar`: the "
              "same estimates integrated in the plane. CPU: median ms of `process` per 621x188 frame, one thread.",
              "", G.table(pooled, cols, why), "", "Per route:", "", G.table(rows, rcols, why), ""]
-    key, _, seg, _ = _segments(table)
-    fig = G.plot_per_route(table, key, TARGET_T_PCT, f"translation error (%), {seg}",
-                           f"KITTI translation error per route ({ctx.split} split, simulated routes)")
-    lines += [savefig(fig, ctx.out_dir, "ground_odometry_errors")]
-    return "\n".join(lines)
+    key, _, seg, _ = G.segments(table)
+    fig = pictures.per_route_bars(table, key, TARGET_T_PCT, f"translation error (%), {seg}",
+                                  f"KITTI translation error per route ({ctx.split} split, simulated routes)")
+    return "\n".join(lines + [savefig(fig, ctx.out_dir, "ground_odometry_errors")])
 
 
 def checks(table, ctx):
-    p = _pooled(table, ctx)
-    key, _, seg, _ = _segments(table)
+    p = G.pooled_odometry(table, ctx)
+    key, _, seg, _ = G.segments(table)
     if "w6" not in p or (key != "t_pct" and "mono" not in p):
         return []  # a run of other methods (e.g. a user's VO alone) has nothing to check against
     cpu = p["w6"]["cpu_ms_median"]
@@ -143,8 +103,8 @@ def checks(table, ctx):
 
 
 def findings(table, ctx):
-    p = _pooled(table, ctx)
-    key, rkey, _, seg = _segments(table)
+    p = G.pooled_odometry(table, ctx)
+    key, rkey, _, seg = G.segments(table)
     have = [m for m in ("w6", "u6", "w2", "u2") if m in p]
     n = len({r["route"] for r in table})
     note = (f"{ctx.split} split, {n} simulated route{'s' if n != 1 else ''}, {seg}; VISO2-M is not run here: "
@@ -166,11 +126,11 @@ def findings(table, ctx):
         ["no monocular baseline run: the VISO2-M part is not tested"]
     verdict = "held" if order and worse else "partly held" if six or two or worse else "not held"
     rs = {m: p[m][rkey] for m in have}
-    return [Finding("Ch. 4, KITTI table", PUBLISHED, "; ".join(ours), verdict, note),
+    return [Finding("Ch. 4, KITTI table", PUBLISHED, "; ".join(ours), verdict, note, n=n, n_of="routes"),
             Finding("Ch. 4, KITTI table", "rotation error equal across u2, w2, u6, w6",
                     ", ".join(f"{m} {rs[m]:.4f} deg/m" for m in have),
                     "held" if max(rs.values()) <= 1.1 * min(rs.values()) else "not held",
-                    f"{ctx.split} split, {seg}; equal = within 10 %")]
+                    f"{ctx.split} split, {seg}; equal = within 10 %", n=n, n_of="routes")]
 
 
 EXPERIMENT = Experiment(

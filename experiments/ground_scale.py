@@ -13,8 +13,9 @@ size uses 5 repetitions and 4 iteration counts of the quick route.
 
 import numpy as np
 
+from polar_sim.experiments import _ground_candidates as C
 from polar_sim.experiments import _ground_common as G
-from polar_sim.experiments.ground_success import data_of
+from polar_sim.experiments import _ground_pictures as pictures
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import savefig
 
@@ -22,8 +23,8 @@ from polar_sim.runner.report import savefig
 def trial(params, seed, ctx):
     from polar_sim.metrics.ground import laplace_scale
 
-    data = G.candidate_set(*data_of(params, ctx))
-    _, inliers, V = G.refit(data, config=params["config"], sampling=params["sampling"], n_iter=params["n_iter"], seed=seed)
+    data = C.data_of(params, ctx)
+    _, inliers, V = C.refit(data, config=params["config"], sampling=params["sampling"], n_iter=params["n_iter"], seed=seed)
     v_cd, v_inst = np.array([d["speed_cd"] for d in data]), np.array([d["speed"] for d in data])
     ok = np.isfinite(V)
     nan = float("nan")
@@ -35,7 +36,7 @@ def trial(params, seed, ctx):
 
 def _rows(table):
     rows = []
-    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+    for cfg in [c for c in C.CONFIGS if any(r["config"] == c for r in table)]:
         for n in sorted({r["n_iter"] for r in table if r["config"] == cfg}):
             sel = {s: {r["seed"]: r for r in table if r["config"] == cfg and r["sampling"] == s and r["n_iter"] == n}
                    for s in ("uniform", "weighted")}
@@ -56,11 +57,6 @@ def _rows(table):
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows = _rows(table)
     lines = [f"Split `{ctx.split}`: {table[0]['n_frames']} frames; {len({r['seed'] for r in table})} repetitions. "
              "ΔV_mean (m/s) = mean |V_RANSAC − V_true| per repetition, averaged over repetitions; `dv` against the "
@@ -68,27 +64,14 @@ def summarize(table, ctx):
              "signed error; `seeds_w_better`: paired repetitions with a lower ΔV_mean for weighted; `fit_share`: frames "
              "with a model; `inl10_share`: frames with ≥ 10 inliers (a scale the estimator accepts).", "",
              G.table(rows, list(rows[0]) if rows else []), ""]
-    cfgs = [c for c in G.CONFIGS if any(r["config"] == c for r in rows)]
-    fig, axes = plt.subplots(1, len(cfgs), figsize=(4.0 * len(cfgs), 3.4), squeeze=False)
-    for ax, cfg in zip(axes[0], cfgs):
-        ns = sorted({r["n_iter"] for r in table if r["config"] == cfg})
-        for samp, col in (("uniform", "tab:blue"), ("weighted", "tab:red")):
-            vals = [[r["dv"] for r in table if r["config"] == cfg and r["sampling"] == samp and r["n_iter"] == n] for n in ns]
-            ax.errorbar(ns, [np.mean(v) for v in vals], yerr=[np.std(v) for v in vals], color=col, marker="o", ms=3,
-                        capsize=2, label=samp)
-        ax.set_xscale("log")
-        ax.set_xticks(ns, [str(n) for n in ns])
-        ax.set(xlabel="RANSAC iterations N", ylabel="ΔV_mean (m/s)", title=G.model_label(cfg))
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"Raw RANSAC speed error ({ctx.split} split, simulated routes; mean ± std over repetitions)", fontsize=9)
-    lines.append(savefig(fig, ctx.out_dir, "ground_scale_dv"))
+    cfgs = [c for c in C.CONFIGS if any(r["config"] == c for r in rows)]
+    lines.append(savefig(pictures.scale_errorbars(table, cfgs, ctx.split, C.model_label), ctx.out_dir, "ground_scale_dv"))
     return "\n".join(lines)
 
 
 def checks(table, ctx):
     out = []
-    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+    for cfg in [c for c in C.CONFIGS if any(r["config"] == c for r in table)]:
         rs = [r for r in _rows(table) if r["config"] == cfg]
         out.append(Check(f"weighted beats uniform in ΔV_mean at every N ({cfg}, {ctx.split})",
                          bool(rs) and all(r["dv_weighted"] < r["dv_uniform"] for r in rs),
@@ -110,9 +93,9 @@ def findings(table, ctx):
 EXPERIMENT = Experiment(
     name="ground_scale",
     description="scale error ΔV_mean (Laplace scale of the raw RANSAC speed error): weighted vs uniform sampling",
-    grid={"data": ["dev10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(G.ITERATIONS)},
+    grid={"data": ["dev10"], "config": list(C.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(C.ITERATIONS)},
     splits={"dev": {"seeds": range(10)}, "test": {"seeds": range(10_000, 10_010), "grid": {"data": ["test12"]}}},
-    choices={"data": ["quick", *G.DATASETS]},
+    choices={"data": ["quick", *C.DATASETS]},
     sizes={"quick": {"n_seeds": 5, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "n_iter": [1, 4, 16, 55]}},
            "full": {}},
     trial=trial, summarize=summarize, checks=checks, findings=findings,

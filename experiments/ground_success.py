@@ -15,20 +15,18 @@ every frame after the warm-up of the split's 120-frame quick route, 10 seeds and
 
 import numpy as np
 
+from polar_sim.experiments import _ground_candidates as C
 from polar_sim.experiments import _ground_common as G
+from polar_sim.experiments import _ground_pictures as pictures
 from polar_sim.runner import Check, Experiment, Finding
 from polar_sim.runner.report import savefig
-
-
-def data_of(params, ctx):
-    return G.DATASETS[f"quick_{ctx.split}" if params["data"] == "quick" else params["data"]]
 
 
 def trial(params, seed, ctx):
     from polar_sim.metrics.ground import ground_success
 
-    data = G.candidate_set(*data_of(params, ctx))
-    labels, inliers, _ = G.refit(data, config=params["config"], sampling=params["sampling"], n_iter=params["n_iter"],
+    data = C.data_of(params, ctx)
+    labels, inliers, _ = C.refit(data, config=params["config"], sampling=params["sampling"], n_iter=params["n_iter"],
                                  seed=seed)
     s = ground_success(labels, inliers)
     return {"n_frames": len(data), "n_candidates": int(sum(len(d["u"]) for d in data)),
@@ -44,7 +42,7 @@ def _rows(table):
     from scipy.stats import wilcoxon
 
     rows = []
-    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+    for cfg in [c for c in C.CONFIGS if any(r["config"] == c for r in table)]:
         for n in sorted({r["n_iter"] for r in table if r["config"] == cfg}):
             u, w = _by(table, cfg, "uniform", n), _by(table, cfg, "weighted", n)
             both = sorted(set(u) & set(w))
@@ -64,7 +62,7 @@ def _fits(table):
     from polar_sim.metrics.ground import fit_success_curve
 
     out = {}
-    for cfg in G.CONFIGS:
+    for cfg in C.CONFIGS:
         for samp in ("uniform", "weighted"):
             rs = [r for r in table if r["config"] == cfg and r["sampling"] == samp]
             if len({r["n_iter"] for r in rs}) >= 3:
@@ -73,11 +71,6 @@ def _fits(table):
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows, fits = _rows(table), _fits(table)
     r0 = table[0]
     lines = [f"Split `{ctx.split}`: {r0['n_frames']} frames, {r0['n_candidates']} RANSAC candidates "
@@ -86,27 +79,8 @@ def summarize(table, ctx):
              "paired repetitions in which weighted beat uniform; `wilcoxon_p`: signed-rank test of the pairs.", "",
              G.table(rows, list(rows[0]) if rows else [],
                      {"wilcoxon_p": "the signed-rank test needs ≥ 6 paired repetitions and a nonzero difference"}), ""]
-    cfgs = sorted({c for c, _ in fits}, key=list(G.CONFIGS).index)
-    fig, axes = plt.subplots(1, max(len(cfgs), 1), figsize=(4.2 * max(len(cfgs), 1), 3.6), squeeze=False)
-    for ax, cfg in zip(axes[0], cfgs):
-        ns = sorted({r["n_iter"] for r in table if r["config"] == cfg})
-        pos = np.log(ns)
-        half = 0.16 * float(np.min(np.diff(pos))) if len(pos) > 1 else 0.2
-        for k, (samp, col) in enumerate((("uniform", "tab:blue"), ("weighted", "tab:red"))):
-            vals = [[r["ps"] for r in _by(table, cfg, samp, n).values()] for n in ns]
-            bp = ax.boxplot(vals, positions=pos + (2 * k - 1) * half, widths=1.6 * half, patch_artist=True,
-                            flierprops=dict(markersize=2), manage_ticks=False)
-            for b in bp["boxes"]:
-                b.set(facecolor=col, alpha=0.35, edgecolor=col)
-            fc = fits[(cfg, samp)]
-            nn = np.geomspace(ns[0] * 0.8, ns[-1] * 1.25, 200)
-            ax.plot(np.log(nn), fc(nn), color=col, lw=1.2, label=f"{samp}: p_max {fc.p_max:.3f}, n95 {fc.n95:.1f}")
-        ax.set_xticks(pos, [str(n) for n in ns])
-        ax.set(xlabel="RANSAC iterations N", ylabel="ps (recall of true ground)", title=G.model_label(cfg))
-        ax.legend(fontsize=7, loc="lower right")
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"RANSAC success rate ps ({ctx.split} split, simulated routes): uniform (blue) vs weighted (red); "
-                 "curves: fitted ps(N) = p_max − (p_max − p_0)·p^N", fontsize=9)
+    cfgs = sorted({c for c, _ in fits}, key=list(C.CONFIGS).index)
+    fig = pictures.success_boxplots(table, fits, cfgs, ctx.split, C.model_label)
     fit_rows = [dict(config=c, sampling=s, p_max=f.p_max, p_0=f.p_0, p=f.p, n95=f.n95) for (c, s), f in fits.items()]
     lines += [savefig(fig, ctx.out_dir, "ground_success_ps"), "", "Fitted curves (n95: iterations to 95 % of p_max):",
               "", G.table(fit_rows, ["config", "sampling", "p_max", "p_0", "p", "n95"])]
@@ -115,7 +89,7 @@ def summarize(table, ctx):
 
 def checks(table, ctx):
     out = []
-    for cfg in [c for c in G.CONFIGS if any(r["config"] == c for r in table)]:
+    for cfg in [c for c in C.CONFIGS if any(r["config"] == c for r in table)]:
         rs = [r for r in _rows(table) if r["config"] == cfg]
         out.append(Check(f"weighted beats uniform in mean ps at every N ({cfg}, {ctx.split})",
                          bool(rs) and all(r["ps_weighted"] > r["ps_uniform"] for r in rs),
@@ -127,14 +101,14 @@ def findings(table, ctx):
     rows, fits = _rows(table), _fits(table)
     won = [r for r in rows if r["ps_weighted"] > r["ps_uniform"]]
     pairs = [int(r["seeds_w_better"].split("/")[0]) == int(r["seeds_w_better"].split("/")[1]) for r in rows]
-    n95 = [(c, fits[(c, "weighted")].n95, fits[(c, "uniform")].n95) for c in G.CONFIGS
+    n95 = [(c, fits[(c, "weighted")].n95, fits[(c, "uniform")].n95) for c in C.CONFIGS
            if (c, "weighted") in fits and (c, "uniform") in fits]
     note = f"{ctx.split} split, simulated routes; our candidates come from a KLT front end, not libviso2"
     return [Finding("Ch. 4, Fig. 4.7", "weighted RANSAC reaches a higher ps than uniform at every N",
                     f"higher mean ps in {len(won)}/{len(rows)} (config, N) cells; every paired repetition in "
                     f"{sum(pairs)}/{len(rows)}", "held" if len(won) == len(rows) else "partly held" if won else "not held", note),
             Finding("Ch. 4, Fig. 4.7", "weighted sampling needs fewer iterations to reach 95 % of p_max",
-                    "; ".join(f"{c}: {w:.1f} vs {u:.1f}" for c, w, u in n95),
+                    "; ".join(f"{c}: {w:.1f} vs {u:.1f}" for c, w, u in n95) + " iterations (weighted vs uniform)",
                     "held" if all(w < u for _, w, u in n95) else "partly held" if any(w < u for _, w, u in n95)
                     else "not held", note)]
 
@@ -143,9 +117,9 @@ EXPERIMENT = Experiment(
     name="ground_success",
     description="RANSAC ground success rate ps vs iterations: weighted vs uniform sampling, 2- and 6-parameter "
                 "models, re-fitted on the candidates of one online pass per route",
-    grid={"data": ["dev10"], "config": list(G.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(G.ITERATIONS)},
+    grid={"data": ["dev10"], "config": list(C.CONFIGS), "sampling": ["uniform", "weighted"], "n_iter": list(C.ITERATIONS)},
     splits={"dev": {"seeds": range(30)}, "test": {"seeds": range(10_000, 10_030), "grid": {"data": ["test12"]}}},
-    choices={"data": ["quick", *G.DATASETS]},
+    choices={"data": ["quick", *C.DATASETS]},
     sizes={"quick": {"n_seeds": 10, "grid": {"data": ["quick"], "config": ["2p", "6p_lam0.1"], "n_iter": [1, 4, 16, 55]}},
            "full": {}},
     trial=trial, summarize=summarize, checks=checks, findings=findings,

@@ -9,7 +9,7 @@ the ``mapper2d`` method (``gpis``):
 - **held-out self-consistency**: map 4 of every 5 scans, then |SDF| at the end points of the 5th
   (every ``held_out_stride``-th of these held-out scans: all at full size, every 4th quick);
 - **scan-to-map odometry**: each scan registered by ICP-G to the map of the scans before it, from
-  the previous estimate moved by the raw odometry, then fused; scored (``runner.localise.relation_scores``)
+  the previous estimate moved by the raw odometry, then fused; scored (``metrics.relation_scores``)
   on the Freiburg benchmark relations among these scans (Kümmerle et al. 2009; 90 of 2984, matched by
   ``t_abs``): *local* ones (scans <= 5 apart: the front end's accuracy) and *loop* ones (a place
   revisited: the drift a SLAM system removes by closing the loop). **Not** a SLAM result (no polar_sim
@@ -27,14 +27,12 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.localise import relation_scores, relocalise
+from polar_sim.metrics import relation_scores
+from polar_sim.runner.localise import relocalise
 from polar_sim.runner.pictures2d import map_figure
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import duration, length, markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 MAP_COLS = ["mapper", "update_cpu_ms_median", "update_cpu_ms_p99", "heldout_abs_sdf_median_m", "heldout_abs_sdf_p90_m",
             "heldout_within_5cm"]
@@ -107,12 +105,13 @@ def findings(table, ctx):
         return []
     return [Finding("Ch. 7, Fig. 7.12a (Intel Lab)", "the distribution of GPIS update times over the Intel Lab log (online "
                     "rate); we read it as a target of a median <= 8 ms per scan",
-                    f"median {r['update_cpu_ms_median']:.2f} ms, p99 {r['update_cpu_ms_p99']:.2f} ms CPU per 180-beam scan",
+                    f"median {duration(r['update_cpu_ms_median'] / 1e3, 'ms', decimals=2)}, p99 "
+                    f"{duration(r['update_cpu_ms_p99'] / 1e3, 'ms', decimals=2)} CPU per 180-beam scan",
                     "held" if r["update_cpu_ms_median"] <= 8.0 else "not held", "our implementation on a shared 2-core VM, 910 corrected scans; the published "
                     "histogram's numbers are not transcribed here: bench_vs_published times the published C++ on the same scans"),
             Finding("Ch. 7, Fig. 7.19 (Intel Lab)", "the GPIS map of the Intel Lab: its zero level on the walls, low "
                     "variance where observed (a picture)",
-                    f"held-out end points lie {100 * r['heldout_abs_sdf_median_m']:.2f} cm (median) from the zero level",
+                    f"held-out end points lie {length(r['heldout_abs_sdf_median_m'], 'cm', decimals=2)} (median) from the zero level",
                     "held" if r["heldout_abs_sdf_median_m"] <= 0.015 else "partly held",
                     "a picture is compared by eye; we score it by self-consistency (target: median "
                     "<= 1.5 cm), as a real log has no exact geometry")]

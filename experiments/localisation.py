@@ -26,15 +26,12 @@ import time
 
 import numpy as np
 
+from polar_sim.metrics import pooled_pose2d_errors
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.localise import (budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start,
-                                      pooled_errors)
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.localise import budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start
+from polar_sim.runner.report import duration, length, markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 FAIL_M = 0.5
 COLS = ["method", "seeds", "steps", "pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg",
@@ -60,7 +57,7 @@ def trial(params, seed, ctx):
     r = localise_drive(loc, d2.angles, d2.ranges, truth, odom, perturbed_start(truth[0], rng, offset_m=0.1, offset_deg=2.0))
     e, cpu = r["err"], r["cpu_ms"]
     ctx.save_arrays(err=e, truth=truth, odom=odom)
-    st = pooled_errors(e, FAIL_M)
+    st = pooled_pose2d_errors(e, FAIL_M)
     return {**{k: st[k] for k in ("pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg", "fail_steps")},
             "not_ok_steps": int(getattr(loc, "not_ok_", 0)), "cpu_ms_median": float(np.median(cpu)),
             "cpu_ms_p90": float(np.percentile(cpu, 90)), "wall_ms_median": float(np.median(r["wall_ms"])), "n_steps": len(truth),
@@ -73,7 +70,7 @@ def _stats(table, ctx):
     for k in sorted({r["method"] for r in table}):
         rows = [r for r in table if r["method"] == k]
         e = np.vstack([ctx.arrays(r)["err"] for r in rows])
-        out.append({"method": k, "seeds": len(rows), **pooled_errors(e, FAIL_M),
+        out.append({"method": k, "seeds": len(rows), **pooled_pose2d_errors(e, FAIL_M),
                     "seeds_with_failure": sum(r["fail_steps"] > 0 for r in rows),
                     "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rows])),
                     "wall_ms_median": float(np.median([r["wall_ms_median"] for r in rows])), "err": e})
@@ -106,8 +103,12 @@ def checks(table, ctx):
 
 def _fig(s):
     """One method's figures for a finding: median (p90) position error, failures, CPU per step."""
-    return (f"{100 * s['pos_median_m']:.2f} cm (p90 {100 * s['pos_p90_m']:.2f} cm, {s['fail_steps']} "
-            f"failed steps, {s['cpu_ms_median']:.2f} ms CPU per step)")
+    return (f"{length(s['pos_median_m'], 'cm', decimals=2)} (p90 {length(s['pos_p90_m'], 'cm', decimals=2)}, {s['fail_steps']} "
+            f"failed steps, {duration(s['cpu_ms_median'] / 1e3, 'ms', decimals=2)} CPU per step)")
+
+
+def _steps_of(s):
+    return f"steps of {s['seeds']} seed{'s' if s['seeds'] != 1 else ''}"
 
 
 #: The two ICP-D baselines: (method, its map, the claim's words, ours, what differs from the dissertation).
@@ -135,7 +136,8 @@ def findings(table, ctx):
         if key in st:
             out.append(Finding(f"Ch. 7, localisation: ICP-G vs ICP-D on {src}", "ICP-G on the GPIS map localises more "
                                f"accurately than ICP-D on {claim}", f"{over}; ICP-D on {theirs} {_fig(st[key])}",
-                               "held" if g["pos_median_m"] < st[key]["pos_median_m"] else "not held", note))
+                               "held" if g["pos_median_m"] < st[key]["pos_median_m"] else "not held", note,
+                               n=int(g["steps"]), n_of=_steps_of(g)))
     pf, gcpu = budget_match(list(st.values()))
     if pf is not None:
         same = pf["cpu_ms_median"] >= gcpu
@@ -146,7 +148,8 @@ def findings(table, ctx):
                 f"no PF run reached ICP-G's {gcpu:.2f} ms CPU per step ({pf['method']} is the most expensive)")
         out.append(Finding("Ch. 7, localisation: ICP-G vs the particle filter at the same compute budget",
                            "ICP-G on the GPIS map localises more accurately than a particle filter", ours, verdict,
-                           note + "; the PFs run MCL on the likelihood field of a 5 cm grid from the same scans"))
+                           note + "; the PFs run MCL on the likelihood field of a 5 cm grid from the same scans",
+                           n=int(g["steps"]), n_of=_steps_of(g)))
     return out
 
 

@@ -21,12 +21,9 @@ import time
 import numpy as np
 
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import duration, markdown_table, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 WARMUP = 5
 COLS = ["method", "tiles", "area_x", "seed", "n_scans", "travelled_m", "cpu_ms_median", "cpu_ms_p90", "cpu_ms_p99",
@@ -89,7 +86,8 @@ def checks(table, ctx):
 def findings(table, ctx):
     lo, hi, a, b = _ratio(table)
     return [Finding("Ch. 7, update time as the map grows", "the median GPIS update time stays flat as the map grows",
-                    f"median CPU per scan {a:.2f} ms at {lo * lo}x the office2d area, {b:.2f} ms at {hi * hi}x "
+                    f"median CPU per scan {duration(a / 1e3, 'ms', decimals=2)} at {lo * lo}x the office2d area, "
+                    f"{duration(b / 1e3, 'ms', decimals=2)} at {hi * hi}x "
                     f"(ratio {b / a:.2f})", "held" if b <= 1.5 * a else "not held",
                     "tiled simulated office, 1081-beam lidar; CPU time on a shared machine")]
 

@@ -12,7 +12,7 @@ rover on the unicycle to 1e-9 m.
 import numpy as np
 
 from polar_sim.runner import Check, Experiment
-from polar_sim.runner.report import group_rows, markdown_table, write_csv_table
+from polar_sim.runner.report import group_rows, length, markdown_table, percent, write_csv_table
 
 SPEED = {"rover_terrain": (6.0, 0.1), "rover_flat": (6.0, 0.1), "office2d": (1.0, 0.3)}
 
@@ -104,9 +104,10 @@ def checks(table, ctx):
     ag = _worst(table, "ground_label_agreement", min)
     kin = _worst(table, "kinematic_max_error_m")
     return [
-        Check("lidar endpoints on the geometry: |sdf| < 1 mm", max(l2, l3) < 1e-3, f"2D {l2:.2e} m, 3D {l3:.2e} m"),
-        Check("depth back-projection: |sdf| < 2 mm within 5 m", d5 < 2e-3, f"{d5:.2e} m"),
-        Check("ground label agrees with geometry on >= 99.9% of pixels", ag >= 0.999, f"worst {ag:.5f}"),
+        Check("lidar endpoints on the geometry: |sdf| < 1 mm", max(l2, l3) < 1e-3,
+              f"2D {length(l2, 'mm')}, 3D {length(l3, 'mm')}"),
+        Check("depth back-projection: |sdf| < 2 mm within 5 m", d5 < 2e-3, length(d5, "mm")),
+        Check("ground label agrees with geometry on >= 99.9% of pixels", ag >= 0.999, f"worst {percent(ag, 3)}"),
         Check("kinematic rover follows the unicycle to 1e-9", kin < 1e-9, f"{kin:.2e} m"),
     ]
 

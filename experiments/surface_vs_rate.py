@@ -22,12 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import length, markdown_table, percent, savefig, write_csv_table
 
-try:
-    from polar_sim.experiments import _gpis_common as C
-except ImportError:  # pragma: no cover
-    import _gpis_common as C
+from polar_sim.experiments import _gpis_common as C
 
 #: The grid maps GPIS is compared with, and their labels.
 GRIDS = {"grid5": "grid 5 cm", "grid10": "grid 10 cm", "edt5": "EDT"}
@@ -98,8 +95,9 @@ def _accuracy_finding(long, scene):
         return None
     parts, wins, n = [], 0, 0
     for sp, tag in ([(sps[-1], " (sparsest)"), (sps[0], " (densest)")] if len(sps) > 1 else [(sps[0], "")]):
-        figs = ", ".join(f"{({'gpis': 'GPIS'} | GRIDS)[k]} {_at(long, scene, sp, k, 'hausdorff_m'):.2f} m / "
-                         f"{100 * _at(long, scene, sp, k, 'surface_rmse_m'):.2f} cm" for k in ["gpis"] + others)
+        at = lambda k, key, unit, sp=sp: length(_at(long, scene, sp, k, key), unit, decimals=2)  # noqa: E731
+        figs = ", ".join(f"{({'gpis': 'GPIS'} | GRIDS)[k]} {at(k, 'hausdorff_m', 'm')} / {at(k, 'surface_rmse_m', 'cm')}"
+                         for k in ["gpis"] + others)
         lowest = [label for key, label in (("hausdorff_m", "Hausdorff"), ("surface_rmse_m", "surface RMSE"))
                   if _lowest(long, scene, sp, key, others)]
         wins, n = wins + len(lowest), n + 2
@@ -111,7 +109,8 @@ def _accuracy_finding(long, scene):
                    "held" if wins == n else ("partly held" if wins else "not held"),
                    "Hausdorff: the larger directed distance between the estimated and the observed true surface; surface "
                    "RMSE: RMS of the exact |SDF| at the estimated surface; EDT: the zero contour of the 5 cm grid's signed "
-                   "EDT. Simulated lidar drives scored against the exact SDF; our grids, not the dissertation's")
+                   "EDT. Simulated lidar drives scored against the exact SDF; our grids, not the dissertation's",
+                   n=int(seeds), n_of="seed" if seeds == 1 else "seeds")
 
 
 def findings(table, ctx):
@@ -126,8 +125,9 @@ def findings(table, ctx):
         rc, rs = _at(long, scene, sp, "grid5", "worst_corner_share"), _at(long, scene, sp, "grid5", "worst_sparse_share")
         ok = gc > gs and rs > rc
         out.append(Finding("Ch. 7, where the worst errors lie", "corners for GPIS; sparsely seen walls for grids",
-                           f"{scene}, a scan every {sp:g} m: worst 1 % at corners / sparse: GPIS {gc:.0%} / {gs:.0%}, "
-                           f"grid 5 cm {rc:.0%} / {rs:.0%}", "held" if ok else ("partly held" if gc > gs or rs > rc else "not held"),
+                           f"{scene}, a scan every {sp:g} m: worst 1 % at corners / sparse: GPIS {percent(gc, 0)} / "
+                           f"{percent(gs, 0)}, grid 5 cm {percent(rc, 0)} / {percent(rs, 0)}",
+                           "held" if ok else ("partly held" if gc > gs or rs > rc else "not held"),
                            "classes: within 0.3 m of a true corner; hit by fewer scans than are taken over 1 m"))
     return out
 

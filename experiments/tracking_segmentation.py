@@ -16,14 +16,12 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import markdown_table, savefig, write_csv_table
+from polar_sim.runner.pictures_calibration import plot_reliability
+from polar_sim.runner.report import markdown_table, percent, savefig, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_segmentation
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_tables as T
+from polar_sim.experiments import _tracking_pictures as pictures
 
 ORDER = C.VARIANTS + ["shape-only"]
 HAND_MAX, ECE_MAX = 0.05, 0.05
@@ -42,14 +40,14 @@ def _ref(table):
 def _rows(table, ctx):
     out = []
     methods = list(dict.fromkeys(r["method"] for r in table))
-    for r in C.rate_rows(table, "method", ORDER + [m for m in methods if m not in ORDER]):
-        rs = C.by(table, "method", r["method"])
+    for r in T.rate_rows(table, "method", ORDER + [m for m in methods if m not in ORDER]):
+        rs = T.by(table, "method", r["method"])
         worst = max((x for x in rs if x["hand_px_touch"]), key=lambda x: x["hand_as_target"], default=None)
         out.append({**{k: r[k] for k in ("method", "sequences", "frames", "iou_ok", "iou_mean", "occl_frames",
                                          "occl_iou_ok", "hand_as_target")},
-                    "precision": C.pooled(rs, "precision"), "recall": C.pooled(rs, "recall"),
+                    "precision": T.pooled(rs, "precision"), "recall": T.pooled(rs, "recall"),
                     "hand_worst": f"{worst['sequence']} {100 * worst['hand_as_target']:.1f} %" if worst else "",
-                    "ece": C.ece(_bins(rs, ctx, "cal_bins")), "ece_raw": C.ece(_bins(rs, ctx, "raw_bins"))})
+                    "ece": metrics.pooled_ece(_bins(rs, ctx, "cal_bins")), "ece_raw": metrics.pooled_ece(_bins(rs, ctx, "raw_bins"))})
     return out
 
 
@@ -59,19 +57,19 @@ def summarize(table, ctx):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    head, ref = C.group(table, ctx.split), _ref(table)
+    head, ref = T.group(table, ctx.split), _ref(table)
     rows = _rows(head, ctx)
     cols = list(rows[0])
     write_csv_table(rows, cols, ctx.out_dir / "tracking_segmentation_table.csv")
     seqs = list(dict.fromkeys(r["sequence"] for r in table))
-    hrows = [{"sequence": s, "touch_frames": C.by(table, "sequence", s)[0]["touch_frames"],
-              **{r["method"]: r["hand_as_target"] for r in C.by(table, "sequence", s)},
-              **{f"ece_{r['method']}": r["ece"] for r in C.by(table, "sequence", s)}} for s in seqs]
+    hrows = [{"sequence": s, "touch_frames": T.by(table, "sequence", s)[0]["touch_frames"],
+              **{r["method"]: r["hand_as_target"] for r in T.by(table, "sequence", s)},
+              **{f"ece_{r['method']}": r["ece"] for r in T.by(table, "sequence", s)}} for s in seqs]
     hcols = ["sequence", "touch_frames"] + [r["method"] for r in rows] + [f"ece_{ref}"]
     write_csv_table(hrows, hcols, ctx.out_dir / "tracking_segmentation_sequences.csv")
     lines = [f"Split **{ctx.split}**, pooled over {len({r['sequence'] for r in head})} sequences. `iou_ok`: IoU > 0.5; "
              f"`occl_iou_ok`: the same on the frames of occlusion by touch (the hand touches the object and hides "
-             f"more than {100 * C.TOUCH_OCCLUSION:.0f} % of it); `hand_as_target`: hand pixels labelled target while "
+             f"more than {100 * T.TOUCH_OCCLUSION:.0f} % of it); `hand_as_target`: hand pixels labelled target while "
              "touching; `ece`: expected calibration error (15 bins) of P(target) over the ROI pixels against the "
              "true visible mask, `ece_raw` the same for the uncalibrated prediction map. `shape-only` is a "
              "reference, not a variant.", "", markdown_table(rows, cols), "",
@@ -87,19 +85,19 @@ def summarize(table, ctx):
     ax[1].set_xticks(range(len(hrows)), [h["sequence"] for h in hrows], rotation=70, ha="right", fontsize=6)
     ax[1].set(ylabel="% of hand pixels labelled target", title="the hand while touching")
     ax[1].legend(fontsize=7, ncol=2)
-    ww = C.by(head, "method", ref)
+    ww = T.by(head, "method", ref)
     rels = [_bins(ww, ctx, k) for k in ("cal_bins", "raw_bins")]
     if all(b[0].sum() for b in rels):   # a method without a P(target) map has no reliability diagram
-        metrics.plot_reliability([metrics.pooled_reliability(*b) for b in rels],
-                                 ["P(target), calibrated", "raw prediction map"], ax=ax[2],
-                                 title=f"{ref}, ROI pixels ({ctx.split})")
+        plot_reliability([metrics.pooled_reliability(*b) for b in rels],
+                         ["P(target), calibrated", "raw prediction map"], ax=ax[2],
+                         title=f"{ref}, ROI pixels ({ctx.split})")
     fig.tight_layout()
     return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_segmentation")])
 
 
 def checks(table, ctx):
     m = _ref(table)
-    r = next(x for x in _rows(C.group(table, ctx.split), ctx) if x["method"] == m)
+    r = next(x for x in _rows(T.group(table, ctx.split), ctx) if x["method"] == m)
     return [Check(f"{m}: IoU > 0.5 on >= 95 % of frames", r["iou_ok"] >= 0.95, f"{100 * r['iou_ok']:.1f} %"),
             Check(f"{m}: <= 5 % of hand pixels labelled target while touching", r["hand_as_target"] <= HAND_MAX,
                   f"{100 * r['hand_as_target']:.2f} % (worst sequence {r['hand_worst']})"),
@@ -108,16 +106,17 @@ def checks(table, ctx):
 
 
 def findings(table, ctx):
-    rows = {r["method"]: r for r in _rows(C.group(table, ctx.split), ctx)}
+    rows = {r["method"]: r for r in _rows(T.group(table, ctx.split), ctx)}
     if "ww" not in rows:
         return []   # the finding is about the thesis's Ww
     w, s = rows["ww"], rows.get("shape-only")
-    ours = (f"Ww under touch: IoU > 0.5 on {100 * w['occl_iou_ok']:.1f} % of {w['occl_frames']} frames, hand labelled "
-            f"target {100 * w['hand_as_target']:.1f} %" + (f" (shape only: {100 * s['occl_iou_ok']:.1f} %, "
-                                                            f"{100 * s['hand_as_target']:.1f} %)" if s else ""))
+    ours = (f"Ww under touch: IoU > 0.5 on {percent(w['occl_iou_ok'])} of {w['occl_frames']} frames, hand labelled "
+            f"target {percent(w['hand_as_target'])}" + (f" (shape only: {percent(s['occl_iou_ok'])}, "
+                                                          f"{percent(s['hand_as_target'])})" if s else ""))
     ok = w["occl_iou_ok"] >= 0.9 and w["hand_as_target"] <= HAND_MAX
     return [Finding("Ch. 1-2, Ch. 5 (Fig. 5.7)", "accurate segmentation under occlusion by touch", ours,
-                    "held" if ok else "partly held", "a scripted simulated hand; IoU success at 0.5")]
+                    "held" if ok else "partly held", "a scripted simulated hand; IoU success at 0.5",
+                    n=int(w["occl_frames"]), n_of="frames under touch")]
 
 
 EXPERIMENT = Experiment(

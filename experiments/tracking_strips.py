@@ -23,12 +23,8 @@ from polar_sim import metrics
 from polar_sim.runner import Check, Experiment
 from polar_sim.runner.report import markdown_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_strips
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_pictures as pictures
 
 README_SEQUENCES = ["mug_touch", "drill_lift", "box_turn", "can_fast", "skin_box_lift", "box_pass",
                     "blocks_turn_primary", "bottle_touch_studio", "mug_lift_gloved"]

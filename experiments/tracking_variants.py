@@ -15,15 +15,14 @@ import numpy as np
 
 from polar_sim import metrics
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.report import fmt, markdown_table, savefig, write_csv_table
+from polar_sim.runner.report import fmt, markdown_table, percent, write_csv_table
 
-try:  # the registry imports this module as polar_sim.experiments.tracking_variants
-    from polar_sim.experiments import _tracking_common as C
-    from polar_sim.experiments import _tracking_pictures as pictures
-except ImportError:  # pragma: no cover
-    import _tracking_common as C
-    import _tracking_pictures as pictures
+from polar_sim.experiments import _tracking_common as C
+from polar_sim.experiments import _tracking_tables as T
+from polar_sim.experiments import _tracking_pictures as pictures
 
+#: ICG (Stoiber et al., CVPR 2022): 1.3 ms per frame on one CPU core.
+ICG_MS = 1.3
 #: distinct = asymmetric and non-convex; cuboid = flat faces; revolved = symmetric about an axis
 SHAPE = {"drill": "distinct", "mug": "distinct", "bracket": "distinct", "blocks": "distinct", "box": "cuboid",
          "cube": "cuboid", "bottle": "revolved", "can": "revolved"}
@@ -43,33 +42,28 @@ def _size_rows(table):
     shape, and the Spearman correlation of diameter with ADD(-S) AUC over them (NaN when undefined)."""
     rows = [{"sequence": r["sequence"], "object": r["object"], "diameter_cm": r["diameter_cm"],
              "shape": SHAPE.get(r["object"], "?"), "symmetry": r["symmetry"], "add_ok": r["add_ok"],
-             "add_auc": r["add_auc"], "iou_ok": r["iou_ok"]} for r in C.by(table, "method", _ref(table))]
+             "add_auc": r["add_auc"], "iou_ok": r["iou_ok"]} for r in T.by(table, "method", _ref(table))]
     rows = sorted(rows, key=lambda r: -r["diameter_cm"])
-    return rows, metrics.spearman(C.col(rows, "diameter_cm"), C.col(rows, "add_auc"))
+    return rows, metrics.spearman(T.col(rows, "diameter_cm"), T.col(rows, "add_auc"))
 
 
 def summarize(table, ctx):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    head = C.group(table, ctx.split)
+    head = T.group(table, ctx.split)
     methods = list(dict.fromkeys(r["method"] for r in table))
-    vrows = C.rate_rows(head, "method", [m for m in C.VARIANTS if m in methods] + [m for m in methods if m not in C.VARIANTS])
+    vrows = T.rate_rows(head, "method", [m for m in C.VARIANTS if m in methods] + [m for m in methods if m not in C.VARIANTS])
     cols = ["method", "sequences", "frames", "add_ok", "add_ok_seqmin", "add_strict_ok", "add_auc", "s5cm5deg",
             "iou_ok", "iou_mean", "hand_as_target", "drift_deg_max", "lost", "cpu_ms_median"]
     write_csv_table(vrows, cols, ctx.out_dir / "tracking_variants_table.csv")
     seqs = list(dict.fromkeys(r["sequence"] for r in table))
-    prow = [{"sequence": s, "object": C.by(table, "sequence", s)[0]["object"],
-             "appearance": C.by(table, "sequence", s)[0]["appearance"],
-             **{f"add_{r['method']}": r["add_ok"] for r in C.by(table, "sequence", s)},
-             **{f"iou_{r['method']}": r["iou_ok"] for r in C.by(table, "sequence", s)}} for s in seqs]
+    prow = [{"sequence": s, "object": T.by(table, "sequence", s)[0]["object"],
+             "appearance": T.by(table, "sequence", s)[0]["appearance"],
+             **{f"add_{r['method']}": r["add_ok"] for r in T.by(table, "sequence", s)},
+             **{f"iou_{r['method']}": r["iou_ok"] for r in T.by(table, "sequence", s)}} for s in seqs]
     pcols = ["sequence", "object", "appearance"] + [f"{m}_{v}" for m in ("add", "iou") for v in C.VARIANTS
                                                     if any(f"{m}_{v}" in p for p in prow)]
     write_csv_table(prow, pcols, ctx.out_dir / "tracking_variants_sequences.csv")
     srows, rho = _size_rows(table)
-    cost = C.cost_vs_size(table, ctx, _ref(table))
+    cost = T.cost_vs_size(table, ctx, _ref(table))
     lines = [f"Split **{ctx.split}**, {len(seqs)} sequences at {table[0]['width']} px wide, seeds "
              f"{sorted({r['seed'] for r in table})}. The pooled rows use {len({r['sequence'] for r in head})} "
              "sequences (on dev the 16 of every earlier run). `add_ok`: ADD(-S) < 0.1 d over all frames; "
@@ -82,30 +76,16 @@ def summarize(table, ctx):
              + ("." if np.isfinite(rho) else " (undefined for fewer than 3 sequences or a constant input)."), "",
              "### Speed", "",
              f"{_ref(table)}, {cost['frames']} frames: CPU ms per frame median {cost['q'][0]:.1f}, 95th percentile "
-             f"{cost['q'][1]:.1f} ({1000 / cost['q'][0]:.0f} frames/s; ICG takes {C.ICG_MS} ms). Spearman "
+             f"{cost['q'][1]:.1f} ({1000 / cost['q'][0]:.0f} frames/s; ICG takes {ICG_MS} ms). Spearman "
              f"correlation with the object's pixels {fmt(cost['rho_target'])}, with the ROI's {fmt(cost['rho_roi'])}; "
              f"fit {cost['icpt']:.1f} ms + {cost['slope']:.2f} ms per 10,000 object pixels.", ""]
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4))
-    pictures.success_curves(head, ctx, [r["method"] for r in vrows], ax[0], ax[1])
-    for r in srows:
-        ax[2].scatter(r["diameter_cm"], 100 * r["add_auc"], marker={"distinct": "o", "cuboid": "s"}.get(r["shape"], "^"))
-        ax[2].annotate(r["sequence"], (r["diameter_cm"], 100 * r["add_auc"]), fontsize=6)
-    ax[2].set(xlabel="object diameter, cm", ylabel=f"{_ref(table)} ADD(-S) AUC 0-10 cm, %", title="per sequence (o distinct, s cuboid, ^ revolved)")
-    ax[2].grid(alpha=0.3)
-    fig.tight_layout()
-    lines += [savefig(fig, ctx.out_dir, "tracking_variants_curves"), ""]
-    fig, a = plt.subplots(figsize=(5, 4))
-    a.scatter(cost["tgt"] / 1e3, cost["cpu"], s=2, alpha=0.3)
-    a.set(xlabel="object pixels (amodal mask), thousands", ylabel="CPU ms per frame (one thread)",
-          title=f"{_ref(table)}: cost against the object's image size")
-    a.grid(alpha=0.3)
-    fig.tight_layout()
-    return "\n".join(lines + [savefig(fig, ctx.out_dir, "tracking_variants_cost")])
+    figs = pictures.variants_figures(head, ctx, [r["method"] for r in vrows], srows, cost, _ref(table))
+    return "\n".join(lines + figs)
 
 
 def checks(table, ctx):
-    head, m = C.group(table, ctx.split), _ref(table)
-    ww = next(r for r in C.rate_rows(head, "method", [m]))
+    head, m = T.group(table, ctx.split), _ref(table)
+    ww = next(r for r in T.rate_rows(head, "method", [m]))
     out = [Check(f"{m}: ADD(-S) < 0.1 d on >= 95 % of frames", ww["add_ok"] >= 0.95,
                  f"{100 * ww['add_ok']:.1f} % (lowest sequence {100 * ww['add_ok_seqmin']:.1f} %)"),
            Check(f"{m}: IoU > 0.5 on >= 95 % of frames", ww["iou_ok"] >= 0.95, f"{100 * ww['iou_ok']:.1f} %")]
@@ -123,19 +103,22 @@ def checks(table, ctx):
 
 
 def findings(table, ctx):
-    vr = C.rate_rows(C.group(table, ctx.split), "method", ["su", "sw", "wu", "ww"])
+    vr = T.rate_rows(T.group(table, ctx.split), "method", ["su", "sw", "wu", "ww"])
     if len(vr) < 4:
         return []
     lo, hi = min(r["add_ok"] for r in vr), max(r["add_ok"] for r in vr)
     srows, rho = _size_rows(table)
     n, ok = len(srows), bool(np.isfinite(rho))
     size = f"Spearman(diameter, ADD(-S) AUC) = {fmt(rho)} over {n} sequences" if ok else (
-        f"Spearman(diameter, ADD(-S) AUC) undefined over {n} sequences ({len(set(C.col(srows, 'diameter_cm')))} "
-        f"diameters, {len(set(C.col(srows, 'add_auc')))} AUC values)")
+        f"Spearman(diameter, ADD(-S) AUC) undefined over {n} sequences ({len(set(T.col(srows, 'diameter_cm')))} "
+        f"diameters, {len(set(T.col(srows, 'add_auc')))} AUC values)")
+    frames, seqs = vr[0]["frames"], vr[0]["sequences"]
+    ceiling = f"every variant at {percent(hi)}" if lo >= 0.999 else f"every variant at {percent(lo)}" if hi <= 0.001 else ""
     return [Finding("Ch. 5, Fig. 5.6", "the four implementations perform similarly",
-                    f"ADD(-S) < 0.1 d {100 * lo:.1f}-{100 * hi:.1f} % over Su, Sw, Wu, Ww ({ctx.split})",
+                    f"ADD(-S) < 0.1 d {percent(lo)} to {percent(hi)} over Su, Sw, Wu, Ww ({ctx.split})",
                     "held" if hi - lo <= 0.03 else "partly held",
-                    "simulated tabletop sequences, hand-crafted multi-scale features instead of a CNN"),
+                    "simulated tabletop sequences, hand-crafted multi-scale features instead of a CNN",
+                    n=int(frames), n_of=f"frames of {seqs} sequence{'s' if seqs != 1 else ''}", saturated=ceiling),
             Finding("Ch. 5, Fig. 5.8", "larger objects of distinct shape show higher success rates",
                     f"Ww, one point per sequence: {size}; shape not tested",
                     ("held" if rho > 0.3 else "partly held" if rho > 0 else "not held") if ok

@@ -10,15 +10,20 @@ Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) foll
 - parameters are validated in one place, the class's ``_check_params()``, which returns the clean
   values (and raises ``ValueError``/``TypeError`` naming the parameter);
 - the published behaviour is a named preset, ``Cls.published(**overrides)``: the parameters in the
-  class's ``PUBLISHED`` mapping, not flags threaded through the code.
+  class's ``PUBLISHED`` mapping, not flags threaded through the code;
+- a parameter may be a frozen dataclass of one stage's settings (a *stage config*): as in
+  scikit-learn's nested estimators, ``get_params(deep=True)`` also lists its fields as
+  ``stage__field``, and ``set_params(stage__field=value)`` replaces the config by a copy with that
+  field changed (validated by the config itself).
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import inspect
 
-__all__ = ["Parameterised"]
+__all__ = ["Parameterised", "split_nested", "replace_fields", "check_fields"]
 
 
 class Parameterised:
@@ -33,26 +38,37 @@ class Parameterised:
         return [p.name for p in sig.parameters.values()
                 if p.name != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
 
-    def get_params(self) -> dict:
-        """The constructor parameters, by name."""
-        return {k: getattr(self, k) for k in self._param_names()}
+    def get_params(self, deep=True) -> dict:
+        """The constructor parameters, by name; with ``deep``, also every field of a stage config
+        parameter as ``stage__field``."""
+        out = {}
+        for k in self._param_names():
+            v = out[k] = getattr(self, k)
+            if deep and _is_config(v):
+                out.update({f"{k}__{f.name}": getattr(v, f.name) for f in dataclasses.fields(v)})
+        return out
 
     def set_params(self, **params):
-        """Change parameters; unknown names or bad values raise and leave the object unchanged.
+        """Change parameters (``name=value``, or ``stage__field=value`` inside a stage config); unknown
+        names or bad values raise and leave the object unchanged.
 
         Learned state is kept; call :meth:`reset` to start over with the new parameters.
         """
         names = self._param_names()
-        unknown = sorted(set(params) - set(names))
+        flat, nested = split_nested(params)
+        unknown = sorted(set(flat) - set(names)) + sorted(f"{s}__{f}" for s, fs in nested.items()
+                                                          if s not in names for f in fs)
         if unknown:
             raise ValueError(f"{unknown[0]}: unknown parameter of {type(self).__name__}; valid: {', '.join(names)}")
         trial = copy.copy(self)
-        for k, v in params.items():
+        for k, v in flat.items():
             setattr(trial, k, v)
+        for stage, fields in nested.items():
+            setattr(trial, stage, replace_fields(getattr(trial, stage), stage, fields))
         if hasattr(trial, "_check_params"):
             trial._check_params()
-        for k, v in params.items():
-            setattr(self, k, v)
+        for k in set(flat) | set(nested):
+            setattr(self, k, getattr(trial, k))
         return self
 
     def reset(self):
@@ -85,3 +101,41 @@ class Parameterised:
             if not same and (default is not inspect.Parameter.empty):
                 parts.append(f"{k}={v!r}")
         return f"{type(self).__name__}({', '.join(parts)})"
+
+
+def _is_config(v):
+    return dataclasses.is_dataclass(v) and not isinstance(v, type)
+
+
+def split_nested(params):
+    """({name: value}, {stage: {field: value}}) of keyword parameters with ``stage__field`` names."""
+    flat, nested = {}, {}
+    for k, v in params.items():
+        stage, sep, field = k.partition("__")
+        if sep:
+            nested.setdefault(stage, {})[field] = v
+        else:
+            flat[k] = v
+    return flat, nested
+
+
+def replace_fields(config, stage, fields):
+    """A copy of the stage config ``config`` with ``fields`` changed, validated by the config; errors
+    name the parameter as ``stage__field``."""
+    if not _is_config(config):
+        raise ValueError(f"{stage}__{next(iter(fields))}: {stage} is not a stage config "
+                         f"(got {type(config).__name__})")
+    check_fields(type(config), stage, fields)
+    try:
+        return dataclasses.replace(config, **fields)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"{stage}__{exc}") from None
+
+
+def check_fields(config_type, stage, fields):
+    """Raise ``ValueError`` naming ``stage__field`` for a name in ``fields`` that ``config_type`` lacks."""
+    known = {f.name for f in dataclasses.fields(config_type)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise ValueError(f"{stage}__{unknown[0]}: unknown field of {config_type.__name__}; valid: "
+                         f"{', '.join(sorted(known))}")

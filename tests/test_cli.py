@@ -73,9 +73,9 @@ def test_set_parsing():
 # The slips a new user makes end in one-line errors, never tracebacks.
 @pytest.mark.parametrize("argv, match", [
     (["eval", "polar_sim/Nope-v0", "--policy", "random"], "unknown environment"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", "0"], "--episodes"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "[1]"], "--env-kwargs"),
-    (["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--env-kwargs", "{bad"], "--env-kwargs"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--episodes", "0"], "--episodes"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--env-kwargs", "[1]"], "--env-kwargs"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--env-kwargs", "{bad"], "--env-kwargs"),
     (["render", "office2d", "--width", "0"], "--width"),
     (["demo", "--out", "/dev/null/x"], "--out"),
     (["render", "office2d", "--out", "/tmp/" + "x" * 5000], "--out"),
@@ -83,6 +83,25 @@ def test_set_parsing():
     (["run", "sensors", "--quick", "--set", "bogus=1"], "valid:"),
     (["run", "sensors", "--quick", "--workers", "0"], "--workers"),
     (["compare", "/nonexistent/a", "/nonexistent/b"], "run_a"),
+    # a value of the wrong type for a declared param is refused before any trial, naming it
+    (["run", "localisation", "--quick", "--set", "map_every_steps=2.5"],
+     "param 'map_every_steps': expected an integer (declared: 2, 3), got 2.5"),
+    (["run", "localisation", "--quick", "--set", "loc_s=[30,60]"], "param 'loc_s': expected a number"),
+    (["run", "surface_vs_rate", "--quick", "--set", "spacing_m=[fine]"], "axis 'spacing_m': expected a number"),
+    # eval checks the env id before anything else, then asks for --policy
+    (["eval", "NoSuchEnv-v0"], "env_id: unknown environment 'NoSuchEnv-v0'"),
+    (["eval", "polar_sim/GPISNav-v1"], "--policy: required"),
+    # every path option: an OS error is one line naming the option
+    (["render", "office2d", "--out", "/proc/self"], "--out: cannot create files in '/proc/self'"),
+    (["run", "sensors", "--quick", "--out", "/proc/self"], "--out: cannot create files in '/proc/self'"),
+    (["run", "sensors", "--quick", "--out", "/proc/self/new"], "--out: cannot create '/proc/self/new'"),
+    (["reproduce", "--quick", "--out", "/dev/null"], "--out: '/dev/null' exists and is not a folder"),
+    (["reproduce", "--report-only", "--out", "/dev/null"], "--out: '/dev/null' exists and is not a folder"),
+    (["reproduce", "--report-only", "--out", "/nonexistent/reproduce"], "--out: '/nonexistent/reproduce' does not exist"),
+    (["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--out", "/dev/null/x"], "--out: cannot create"),
+    (["compare", "/proc/self", "/proc/self"], "run_a"),
+    (["compare", "/nonexistent/a", "/nonexistent/b", "--out", "/dev/null"], "--out: '/dev/null' exists and is not a folder"),
+    (["run", "sensors", "--quick", "--backend", "ray", "--address", "127.0.0.1:1"], "--address: cannot reach"),
 ])
 def test_cli_slips(argv, match, capsys):
     assert main(argv) == 1
@@ -90,9 +109,51 @@ def test_cli_slips(argv, match, capsys):
     assert err.startswith("polar-sim: error:") and match in err and err.count("\n") == 1, err
 
 
+# A file where a folder is expected, anywhere up the path, is named with the option.
+def test_out_under_a_file(tmp_path, capsys):
+    (tmp_path / "f").write_text("x")
+    for argv in (["render", "office2d"], ["run", "sensors", "--quick"], ["demo"], ["reproduce", "--quick"]):
+        assert main(argv + ["--out", str(tmp_path / "f" / "sub")]) == 1
+        err = capsys.readouterr().err
+        assert f"--out: cannot create '{tmp_path / 'f' / 'sub'}': '{tmp_path / 'f'}' is a file" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]
+
+
+# An OS error raised deep in a command (not caught by the checks up front) still names the
+# option whose path it concerns, in one line.
+def test_os_error_names_the_option(tmp_path, capsys, monkeypatch):
+    import polar_sim.runner.compare as compare
+
+    def boom(run_a, run_b, **kw):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "b" / "compare" / "compare.md"))
+
+    monkeypatch.setattr(compare, "compare_runs", boom)
+    assert main(["compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "b" / "compare")]) == 1
+    err = capsys.readouterr().err
+    assert err == f"polar-sim: error: --out: cannot use '{tmp_path / 'b' / 'compare' / 'compare.md'}': Permission denied\n"
+    monkeypatch.setattr(compare, "compare_runs", lambda *a, **k: (_ for _ in ()).throw(
+        FileNotFoundError(2, "No such file or directory", str(tmp_path / "a" / "results.csv"))))
+    assert main(["compare", str(tmp_path / "a"), str(tmp_path / "b")]) == 1
+    assert capsys.readouterr().err.startswith("polar-sim: error: run_a: cannot use ")
+
+
+# eval prints every mean with its unit (success and other true/false metrics as % of episodes).
+def test_eval_units():
+    from polar_sim.cli import _EVAL_UNITS, _eval_lines
+
+    rows = [{"return": 1.0, "length": 10, "truncated": False, "is_success": True, "pose_error": 0.1, "novel_s": 2.0},
+            {"return": 3.0, "length": 30, "truncated": True, "is_success": False, "pose_error": 0.3, "novel_s": 4.0}]
+    summary = {"env_id": "x", "episodes": 2, "seed": 0, "mean_return": 2.0, "mean_length": 20.0,
+               "mean_truncated": 0.5, "mean_pose_error": 0.2, "mean_novel_s": 3.0, "success_rate": 0.5}
+    assert dict(_eval_lines(rows, summary)) == {
+        "return": "2 (reward)", "length": "20 steps", "truncated": "50.0 % of episodes", "pose_error": "0.2 m",
+        "novel_s": "3 s", "success": "50.0 % of episodes"}
+    assert _EVAL_UNITS["heading_error"] == "rad" and _EVAL_UNITS["tracking_error_deg"] == "deg"
+
+
 # A callable that is not a policy is named once it is called (after the progress bar has started).
 def test_eval_names_a_callable_that_is_not_a_policy(capsys):
-    assert main(["eval", "polar_sim/GPISNav-v0", "--policy", "os:getcwd", "--episodes", "1"]) == 1
+    assert main(["eval", "polar_sim/GPISNav-v1", "--policy", "os:getcwd", "--episodes", "1"]) == 1
     last = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
     assert last.startswith("polar-sim: error: policy: ") and "policy(obs)" in last, last
 

@@ -19,19 +19,41 @@ def test_packages_listed():
     assert found <= listed, found - listed
 
 
-# The installed package finds its MJCF scenes and experiments through importlib.resources.
-def test_scenes_are_package_data():
-    import polar_sim
-
-    try:
-        scenes = resources.files("polar_sim.scenes")
-    except ModuleNotFoundError:   # a source checkout on PYTHONPATH shadows the installed package
-        raise AssertionError(f"polar_sim is imported from {polar_sim.__file__}, not from an install "
-                             "(scenes/ is mapped into the package by pip install); unset PYTHONPATH") from None
+# The package finds its MJCF scenes and experiments through importlib.resources, in a source checkout
+# (polar_sim/scenes and polar_sim/experiments are links to the top-level folders) and in an install
+# (pyproject maps the same folders into the package): one import path either way.
+def test_scenes_and_experiments_are_package_data():
+    scenes = resources.files("polar_sim.scenes")
     files = {p.name for p in scenes.iterdir()}
     assert {"rover_terrain.xml", "rover_flat.xml", "office2d.xml"} <= files
     exps = {p.name for p in resources.files("polar_sim.experiments").iterdir()}
     assert "sensors.py" in exps
+
+
+# The links in the source tree point at the top-level folders that pyproject maps into the package.
+def test_source_links_match_the_package_mapping():
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    mapping = cfg["tool"]["setuptools"]["package-dir"]
+    for sub in ("scenes", "experiments"):
+        link = ROOT / "polar_sim" / sub
+        assert link.is_symlink() and link.resolve() == (ROOT / mapping[f"polar_sim.{sub}"]).resolve(), link
+
+
+# A source checkout on PYTHONPATH, without any install, imports the experiments the same way.
+def test_source_checkout_imports_experiments(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.path.insert(0, %r); "
+            "import polar_sim, polar_sim.experiments as e, pathlib; "
+            "from polar_sim.runner.registry import list_experiments; "
+            "print(pathlib.Path(polar_sim.__file__).parent, pathlib.Path(e.__path__[0]).resolve(), "
+            "len(list_experiments()))" % str(ROOT))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    pkg, path, n = out.stdout.split()
+    assert Path(pkg) == ROOT / "polar_sim"          # the checkout, not an installed copy
+    assert Path(path) == (ROOT / "experiments").resolve() and int(n) >= 16
 
 
 def mujoco_imports(path):

@@ -102,6 +102,8 @@ class RoomSDF2D(_Room):
     pose : (x, y, theta), default=(0, 0, 0)
         Pose of the room frame (its corner) in the world, m and rad.
 
+    Notes
+    -----
     The SDF is exact everywhere: positive in the free space, negative inside pillars and behind
     the walls (outside the box).
     """

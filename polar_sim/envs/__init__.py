@@ -8,7 +8,7 @@ registers by itself, which is what ``spawn``/``forkserver`` vector-env workers n
 
 from gymnasium.envs.registration import register
 
-__all__ = ["ENV_IDS", "ENV_SUMMARIES", "register_envs"]
+__all__ = ["ENV_IDS", "ENV_SUMMARIES", "register_envs", "pretrained", "pretrained_ids"]
 
 _NAV = "polar_sim.envs.gpis_nav:GPISNavEnv"
 _LIDAR = "polar_sim.envs.lidar_nav:LidarNavEnv"
@@ -53,3 +53,5 @@ def register_envs():
 
 
 register_envs()
+
+from polar_sim.envs.shipped import pretrained, pretrained_ids  # noqa: E402  (after the ids exist)

@@ -12,13 +12,14 @@ import importlib
 import inspect
 import json
 import numbers
+import os
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
-__all__ = ["evaluate", "load_policy", "RandomPolicy"]
+__all__ = ["evaluate", "load_policy", "policy_env_kwargs", "RandomPolicy"]
 
 
 class RandomPolicy:
@@ -36,14 +37,36 @@ class RandomPolicy:
 
 
 def load_policy(spec, env=None):
-    """A policy from ``"module:callable"`` (a class is instantiated without arguments), or
-    ``"random"``. The result is called as ``policy(obs) -> action``."""
+    """The one way to get a policy: a callable ``policy(obs) -> action`` with ``reset()``.
+
+    ``spec`` is one of
+
+    - ``"random"``: uniform random actions of ``env``'s action space (seeded 0);
+    - ``"pretrained"``: the policy shipped for ``env``'s id (:func:`polar_sim.envs.pretrained`);
+    - a path to a policy file (``.npz``, :mod:`polar_sim.envs.policy_file`): a numpy MLP policy,
+      or an SB3 policy (needs torch and stable-baselines3);
+    - ``"module:callable"``: a class (instantiated without arguments) or a callable.
+
+    With ``env``, a policy file is checked against its observation space (``ValueError`` naming
+    the key that does not match).
+    """
     if spec == "random":
         if env is None:
             raise ValueError("policy: 'random' needs the environment")
         return RandomPolicy(env.action_space)
+    if spec == "pretrained":
+        from polar_sim.envs.shipped import pretrained
+
+        if env is None or env.spec is None:
+            raise ValueError("policy: 'pretrained' needs an environment made by gym.make (its id picks the policy)")
+        policy = pretrained(env.spec.id)
+        policy.check_env(env)
+        return policy
+    if isinstance(spec, os.PathLike) or (isinstance(spec, str) and spec.endswith(".npz")):
+        return _load_file(spec, env)
     if not isinstance(spec, str) or ":" not in spec:
-        raise ValueError(f"policy: expected 'module:callable' or 'random', got {spec!r}")
+        raise ValueError(f"policy: expected 'random', 'pretrained', a .npz policy file or 'module:callable', "
+                         f"got {spec!r}")
     mod_name, attr = spec.split(":", 1)
     try:
         obj = getattr(importlib.import_module(mod_name), attr)
@@ -54,6 +77,36 @@ def load_policy(spec, env=None):
     if not callable(obj):
         raise ValueError(f"policy: {spec!r} is not callable")
     return obj
+
+
+def _load_file(path, env):
+    from polar_sim.envs.policy_file import read_policy_file
+
+    meta, _ = read_policy_file(path, "policy")
+    if meta["kind"] == "mlp":
+        from polar_sim.envs.mlp_policy import MLPPolicy
+
+        return MLPPolicy.load(path, env, name="policy")
+    if env is None:
+        raise ValueError("policy: an SB3 policy file needs the environment to rebuild its network")
+    from polar_sim.envs.learning import SB3Policy, load_model
+
+    model, norm, meta = load_model(path, env, name="policy")
+    return SB3Policy(model, norm, meta["recipe"], meta.get("env_id"), meta.get("env_kwargs"))
+
+
+def policy_env_kwargs(spec, env_id):
+    """The ``gym.make`` arguments a policy ``spec`` was made for (``"pretrained"`` or a policy
+    file; ``{}`` otherwise), so that it is scored on the observation it reads."""
+    if spec == "pretrained":
+        from polar_sim.envs.shipped import pretrained
+
+        return dict(pretrained(env_id).env_kwargs)
+    if isinstance(spec, os.PathLike) or (isinstance(spec, str) and spec.endswith(".npz")):
+        from polar_sim.envs.policy_file import read_policy_file
+
+        return dict(read_policy_file(spec, "policy")[0].get("env_kwargs") or {})
+    return dict(getattr(spec, "env_kwargs", None) or {})
 
 
 def _act(policy, obs):
@@ -81,8 +134,9 @@ def evaluate(env_id, policy, *, episodes=10, seed=10_000, env_kwargs=None, out_d
     scalar entries of the final ``info``, e.g. ``is_success``) and a dict of means. With
     ``out_dir``, writes ``episodes.csv``, ``summary.json`` and ``summary.md`` there.
     """
-    env = gym.make(env_id, **(env_kwargs or {}))
-    if isinstance(policy, str):
+    env_kwargs = {**policy_env_kwargs(policy, env_id), **(env_kwargs or {})}
+    env = gym.make(env_id, **env_kwargs)
+    if isinstance(policy, (str, os.PathLike)):
         policy = load_policy(policy, env)
     rows = []
     try:

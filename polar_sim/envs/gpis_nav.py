@@ -15,7 +15,7 @@ from polar_sim.envs.sdf_grid import GRID_SDF_BOUND, GRID_VAR_MAX, SDFGrid, Visit
 from polar_sim.geometry import between2d, compose2d, inv2d, wrap_angle
 
 __all__ = ["GPISNavEnv", "stencil_observation", "OBS_MODES", "LOST_DISTANCE", "RENDER_SPAN", "RENDER_SDF_RANGE",
-           "RENDER_ZERO_BAND"]
+           "RENDER_ZERO_BAND", "RENDER_UNSEEN_VAR", "RENDER_UNSEEN_GREY"]
 
 SDF_BOUND = 50.0
 GRAD_BOUND = 10.0
@@ -27,6 +27,10 @@ LOST_DISTANCE = 0.5  # m: info["track_lost"] when the estimate is further than t
 RENDER_SPAN = 4.0
 RENDER_SDF_RANGE = (-1.0, 2.0)
 RENDER_ZERO_BAND = 0.05
+#: Grey (RGB) where the map's variance is at least RENDER_UNSEEN_VAR: never observed, the map's
+#: prior (GPIS: 1 + map_noise), so its distance there is only an extrapolation.
+RENDER_UNSEEN_VAR = 1.0
+RENDER_UNSEEN_GREY = (150, 150, 150)
 
 
 def stencil_observation(source, stencil, pose2d, queried=None):
@@ -234,8 +238,8 @@ class GPISNavEnv(ModuleEnv):
         return info
 
     def _render_frame(self):
-        """Top-down view beside the map's SDF around the robot, world axes (zero level in white;
-        the true robot red, the estimated one orange, the goal green)."""
+        """Top-down view beside the map's SDF around the robot, world axes (zero level in white,
+        never observed in grey; the true robot red, the estimated one orange, the goal green)."""
         top = self.base.render()
         h, w = top.shape[:2]
         n, span = 96, RENDER_SPAN
@@ -245,11 +249,14 @@ class GPISNavEnv(ModuleEnv):
         pts = np.stack([X.ravel() + pose[0], Y.ravel() + pose[1]], 1)
         if self._origin is not None:  # world points into the map frame
             pts = compose2d(inv2d(self._origin), np.c_[pts, np.zeros(len(pts))])[:, :2]
-        d = self._source.query(pts)[0].reshape(n, n)
+        out = self._source.query(pts)
+        d = out[0].reshape(n, n)
         lo, hi = RENDER_SDF_RANGE
         v = np.clip((d - lo) / (hi - lo), 0, 1)
         heat = cv2.applyColorMap((255 * v).astype(np.uint8), cv2.COLORMAP_VIRIDIS)[..., ::-1].copy()
         heat[np.abs(d) < RENDER_ZERO_BAND] = 255
+        if len(out) > 2:  # a source with a variance: grey where it has seen nothing
+            heat[np.asarray(out[2]).reshape(n, n) >= RENDER_UNSEEN_VAR] = RENDER_UNSEEN_GREY
         heat = cv2.resize(heat, (w, h), interpolation=cv2.INTER_NEAREST)
         c = np.array([w // 2, h // 2])
 

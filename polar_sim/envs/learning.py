@@ -1,22 +1,23 @@
-"""PPO recipes for GPISNav on 2 CPU cores (stable-baselines3, sb3-contrib), and a policy file
-format without pickle.
+"""stable-baselines3 / sb3-contrib recipes for GPISNav on 2 CPU cores, and their policy files.
 
 Needs ``stable-baselines3`` and ``sb3-contrib`` (the ``[test]`` extra) and CPU torch.
 
 - :func:`ppo_recipe` gives the algorithm, policy and keyword arguments for an observation mode
-  and whether the policy is recurrent.
+  and whether the policy is recurrent; :func:`sb3_recipe` the same for SAC and TQC.
 - :class:`SDFGridExtractor` reads the ``sdf_grid`` image with a small CNN (SB3's ``NatureCNN``
   needs 36x36 uint8 images; the grid is 32x32 float32 in metres) and the vector keys as they are.
-- :func:`save_policy` / :func:`load_policy` store the policy's weights, the recipe and the
-  observation normalisation in one ``.npz`` (SB3's own ``save`` pickles parts of the model).
+- :class:`FeatureObservation` flattens chosen keys into one normalised vector, so that an SB3
+  ``MlpPolicy`` is exactly an :class:`~polar_sim.envs.mlp_policy.MLPPolicy` (:func:`export_mlp`)
+  and can start from imitation weights (:func:`load_mlp_into`).
+- :func:`save_policy` / :func:`load_model` store an SB3 policy's weights, the recipe and the
+  observation normalisation in one ``.npz`` of kind ``"sb3"`` (SB3's own ``save`` pickles parts of
+  the model); :class:`SB3Policy` acts with it as ``policy(obs) -> action``. Users load any policy
+  file with :func:`polar_sim.envs.evaluate.load_policy`.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -24,78 +25,18 @@ import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-__all__ = ["ForwardDriveAction", "SDFGridExtractor", "ppo_recipe", "wrap_action", "env_action", "make_model",
-           "ObsNormaliser", "save_policy", "load_policy", "POLICY_FORMAT_VERSION"]
+from polar_sim.envs.action_maps import ACTION_WRAPPERS, ForwardDriveAction, env_action, wrap_action
+from polar_sim.envs.features import FeatureObservation
+from polar_sim.envs.mlp_policy import MLPPolicy
+from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
-POLICY_FORMAT_VERSION = 1
+__all__ = ["ForwardDriveAction", "ACTION_WRAPPERS", "SDFGridExtractor", "FeatureObservation", "ppo_recipe",
+           "sb3_recipe", "wrap_action", "env_action", "make_model", "ObsNormaliser", "save_policy", "load_model",
+           "SB3Policy", "export_mlp", "load_mlp_into", "ALGORITHMS"]
 
-
-class ForwardDriveAction(gym.ActionWrapper):
-    """The policy's action ``b`` in ``Box(-1, 1, (2,))`` mapped to the env's normalised
-    ``(v, omega)``: ``v = min_drive + (1 - min_drive) * (b0 + 1) / 2`` (forward only, in
-    ``[min_drive, 1]`` of ``max_speed``) and ``omega = b1``; ``b`` is first clipped to the box.
-
-    A zero action then drives at ``(1 + min_drive) / 2`` of ``max_speed`` instead of standing
-    still, so a freshly initialised Gaussian policy (mean 0) explores by driving: the progress
-    term of the reward is seen from the first rollout. The env (its action space, reward and
-    dynamics) is unchanged; only the learner's parametrisation is.
-
-    Parameters
-    ----------
-    env : gymnasium.Env
-        An env whose action space is ``Box(-1, 1, (2,))`` (normalised speed and yaw rate).
-    min_drive : float, default=0.0
-        The forward speed at ``b0 = -1``, as a fraction of ``max_speed``, in [0, 1).
-    """
-
-    def __init__(self, env, min_drive=0.0):
-        sp = env.action_space
-        if not (isinstance(sp, gym.spaces.Box) and sp.shape == (2,) and np.all(sp.low == -1) and np.all(sp.high == 1)):
-            raise ValueError(f"env: expected an action space Box(-1, 1, (2,)), got {sp!r}")
-        self.min_drive = _check_min_drive(min_drive)
-        super().__init__(env)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
-
-    @staticmethod
-    def map_action(b, min_drive=0.0):
-        """The env action (2,) float32 of the policy action ``b`` (2,)."""
-        m = _check_min_drive(min_drive)
-        b = np.clip(np.asarray(b, np.float64).reshape(2), -1.0, 1.0)
-        return np.array([m + (1.0 - m) * (b[0] + 1.0) / 2.0, b[1]], np.float32)
-
-    def action(self, action):
-        return self.map_action(action, self.min_drive)
-
-
-def _check_min_drive(m):
-    if isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating)) or not (0.0 <= m < 1.0):
-        raise ValueError(f"min_drive: expected a number in [0, 1), got {m!r}")
-    return float(m)
-
-
-#: Action wrappers a recipe may name (``recipe["action"]``).
-ACTION_WRAPPERS = {"forward_drive": ForwardDriveAction}
-
-
-def wrap_action(env, action):
-    """``env`` wrapped as ``action`` says (a recipe's ``"action"``: None, or ``{"name": ...,
-    "kwargs": {...}}`` with a name of :data:`ACTION_WRAPPERS`)."""
-    if action is None:
-        return env
-    if not isinstance(action, dict) or action.get("name") not in ACTION_WRAPPERS:
-        raise ValueError(f"action: expected None or {{'name': one of {sorted(ACTION_WRAPPERS)}, 'kwargs': ...}}, "
-                         f"got {action!r}")
-    return ACTION_WRAPPERS[action["name"]](env, **action.get("kwargs", {}))
-
-
-def env_action(action, b):
-    """The env action of the policy action ``b`` under a recipe's ``action`` (None: ``b`` clipped)."""
-    if action is None:
-        return np.clip(np.asarray(b, np.float64), -1.0, 1.0).astype(np.float32)
-    cls = ACTION_WRAPPERS.get(action.get("name")) if isinstance(action, dict) else None
-    if cls is None:
-        raise ValueError(f"action: unknown action parametrisation {action!r}")
-    return cls.map_action(b, **action.get("kwargs", {}))
+#: SB3 algorithms a recipe may name, and where they live.
+ALGORITHMS = {"PPO": "stable_baselines3", "RecurrentPPO": "sb3_contrib", "SAC": "stable_baselines3",
+              "TQC": "sb3_contrib"}
 
 
 class SDFGridExtractor(BaseFeaturesExtractor):
@@ -158,70 +99,180 @@ def ppo_recipe(obs_mode="stencil", recurrent=False):
     return {"algorithm": "PPO", "policy": "MultiInputPolicy", "kwargs": kwargs, "action": action}
 
 
+def sb3_recipe(algorithm):
+    """An off-policy recipe (``"SAC"`` or ``"TQC"``) on the stencil: two layers of 256, a replay
+    buffer of 100k steps, 1,000 random steps first, one gradient step per env step, the
+    forward-drive action."""
+    if algorithm not in ("SAC", "TQC"):
+        raise ValueError(f"algorithm: expected 'SAC' or 'TQC', got {algorithm!r}")
+    kwargs = {"buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256, "learning_rate": 3e-4,
+              "gamma": 0.99, "policy_kwargs": {"net_arch": [256, 256]}}
+    return {"algorithm": algorithm, "policy": "MultiInputPolicy", "kwargs": kwargs,
+            "action": {"name": "forward_drive", "kwargs": {}}}
+
+
 def _resolved(recipe):
     kw = json.loads(json.dumps(recipe["kwargs"]))
-    pk = kw["policy_kwargs"]
+    pk = kw.get("policy_kwargs", {})
     if pk.get("features_extractor_class") == "SDFGridExtractor":
         pk["features_extractor_class"] = SDFGridExtractor
+    if pk.get("activation_fn") in ("tanh", "relu"):
+        pk["activation_fn"] = {"tanh": nn.Tanh, "relu": nn.ReLU}[pk["activation_fn"]]
     return kw
+
+
+def _algorithm(name):
+    if name not in ALGORITHMS:
+        raise ValueError(f"algorithm: expected one of {sorted(ALGORITHMS)}, got {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(ALGORITHMS[name]), name)
 
 
 def make_model(recipe, env, *, seed=0):
     """The SB3 model of ``recipe`` on ``env`` (a VecEnv or an Env), CPU."""
-    if recipe["algorithm"] == "RecurrentPPO":
-        from sb3_contrib import RecurrentPPO as algo
-    else:
-        from stable_baselines3 import PPO as algo
-    return algo(recipe["policy"], env, seed=seed, device="cpu", verbose=0, **_resolved(recipe))
+    return _algorithm(recipe["algorithm"])(recipe["policy"], env, seed=seed, device="cpu", verbose=0,
+                                           **_resolved(recipe))
 
 
 class ObsNormaliser:
     """The observation normalisation of SB3's ``VecNormalize`` as plain arrays:
-    ``clip((obs[k] - mean[k]) / sqrt(var[k] + eps), -clip, clip)`` per key."""
+    ``clip((obs[k] - mean[k]) / sqrt(var[k] + eps), -clip, clip)`` per key (``mean`` an array
+    instead of a dict: the whole observation, for a flat ``Box``)."""
 
     def __init__(self, mean, var, clip=10.0, eps=1e-8):
-        self.mean = {k: np.asarray(v, np.float64) for k, v in mean.items()}
-        self.var = {k: np.asarray(v, np.float64) for k, v in var.items()}
+        self.flat = not isinstance(mean, dict)
+        m, v = ({"": mean}, {"": var}) if self.flat else (mean, var)
+        self.mean = {k: np.asarray(x, np.float64) for k, x in m.items()}
+        self.var = {k: np.asarray(x, np.float64) for k, x in v.items()}
         self.clip, self.eps = float(clip), float(eps)
 
     @classmethod
     def from_vecnormalize(cls, venv):
         rms = venv.obs_rms
-        return cls({k: r.mean for k, r in rms.items()}, {k: r.var for k, r in rms.items()}, venv.clip_obs,
-                   venv.epsilon)
+        if isinstance(rms, dict):
+            return cls({k: r.mean for k, r in rms.items()}, {k: r.var for k, r in rms.items()}, venv.clip_obs,
+                       venv.epsilon)
+        return cls(rms.mean, rms.var, venv.clip_obs, venv.epsilon)
+
+    @classmethod
+    def identity(cls, space):
+        """No normalisation (mean 0, variance 1 - eps, no clip) for the keys of ``space``."""
+        spaces = getattr(space, "spaces", None) or {"": space}
+        ob = cls({k: np.zeros(s.shape) for k, s in spaces.items()}, {k: np.ones(s.shape) for k, s in spaces.items()},
+                 np.inf, 0.0)
+        ob.flat = not hasattr(space, "spaces")
+        return ob
 
     def __call__(self, obs):
-        return {k: np.clip((np.asarray(obs[k], np.float64) - self.mean[k]) / np.sqrt(self.var[k] + self.eps),
-                           -self.clip, self.clip).astype(np.float32) for k in self.mean}
+        if self.flat:
+            return self._one("", obs)
+        return {k: self._one(k, obs[k]) for k in self.mean}
+
+    def _one(self, k, x):
+        return np.clip((np.asarray(x, np.float64) - self.mean[k]) / np.sqrt(self.var[k] + self.eps),
+                       -self.clip, self.clip).astype(np.float32)
 
 
-def save_policy(path, model, recipe, normaliser):
-    """Write the policy's weights, the recipe and the normalisation to ``path`` (.npz), atomically."""
-    path = Path(path)
+def save_policy(path, model, recipe, normaliser, *, env_id=None, env_kwargs=None):
+    """Write an SB3 model's policy weights, the recipe and the normalisation to ``path`` (.npz,
+    kind ``"sb3"``), atomically."""
+    space = model.observation_space
+    shapes = {k: s.shape for k, s in space.spaces.items()} if hasattr(space, "spaces") else {"": space.shape}
     arrays = {f"policy/{k}": v.detach().cpu().numpy() for k, v in model.policy.state_dict().items()}
     arrays.update({f"obs_mean/{k}": v for k, v in normaliser.mean.items()})
     arrays.update({f"obs_var/{k}": v for k, v in normaliser.var.items()})
-    meta = {"format_version": POLICY_FORMAT_VERSION, "recipe": recipe, "clip": normaliser.clip, "eps": normaliser.eps}
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp.npz")
-    os.close(fd)
-    try:
-        np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    meta = {"kind": "sb3", "recipe": recipe, "clip": normaliser.clip, "eps": normaliser.eps,
+            "obs_shapes": shapes, "env_id": env_id, "env_kwargs": env_kwargs or {}}
+    write_policy_file(path, meta, arrays)
+    return path
 
 
-def load_policy(path, env):
-    """``(model, normaliser)`` from :func:`save_policy`'s file, on ``env`` (spaces as trained)."""
-    with np.load(path, allow_pickle=False) as f:
-        meta = json.loads(str(f["meta"]))
-        if meta.get("format_version") != POLICY_FORMAT_VERSION:
-            raise ValueError(f"path: policy format version {meta.get('format_version')!r}, expected "
-                             f"{POLICY_FORMAT_VERSION}")
-        state = {k[len("policy/"):]: torch.as_tensor(f[k]) for k in f.files if k.startswith("policy/")}
-        mean = {k[len("obs_mean/"):]: f[k] for k in f.files if k.startswith("obs_mean/")}
-        var = {k[len("obs_var/"):]: f[k] for k in f.files if k.startswith("obs_var/")}
+def load_model(path, env, name="path"):
+    """``(model, normaliser, meta)`` from :func:`save_policy`'s file, on ``env`` (spaces as trained)."""
+    meta, arrays = read_policy_file(path, name)
+    if meta["kind"] != "sb3":
+        raise ValueError(f"{name}: a policy of kind {meta['kind']!r}, expected 'sb3'")
+    shapes = meta.get("obs_shapes", {})
+    if "" in shapes:
+        if tuple(env.observation_space.shape or ()) != tuple(shapes[""]):
+            raise ValueError(f"env: observation mismatch: shape {env.observation_space.shape} in the env, "
+                             f"{tuple(shapes[''])} in the policy")
+    else:
+        check_observation_space(shapes, env.observation_space)
+    state = {k[len("policy/"):]: torch.as_tensor(v) for k, v in arrays.items() if k.startswith("policy/")}
+    mean = {k[len("obs_mean/"):]: v for k, v in arrays.items() if k.startswith("obs_mean/")}
+    var = {k[len("obs_var/"):]: v for k, v in arrays.items() if k.startswith("obs_var/")}
+    if set(mean) == {""}:
+        mean, var = mean[""], var[""]
     model = make_model(meta["recipe"], env)
-    model.policy.load_state_dict(state)
-    return model, ObsNormaliser(mean, var, meta["clip"], meta["eps"])
+    try:
+        model.policy.load_state_dict(state)
+    except RuntimeError as exc:
+        raise ValueError(f"{name}: the weights do not fit the recipe's network ({str(exc)[:200]})") from None
+    return model, ObsNormaliser(mean, var, meta["clip"], meta["eps"]), meta
+
+
+class SB3Policy:
+    """``policy(obs) -> action`` of an SB3 model: deterministic actions on normalised
+    observations, mapped to the env's action by the recipe's ``action``; ``reset()`` clears a
+    recurrent policy's state."""
+
+    def __init__(self, model, normaliser, recipe, env_id=None, env_kwargs=None):
+        self.model, self.normaliser, self.recipe = model, normaliser, recipe
+        self.recurrent = recipe["algorithm"] == "RecurrentPPO"
+        self.env_id, self.env_kwargs = env_id, dict(env_kwargs or {})
+        self.reset()
+
+    def reset(self):
+        self._state, self._start = None, True
+
+    def save(self, path):
+        """Write the policy to ``path`` (.npz, kind ``"sb3"``)."""
+        return save_policy(path, self.model, self.recipe, self.normaliser, env_id=self.env_id,
+                           env_kwargs=self.env_kwargs)
+
+    def __call__(self, obs):
+        o = self.normaliser(obs)
+        o = o[None] if self.normaliser.flat else {k: v[None] for k, v in o.items()}
+        if self.recurrent:
+            a, self._state = self.model.predict(o, state=self._state, episode_start=np.array([self._start]),
+                                                deterministic=True)
+            self._start = False
+        else:
+            a, _ = self.model.predict(o, deterministic=True)
+        return env_action(self.recipe.get("action"), a[0])
+
+
+def _actor_linears(model):
+    """The Linear layers from features to the action mean of an SB3 ``MlpPolicy`` (PPO)."""
+    pi = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, nn.Linear)]
+    return pi + [model.policy.action_net]
+
+
+def export_mlp(model, mean, std, *, keys, obs_shapes, recipe, clip=10.0, env_id=None, env_kwargs=None):
+    """The numpy :class:`MLPPolicy` of a PPO ``MlpPolicy`` trained on :class:`FeatureObservation`
+    (``keys``) normalised by ``mean``/``std``; its deterministic action is the same."""
+    act = model.policy.mlp_extractor.policy_net
+    acts = {type(m) for m in act if not isinstance(m, nn.Linear)}
+    activation = "relu" if acts == {nn.ReLU} else "tanh"
+    if acts - {nn.Tanh, nn.ReLU} or len(acts) > 1:
+        raise ValueError(f"model: only tanh or relu MLP policies export, got {acts}")
+    lin = _actor_linears(model)
+    return MLPPolicy([m.weight.detach().numpy() for m in lin], [m.bias.detach().numpy() for m in lin],
+                     obs_keys=keys, obs_shapes=obs_shapes, mean=mean, std=std, clip=clip, activation=activation,
+                     action=recipe.get("action"), env_id=env_id, env_kwargs=env_kwargs, recipe=recipe)
+
+
+def load_mlp_into(model, policy):
+    """Copy an :class:`MLPPolicy`'s layers into a PPO ``MlpPolicy`` of the same widths (the
+    imitation weights as PPO's starting actor; the critic is left as initialised)."""
+    lin = _actor_linears(model)
+    if len(lin) != len(policy.weights) or any(m.weight.shape != w.shape for m, w in zip(lin, policy.weights)):
+        raise ValueError(f"policy: layers {[w.shape for w in policy.weights]} do not fit the model's "
+                         f"{[tuple(m.weight.shape) for m in lin]}")
+    with torch.no_grad():
+        for m, w, b in zip(lin, policy.weights, policy.biases):
+            m.weight.copy_(torch.as_tensor(w, dtype=torch.float32))
+            m.bias.copy_(torch.as_tensor(b, dtype=torch.float32))
+    return model

@@ -48,7 +48,7 @@ class ObjectTrackEnv(ModuleEnv):
     |---|---|---|
     | ``image_obs`` | False | also observe the RGB-D image |
     | ``tracker`` | ``"objecttracker"`` | or a factory ``tracker(model_points, K, initial_pose, model_normals=..., random_state=..., **tracker_params)`` of an object with ``process(rgb, depth, t)`` (see :class:`polar_sim.envs.observers.TrackerPose`) |
-    | ``tracker_params`` | None | keyword arguments of the tracker (e.g. ``{"appearance": "h"}``) |
+    | ``tracker_params`` | None | keyword arguments of the tracker (e.g. ``{"appearance": "h"}``, or a stage config: ``{"guard": GuardConfig(lost_after=5)}``, :mod:`polar_sim.tracking.config`) |
 
     ## Truth in ``info``
     ``TabletopReach-v0``'s (true ``object_pose``, ``pregrasp_pose``, ``position_error``, ...),

@@ -2,7 +2,7 @@
 
 ``GPISMap2D`` fuses planar laser scans (quadtree), ``GPISMap3D`` depth images and 3D lidar
 (octree). Both answer ``query(points) -> (sdf, grad, var)``; see ``docs/specs/gpis.md`` for the
-algorithm and the README ("Online GPIS mapping") for usage.
+algorithm and ``docs/guide/gpis.md`` for usage.
 """
 
 from polar_sim.gpis.map2d import GPISMap2D

@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.ground.depth import fuse
-from polar_sim.ground.motion import estimate_motion
 from polar_sim.ground.vo import GroundVO
 
 __all__ = ["HeldScaleVO"]
@@ -30,55 +29,44 @@ class HeldScaleVO(GroundVO):
         self.speed_truth = speed_truth
         super().__init__(K, camera_height, **kw)
 
-    def _motion_and_ground(self, trk, tri, t, diag, labels):
+    @classmethod
+    def _param_names(cls):
+        return [*GroundVO._param_names(), "speed_truth"]
+
+    def _motion_and_ground(self, fr, tri, t, labels):
         # Steps 8 and 10 of spec §1 as in GroundVO (same selection and motion solve); step 9 (ground
         # model) replaced by the held scale.
-        c = self.cfg_
+        solved = self._solve_motion(tri, t, fr.diag)
+        if solved is None:
+            fr.status = "few_triplets"
+            return
+        m, idx = solved[:2]
+        c, trk = self.cfg_, self.tracks_
         vf, yf = self.speed_filter_, self.yaw_filter_
-        ps = self.pixel_scale_
-        idx = np.flatnonzero(tri)
-        xy = trk["xy"][idx]
-        u, v = self._level(xy[:, 1])
-        sel = (np.abs(u * self.fx_) > 3.0 * ps) & (np.abs(v * self.fy_) > 3.0 * ps)
-        diag["n_motion_points"] = int(sel.sum())
-        if len(idx) < c["min_triplets"] or sel.sum() < 10:
-            return "few_triplets", False, None
-        idx, xy, u, v = idx[sel], xy[sel], u[sel], v[sel]
-        u0, v0 = self._level(xy[:, 0])
-        u2, v2 = self._level(xy[:, 2])
-        span = t - self.times_[-2]
-        halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
-        m = estimate_motion(u, v, (u2 - u0) / span, (v2 - v0) / span, n_global=c["n_global"], ridge=c["ridge"],
-                            irls_iter=c["irls_iter"], estimate_foe=c["foe"],
-                            span=halves if c["exact_flow"] else None, compat="fixed")
-        diag["irls_iterations"] = int(m.iterations)
-        rates_raw = m.rates.copy()
+        fr.motion_done, fr.rates_raw, fr.yaw_raw = True, m.rates.copy(), float(m.rates[1])
         vi = np.flatnonzero(m.valid)
         ti = idx[vi]
-        usable = trk["has"][ti] & (trk["P"][ti] < c["depth_usable"]) & (trk["d"][ti] > 0)
+        usable = trk["has"][ti] & (trk["P"][ti] < c.depth_usable) & (trk["d"][ti] > 0)
         vf.predict()
         yf.predict()
-        speed_raw = np.nan
-        if usable.sum() >= c["min_inliers"]:
+        if usable.sum() >= c.ground.min_inliers:
             # The frame's scale is its structure's: the median ratio of the measured d̄ to the propagated
             # metric inverse depths (no speed filter: filtering would re-anchor the depths to a lagging
             # speed every frame, so the scale would lag the truth instead of drifting).
-            speed_raw = float(np.median(m.dbar[vi][usable] / trk["d"][ti][usable]))
-            vf.reset(speed_raw, 1e-6)
+            fr.speed_raw = float(np.median(m.dbar[vi][usable] / trk["d"][ti][usable]))
+            vf.reset(fr.speed_raw, 1e-6)
             self.scale_held_ = True
         elif not getattr(self, "scale_held_", False):
             # Start-up, the only ground truth: the true speed of the first solved frame gives the metric
             # scale. (The rover starts from rest, and a static frame on the next images resets speed
             # and depths, so this repeats until the structure has carried the scale once.)
             vf.reset(float(self.speed_truth[self.n_frames_ - 1]), 1e-6)
-        yf.update(float(m.rates[1]))
-        self.rates_ = np.array([rates_raw[0], yf.x, rates_raw[2]])
+        yf.update(fr.yaw_raw)
+        self.rates_ = np.array([fr.rates_raw[0], yf.x, fr.rates_raw[2]])
         if vf.x > 0:
             d_m = m.dbar[vi] / vf.x
-            d_f, P_f = fuse(trk["d"][ti], trk["P"][ti], d_m, usable, c["depth_r"], c["depth_p_reset"])
+            d_f, P_f = fuse(trk["d"][ti], trk["P"][ti], d_m, usable, c.depth_r, c.depth_p_reset)
             trk["dmeas"][ti], trk["d"][ti], trk["P"][ti] = d_m, d_f, P_f
             trk["has"][ti] = True
-        diag["n_inliers"] = int(usable.sum())
-        empty = np.zeros((0, 2))
-        return "ok", True, (speed_raw, float(m.rates[1]), rates_raw, empty, np.zeros(0),
-                            np.zeros(0, dtype=bool), empty, np.zeros(0))
+        fr.diag["n_inliers"] = int(usable.sum())
+        fr.status = "ok"

@@ -21,7 +21,7 @@ __all__ = ["arrow_solve", "arrow_normal_equations", "estimate_motion", "central_
 
 
 def arrow_solve(A11, A12, D, b_g, b_d):
-    """Solve the arrow system [[A11, A12], [A12ᵀ, diag(D)]] [g; d] = [b_g; b_d] in O(N n_g²).
+    """Solve the arrow system ``[[A11, A12], [A12ᵀ, diag(D)]] [g; d] = [b_g; b_d]`` in O(N n_g²).
 
     A11 (n_g, n_g), A12 (n_g, N), D (N,) positive, b_g (n_g,), b_d (N,). Returns (g (n_g,), d (N,)).
     """

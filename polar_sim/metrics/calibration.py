@@ -1,7 +1,10 @@
 """Calibration of probability maps: expected calibration error and reliability diagrams.
 
 A probability is calibrated when, among the pixels given P = p, a fraction p are positive. The
-modules' P(ground) and P(target) are scored this way against the true masks.
+modules' P(ground) and P(target) are scored this way against the true masks. One binning serves all:
+:func:`reliability_counts` gives a frame's per-bin sums, which add over frames, and
+:func:`pooled_reliability` turns (summed) counts into a :class:`Reliability`; :func:`reliability` is the
+two in one. Drawing the diagram is the experiments' business (no plotting here).
 
 Probabilities and labels are arrays of the same shape (any, e.g. (H, W) or (n, H, W)); a
 ``valid`` mask, if given, selects the pixels that count (e.g. only those in the image's region of
@@ -14,7 +17,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["reliability", "Reliability", "expected_calibration_error", "plot_reliability"]
+__all__ = ["reliability", "Reliability", "expected_calibration_error", "reliability_counts", "pooled_reliability"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,56 +69,45 @@ def _inputs(prob, labels, valid):
     return p, y
 
 
+def reliability_counts(prob, labels, *, n_bins=15, valid=None):
+    """Per-bin sufficient statistics of a reliability diagram: (count, sum of p, sum of labels), each
+    (n_bins,), over ``n_bins`` equal bins [0, 1/n), ..., [(n-1)/n, 1] (p = 1 in the last bin). Add them
+    over frames and pass the sums to :func:`pooled_reliability`."""
+    if isinstance(n_bins, bool) or not isinstance(n_bins, (int, np.integer)) or not 1 <= n_bins <= 10**6:
+        raise ValueError(f"n_bins: expected an integer from 1 to 1000000, got {n_bins!r}")
+    p, y = _inputs(prob, labels, valid)
+    idx = np.minimum((p * n_bins).astype(np.int64), n_bins - 1)
+    return (np.bincount(idx, minlength=n_bins).astype(np.int64), np.bincount(idx, weights=p, minlength=n_bins),
+            np.bincount(idx, weights=y.astype(np.float64), minlength=n_bins))
+
+
+def pooled_reliability(count, prob_sum, label_sum) -> Reliability:
+    """The :class:`Reliability` of (summed) :func:`reliability_counts`: count, sum of p and sum of
+    labels per bin, three (n_bins,) arrays."""
+    c = np.asarray(count, dtype=np.int64)
+    ps, ys = np.asarray(prob_sum, dtype=np.float64), np.asarray(label_sum, dtype=np.float64)
+    if c.ndim != 1 or ps.shape != c.shape or ys.shape != c.shape or (c < 0).any():
+        raise ValueError(f"count, prob_sum, label_sum: expected three (n_bins,) arrays, counts >= 0; got {c.shape}, "
+                         f"{ps.shape}, {ys.shape}")
+    n = int(c.sum())
+    if n == 0:
+        raise ValueError("count: no samples")
+    nz = c > 0
+    conf = np.where(nz, ps / np.maximum(c, 1), np.nan)
+    freq = np.where(nz, ys / np.maximum(c, 1), np.nan)
+    gap = np.abs(freq - conf)
+    return Reliability(np.linspace(0.0, 1.0, len(c) + 1), c, conf, freq, float(np.sum(c[nz] * gap[nz]) / n),
+                       float(gap[nz].max()), n)
+
+
 def reliability(prob, labels, *, n_bins=15, valid=None) -> Reliability:
     """Reliability statistics of ``prob`` against boolean ``labels`` over ``n_bins`` equal bins.
 
     Bins are [0, 1/n), [1/n, 2/n), ..., [(n-1)/n, 1]: p = 1 falls in the last bin.
     """
-    if isinstance(n_bins, bool) or not isinstance(n_bins, (int, np.integer)) or n_bins < 1:
-        raise ValueError(f"n_bins: expected an integer >= 1, got {n_bins!r}")
-    p, y = _inputs(prob, labels, valid)
-    edges = np.linspace(0.0, 1.0, int(n_bins) + 1)
-    idx = np.minimum((p * n_bins).astype(np.int64), n_bins - 1)
-    count = np.bincount(idx, minlength=n_bins).astype(np.int64)
-    psum = np.bincount(idx, weights=p, minlength=n_bins)
-    ysum = np.bincount(idx, weights=y.astype(np.float64), minlength=n_bins)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        conf = np.where(count > 0, psum / np.maximum(count, 1), np.nan)
-        freq = np.where(count > 0, ysum / np.maximum(count, 1), np.nan)
-    gap = np.abs(freq - conf)
-    nz = count > 0
-    ece = float(np.sum(count[nz] * gap[nz]) / p.size)
-    return Reliability(edges, count, conf, freq, ece, float(gap[nz].max()), int(p.size))
+    return pooled_reliability(*reliability_counts(prob, labels, n_bins=n_bins, valid=valid))
 
 
 def expected_calibration_error(prob, labels, *, n_bins=15, valid=None) -> float:
     """Expected calibration error (ECE) with ``n_bins`` equal-width bins (15 by default)."""
     return reliability(prob, labels, n_bins=n_bins, valid=valid).ece
-
-
-def plot_reliability(rels, labels=None, *, ax=None, title="reliability diagram"):
-    """Draw one or more :class:`Reliability` curves with the diagonal and per-bin counts.
-
-    ``rels``: a Reliability or a list of them; ``labels``: their legend names. Returns the axes.
-    """
-    import matplotlib.pyplot as plt
-
-    if isinstance(rels, Reliability):
-        rels = [rels]
-    labels = list(labels) if labels is not None else [f"curve {i}" for i in range(len(rels))]
-    if len(labels) != len(rels):
-        raise ValueError(f"labels: expected {len(rels)} names, got {len(labels)}")
-    if ax is None:
-        _, ax = plt.subplots(figsize=(4.6, 4.2))
-    ax.plot([0, 1], [0, 1], c="0.6", ls="--", lw=1, label="calibrated")
-    for r, name in zip(rels, labels):
-        nz = r.count > 0
-        ax.plot(r.confidence[nz], r.frequency[nz], marker="o", ms=3, label=f"{name} (ECE {r.ece:.3f})")
-    ax.set_xlim(0, 1)
-    ax.set_ylim(0, 1)
-    ax.set_xlabel("predicted probability (bin mean)")
-    ax.set_ylabel("observed frequency of the class")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
-    return ax

@@ -11,18 +11,21 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import rankdata
 
+from polar_sim._validation import as_float_array
+from polar_sim.metrics.calibration import _inputs
+
 __all__ = [
     "GroundSuccess",
     "ground_success",
     "SuccessCurve",
     "fit_success_curve",
     "laplace_scale",
+    "speed_error_scales",
+    "iou_summary",
     "classifier_iou",
     "classifier_auc",
     "labels_at",
     "oracle_step_speeds",
-    "reliability_counts",
-    "pooled_reliability",
     "class_prob_sums",
     "class_mean_prob_bounds",
     "pool_by_family",
@@ -144,12 +147,47 @@ def laplace_scale(errors):
 
     errors : (n,) finite, e.g. raw RANSAC speed minus true speed (m/s) over frames with a fit.
     """
-    e = np.asarray(errors, dtype=np.float64).ravel()
+    e = as_float_array(errors, "errors").ravel()    # strings and complex numbers: TypeError
     if e.size == 0:
         raise ValueError("errors: expected at least one value")
     if not np.isfinite(e).all():
         raise ValueError("errors: contains NaN or inf (drop frames without a scale fit first)")
     return float(np.mean(np.abs(e)))
+
+
+def speed_error_scales(speed_raw, speed, speed_true):
+    """ΔV_mean (Laplace scale, m/s) of a VO's raw and filtered speeds against the truth.
+
+    ``speed_raw``, ``speed`` (n,): the values reported with image k, which describe the middle frame
+    k - 1 (central-difference flow), so they are compared with ``speed_true[k - 1]`` (n,); raw speeds
+    that are NaN (no ground fit) are left out. Returns (dv_raw, dv_filtered); dv_raw is NaN when no
+    image has a raw speed.
+    """
+    raw, filt, true = (np.asarray(a, dtype=np.float64) for a in (speed_raw, speed, speed_true))
+    n = len(true)
+    if raw.shape != (n,) or filt.shape != (n,) or n < 2:
+        raise ValueError(f"speed_raw, speed, speed_true: expected equal shapes (n,), n >= 2; got {raw.shape}, "
+                         f"{filt.shape}, {true.shape}")
+    mid, ok = np.arange(n) - 1, np.isfinite(raw) & (np.arange(n) >= 1)
+    dv_raw = laplace_scale(raw[ok] - true[mid[ok]]) if ok.any() else float("nan")
+    return dv_raw, laplace_scale(filt[1:] - true[:-1])
+
+
+def iou_summary(iou, settled, scored, target):
+    """Per-route statistics of a per-frame IoU series (n,): over the ``settled`` frames (n,) bool the
+    mean, 10th percentile and share >= ``target``; the mean over the ``scored`` frames (n,) bool that
+    are not settled (transitions), and over all ``scored`` frames. NaN where a set is empty; NaN IoUs
+    (no ground and no prediction) are left out."""
+    iou = np.asarray(iou, dtype=np.float64)
+    s = np.asarray(settled, bool) & np.isfinite(iou)
+    scored = np.asarray(scored, bool)
+    trans = scored & ~np.asarray(settled, bool)
+    nan = float("nan")
+    return {"n_settled": int(s.sum()), "iou_settled_mean": float(np.mean(iou[s])) if s.any() else nan,
+            "iou_settled_p10": float(np.percentile(iou[s], 10)) if s.any() else nan,
+            "share_settled_ge_target": float(np.mean(iou[s] >= target)) if s.any() else nan,
+            "iou_transition_mean": float(np.mean(iou[trans])) if trans.any() else nan,
+            "iou_all_mean": float(np.nanmean(iou[scored])) if np.isfinite(iou[scored]).any() else nan}
 
 
 def _maps(prob, gt_mask, valid):
@@ -230,50 +268,17 @@ def oracle_step_speeds(times, step_lengths):
     return s / dt
 
 
-def reliability_counts(prob, labels, *, n_bins=15, valid=None):
-    """Per-bin sufficient statistics of a reliability diagram: (count, sum of p, sum of labels), each
-    (n_bins,), over equal-width bins of [0, 1] (p = 1 in the last bin). Add them over frames and
-    pass the sums to :func:`pooled_reliability`; same bins as ``metrics.calibration.reliability``."""
-    from polar_sim.metrics.calibration import _inputs
-
-    p, y = _inputs(prob, labels, valid)
-    idx = np.minimum((p * n_bins).astype(np.int64), n_bins - 1)
-    return (np.bincount(idx, minlength=n_bins).astype(np.int64), np.bincount(idx, weights=p, minlength=n_bins),
-            np.bincount(idx, weights=y.astype(np.float64), minlength=n_bins))
-
-
-def pooled_reliability(count, prob_sum, label_sum):
-    """The :class:`polar_sim.metrics.calibration.Reliability` of summed :func:`reliability_counts`."""
-    from polar_sim.metrics.calibration import Reliability
-
-    c = np.asarray(count, dtype=np.int64)
-    ps, ys = np.asarray(prob_sum, dtype=np.float64), np.asarray(label_sum, dtype=np.float64)
-    if c.ndim != 1 or ps.shape != c.shape or ys.shape != c.shape or (c < 0).any():
-        raise ValueError(f"count, prob_sum, label_sum: expected three (n_bins,) arrays, counts >= 0; got {c.shape}, "
-                         f"{ps.shape}, {ys.shape}")
-    n = int(c.sum())
-    if n == 0:
-        raise ValueError("count: no samples")
-    nz = c > 0
-    conf = np.where(nz, ps / np.maximum(c, 1), np.nan)
-    freq = np.where(nz, ys / np.maximum(c, 1), np.nan)
-    gap = np.abs(freq - conf)
-    return Reliability(np.linspace(0.0, 1.0, len(c) + 1), c, conf, freq, float(np.sum(c[nz] * gap[nz]) / n),
-                       float(gap[nz].max()), n)
-
-
 def class_prob_sums(prob, labels, *, valid=None):
     """(sum of p on true ground, ground pixel count, sum of p on non-ground, non-ground count), (4,)
     float64: add over frames; ``sums[0] / sums[1]`` is the mean P(ground) on ground pixels."""
-    from polar_sim.metrics.calibration import _inputs
-
     p, y = _inputs(prob, labels, valid)
     y = y.astype(bool)
     return np.array([p[y].sum(dtype=np.float64), y.sum(), p[~y].sum(dtype=np.float64), (~y).sum()], np.float64)
 
 
 def class_mean_prob_bounds(count, prob_sum, label_sum):
-    """Mean P(ground) on ground and on non-ground pixels from summed :func:`reliability_counts` alone.
+    """Mean P(ground) on ground and on non-ground pixels from summed
+    :func:`~polar_sim.metrics.calibration.reliability_counts` alone.
 
     The bins hold no per-class sum of p, so each class's mean is estimated with the bin's mean
     confidence, and bounded by the bin edges (every pixel of bin k has p in [k/n, (k+1)/n]).
@@ -296,8 +301,11 @@ def pool_by_family(series):
 
     ``series``: an iterable of mappings with ``families`` (zone family names), ``settled`` (n,) bool,
     ``zone`` (n,) zone index, ``iou`` (n,) and ``bins`` (n, 3, n_bins) per-frame
-    :func:`reliability_counts`; optionally ``psums`` (n, 4) per-frame :func:`class_prob_sums`.
-    Returns ``{family: dict(frames, iou_mean, bins (3, n_bins), psums (4,) or None)}``, sorted by name.
+    :func:`~polar_sim.metrics.calibration.reliability_counts`; optionally ``psums`` (n, 4) per-frame
+    :func:`class_prob_sums`. Returns ``{family: dict(frames, iou_mean, bins (3, n_bins), psums (4,) or
+    None, p_ground, p_nonground)}``, sorted by name: ``p_ground``/``p_nonground`` are the mean P(ground)
+    on true ground / non-ground pixels, exact from ``psums`` or, without them, the bins' estimate
+    (:func:`class_mean_prob_bounds`, within one bin width).
     """
     fam = {}
     for a in series:
@@ -310,8 +318,14 @@ def pool_by_family(series):
                 f["has_psums"] &= "psums" in a
                 if "psums" in a:
                     f["psums"] = f["psums"] + np.asarray(a["psums"])[m].sum(axis=0)
-    return {k: dict(frames=int(sum(len(i) for i in v["iou"])), iou_mean=float(np.mean(np.concatenate(v["iou"]))),
-                    bins=v["bins"], psums=v["psums"] if v["has_psums"] else None) for k, v in sorted(fam.items())}
+    out = {}
+    for k, v in sorted(fam.items()):
+        ps = v["psums"] if v["has_psums"] else None
+        pm = (ps[0] / ps[1], ps[2] / ps[3]) if ps is not None else \
+            tuple(class_mean_prob_bounds(*v["bins"])[c][0] for c in ("ground", "nonground"))
+        out[k] = dict(frames=int(sum(len(i) for i in v["iou"])), iou_mean=float(np.mean(np.concatenate(v["iou"]))),
+                      bins=v["bins"], psums=ps, p_ground=pm[0], p_nonground=pm[1])
+    return out
 
 
 def kitti_scores(gt, est, prefix=""):

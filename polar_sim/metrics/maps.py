@@ -27,14 +27,81 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from polar_sim._validation import as_points, as_positive_float
+from polar_sim._validation import as_float, as_float_array, as_int, as_points, as_positive_float
 
 __all__ = ["hit_points", "beam_cells", "ObservedArea", "scan_hit_counts", "sdf_gradient", "angle_deg",
            "sample_eval_points", "sdf_map_scores", "surface_scores_2d", "classify_worst", "class_report",
-           "object_map_scores", "polyline_points", "map_scores_2d", "WORST_CLASSES"]
+           "object_map_scores", "polyline_points", "map_scores_2d", "WORST_CLASSES", "MAX_GRID_CELLS", "MAX_EVAL_POINTS"]
 
 #: Classes of :func:`classify_worst`, in the order of its labels 0, 1, 2.
 WORST_CLASSES = ("corner", "sparse", "wall")
+
+#: The most cells a grid of :func:`beam_cells` (one byte each) may hold: 4e8, 400 MB.
+MAX_GRID_CELLS = 400_000_000
+#: The most evaluation points :func:`sample_eval_points` draws (about 100 bytes each).
+MAX_EVAL_POINTS = 10_000_000
+
+
+def _scans(angles, poses, ranges):
+    """Checked scans: beam angles (m,) rad, sensor poses (n, 3) and ranges (n, m) m (inf or NaN: no
+    return), as float64 arrays."""
+    a = as_float_array(angles, "angles")
+    if a.ndim != 1 or not np.isfinite(a).all():
+        raise ValueError(f"angles: expected finite beam angles of shape (m,), got shape {a.shape}")
+    p = as_float_array(poses, "poses")
+    if p.ndim != 2 or p.shape[1] != 3 or not np.isfinite(p).all():
+        raise ValueError(f"poses: expected finite sensor poses (x, y, theta) of shape (n, 3), got shape {p.shape}")
+    r = as_float_array(ranges, "ranges")
+    if r.shape != (len(p), len(a)):
+        raise ValueError(f"ranges: expected one scan of {len(a)} ranges per pose, shape ({len(p)}, {len(a)}), "
+                         f"got {r.shape}")
+    return a, p, r
+
+
+def _max_range(x):
+    return as_float(x, "max_range", minimum=0.0, exclusive_minimum=True, allow_inf=True)
+
+
+def _callable(f, name):
+    if not callable(f):
+        raise TypeError(f"{name}: expected a function of points (n, d), got {type(f).__name__}")
+    return f
+
+
+def _observed(obs):
+    if not isinstance(obs, ObservedArea):
+        raise TypeError(f"obs: expected an ObservedArea, got {type(obs).__name__}")
+    return obs
+
+
+def _values(x, name, n=None, *, finite=True):
+    """A 1-D float64 array (of ``n`` values if given)."""
+    a = as_float_array(x, name)
+    if a.ndim != 1 or (n is not None and len(a) != n):
+        raise ValueError(f"{name}: expected shape ({'n' if n is None else n},), got {a.shape}")
+    if finite and not np.isfinite(a).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    return a
+
+
+def _corners(c):
+    """True corners (c, 2) (or an empty array), finite."""
+    a = as_float_array(c, "corners")
+    if a.size and (a.ndim != 2 or a.shape[1] != 2 or not np.isfinite(a).all()):
+        raise ValueError(f"corners: expected finite points of shape (c, 2), got shape {a.shape}")
+    return a.reshape(-1, 2)
+
+
+def _flags(x, name, n):
+    """A 1-D boolean array of ``n`` values."""
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name}: expected a boolean array, got {type(x).__name__}")
+    a = np.asarray(x)
+    if a.dtype != bool:
+        raise TypeError(f"{name}: expected a boolean array, got dtype {a.dtype}")
+    if a.shape != (n,):
+        raise ValueError(f"{name}: expected shape ({n},), got {a.shape}")
+    return a
 
 
 def _valid(r, max_range):
@@ -43,9 +110,12 @@ def _valid(r, max_range):
 
 
 def hit_points(angles, poses, ranges, max_range=30.0):
-    """World end points (m, 2) of the returns (0 < r < ``max_range``) of scans at sensor poses (n, 3)."""
+    """World end points (m, 2) of the returns (0 < r < ``max_range``) of scans at sensor poses (n, 3)
+    with beam angles (m,) and ranges (n, m)."""
+    angles, poses, ranges = _scans(angles, poses, ranges)
+    max_range = _max_range(max_range)
     out = []
-    for p, r in zip(np.asarray(poses, float), np.asarray(ranges, float)):
+    for p, r in zip(poses, ranges):
         ok = _valid(r, max_range)
         a = angles[ok] + p[2]
         out.append(np.column_stack([p[0] + r[ok] * np.cos(a), p[1] + r[ok] * np.sin(a)]))
@@ -60,16 +130,27 @@ def beam_cells(angles, poses, ranges, *, cell, origin, shape, extend=0.0, max_ra
     cells a segment crosses are its start and end cells and the two cells on either side of each
     crossing of a grid line (exact, as a DDA traversal, except at measure-zero corner passes).
     """
+    angles, poses, ranges = _scans(angles, poses, ranges)
     cs = as_positive_float(cell, "cell")
-    origin = np.asarray(origin, float)
-    nx, ny = (int(s) for s in shape)
+    origin = as_float_array(origin, "origin")
+    if origin.shape != (2,) or not np.isfinite(origin).all():
+        raise ValueError(f"origin: expected a finite point (x, y), got shape {origin.shape}")
+    if shape is None or isinstance(shape, (str, bytes)):
+        raise TypeError(f"shape: expected (nx, ny), got {type(shape).__name__}")
+    if np.shape(shape) != (2,):
+        raise ValueError(f"shape: expected (nx, ny), got shape {np.shape(shape)}")
+    nx, ny = (as_int(v, "shape", minimum=1) for v in shape)
+    if nx * ny > MAX_GRID_CELLS:
+        raise ValueError(f"shape: {nx} x {ny} cells is more than the limit of {MAX_GRID_CELLS:,}")
+    extend = as_float(extend, "extend")
+    max_range = _max_range(max_range)
     out = np.zeros((nx, ny), bool)
 
     def mark(ix, iy):
         ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
         out[ix[ok], iy[ok]] = True
 
-    for p, r in zip(np.asarray(poses, float), np.asarray(ranges, float)):
+    for p, r in zip(poses, ranges):
         rr = r + extend
         ok = _valid(rr, max_range)
         if not ok.any():
@@ -119,8 +200,10 @@ class ObservedArea:
     """
 
     def __init__(self, angles, poses, ranges, *, tol=0.03, behind=0.3, cell=0.02):
-        self.tol, self.behind, self.cell = float(tol), float(behind), float(cell)
-        angles, poses, ranges = (np.asarray(x, float) for x in (angles, poses, ranges))
+        self.tol = as_float(tol, "tol", minimum=0.0)
+        self.behind = as_float(behind, "behind", minimum=0.0)
+        self.cell = as_positive_float(cell, "cell")
+        angles, poses, ranges = _scans(angles, poses, ranges)
         self.hits = hit_points(angles, poses, ranges)
         if not len(self.hits):
             raise ValueError("ranges: the scans have no returns, nothing was observed")
@@ -128,7 +211,11 @@ class ObservedArea:
         lo = np.minimum(self.hits.min(0), b.min(0)) - behind - 0.1
         hi = np.maximum(self.hits.max(0), b.max(0)) + behind + 0.1
         self.origin = lo
-        self.shape = tuple(np.ceil((hi - lo) / cell - 1e-9).astype(int))
+        cells = np.ceil((hi - lo) / cell - 1e-9)
+        if np.prod(cells) > MAX_GRID_CELLS:
+            raise ValueError(f"cell: {cell:g} m cells over the scans' {hi[0] - lo[0]:.4g} x {hi[1] - lo[1]:.4g} m "
+                             f"are more than the limit of {MAX_GRID_CELLS:,}")
+        self.shape = tuple(cells.astype(int))
         kw = dict(cell=cell, origin=lo, shape=self.shape)
         self._crossed = beam_cells(angles, poses, ranges, **kw)
         self._reached = beam_cells(angles, poses, ranges, extend=behind, **kw)
@@ -166,8 +253,10 @@ def scan_hit_counts(angles, poses, ranges, cell=0.05):
     """Per ``cell`` of the plane, how many scans hit it: a function ``count(points (n, 2)) -> (n,)``
     giving the largest count over the 3 x 3 cells around each point (so "hit by k scans" means
     within about 1.5 cells, 7 cm)."""
+    angles, poses, ranges = _scans(angles, poses, ranges)
+    cell = as_positive_float(cell, "cell")
     keys = []
-    for p, r in zip(np.asarray(poses, float), np.asarray(ranges, float)):
+    for p, r in zip(poses, ranges):
         ok = np.isfinite(r)
         a = angles[ok] + p[2]
         h = np.column_stack([p[0] + r[ok] * np.cos(a), p[1] + r[ok] * np.sin(a)])
@@ -176,7 +265,7 @@ def scan_hit_counts(angles, poses, ranges, cell=0.05):
     uk, cnt = np.unique(np.concatenate(keys) if keys else np.zeros(0, np.int64), return_counts=True)
 
     def count(points):
-        c = np.floor(np.asarray(points) / cell).astype(np.int64)
+        c = np.floor(as_points(points, 2, "points", allow_empty=True) / cell).astype(np.int64)
         best = np.zeros(len(c), np.int64)
         if len(uk) == 0:
             return best
@@ -191,8 +280,13 @@ def scan_hit_counts(angles, poses, ranges, cell=0.05):
 
 
 def sdf_gradient(sdf, P, h=1e-4):
-    """Gradient (n, d) of a signed distance function ``sdf`` at points P (n, d) by central differences."""
-    P = np.asarray(P, float)
+    """Gradient (n, d) of a signed distance function ``sdf`` at points P (n, d) by central differences
+    of step ``h``."""
+    sdf = _callable(sdf, "sdf")
+    P = as_float_array(P, "P")
+    if P.ndim != 2 or P.shape[1] not in (2, 3) or not np.isfinite(P).all():
+        raise ValueError(f"P: expected finite points of shape (n, 2) or (n, 3), got shape {P.shape}")
+    h = as_positive_float(h, "h")
     out = np.zeros_like(P)
     for j in range(P.shape[1]):
         e = np.zeros(P.shape[1])
@@ -202,7 +296,17 @@ def sdf_gradient(sdf, P, h=1e-4):
 
 
 def angle_deg(a, b):
-    """Angle (n,) in degrees between the rows of a and b (n, 2|3)."""
+    """Angle (n,) in degrees between the rows of a and b (n, 2|3); 90 degrees to a zero vector."""
+    a = as_float_array(a, "a")
+    if a.ndim != 2 or a.shape[1] not in (2, 3) or not np.isfinite(a).all():
+        raise ValueError(f"a: expected finite vectors of shape (n, 2) or (n, 3), got shape {a.shape}")
+    b = as_float_array(b, "b")
+    if b.shape != a.shape or not np.isfinite(b).all():
+        raise ValueError(f"b: expected finite vectors of the shape of a {a.shape}, got {b.shape}")
+    return _angles(a, b)
+
+
+def _angles(a, b):
     na = np.linalg.norm(a, axis=1)
     nb = np.linalg.norm(b, axis=1)
     c = np.einsum("ij,ij->i", a, b) / np.maximum(na * nb, 1e-300)
@@ -213,9 +317,12 @@ def sample_eval_points(obs: ObservedArea, sdf, n, seed, margin=0.5):
     """``n`` uniform points over the box of the observed surface (plus ``margin`` m), with their
     exact SDF ``gt``, its gradient ``G`` (on the near and far sets only) and the masks
     ``near``/``far`` (:meth:`ObservedArea.sets`)."""
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 3131]))
+    obs, sdf = _observed(obs), _callable(sdf, "sdf")
+    n = as_int(n, "n", minimum=1, maximum=MAX_EVAL_POINTS)
+    rng = np.random.default_rng(np.random.SeedSequence([as_int(seed, "seed", minimum=0), 3131]))
+    margin = as_float(margin, "margin", minimum=0.0)
     lo, hi = obs.hits.min(0) - margin, obs.hits.max(0) + margin
-    P = rng.uniform(lo, hi, (int(n), 2))
+    P = rng.uniform(lo, hi, (n, 2))
     gt = sdf(P)
     out = {"P": P, "gt": gt}
     out.update(obs.sets(P, gt))
@@ -228,11 +335,18 @@ def sample_eval_points(obs: ObservedArea, sdf, n, seed, margin=0.5):
 
 def sdf_map_scores(d, grad, E):
     """SDF and gradient errors of a map's answers ``d`` (n,), ``grad`` (n, 2) at the points of
-    :func:`sample_eval_points` ``E``. Returns (scores dict, signed errors (n,))."""
-    e = np.asarray(d, float) - E["gt"]
+    :func:`sample_eval_points` ``E``. Returns (scores dict, signed errors (n,)). A map's NaN or inf
+    answers count as they are (they make the scores NaN or inf)."""
+    if not isinstance(E, dict) or not {"gt", "near", "far", "G"} <= set(E):
+        raise TypeError(f"E: expected the dict of sample_eval_points (gt, near, far, G), got {type(E).__name__}")
+    n = len(E["gt"])
+    e = _values(d, "d", n, finite=False) - E["gt"]
+    grad = as_float_array(grad, "grad")
+    if grad.shape != (n, 2):
+        raise ValueError(f"grad: expected shape ({n}, 2), got {grad.shape}")
     near, far = E["near"], E["far"]
     ok = np.linalg.norm(E["G"], axis=1) > 0.5
-    ang = angle_deg(np.asarray(grad, float), E["G"])
+    ang = _angles(grad, E["G"])
     a = np.abs(e)
 
     def stat(f, x):
@@ -249,8 +363,14 @@ def polyline_points(lines, spacing=0.01):
     """Points every ``spacing`` metres along a list of polylines (k, 2); a (1, 2) entry is a point."""
     from polar_sim.metrics.surface import sample_polyline
 
-    pts = [sample_polyline(ln, spacing) if len(ln) >= 2 else np.asarray(ln, float).reshape(-1, 2)
-           for ln in lines if len(ln)]
+    if lines is None or isinstance(lines, (str, bytes, dict)) or not hasattr(lines, "__iter__"):
+        raise TypeError(f"lines: expected a list of polylines (k, 2), got {type(lines).__name__}")
+    spacing = as_positive_float(spacing, "spacing")
+    lines = [as_float_array(ln, f"lines[{i}]") for i, ln in enumerate(lines)]
+    for i, ln in enumerate(lines):
+        if ln.size and (ln.ndim != 2 or ln.shape[1] != 2):
+            raise ValueError(f"lines[{i}]: expected a polyline of shape (k, 2), got {ln.shape}")
+    pts = [sample_polyline(ln, spacing) if len(ln) >= 2 else ln.reshape(-1, 2) for ln in lines if len(ln)]
     return np.vstack(pts) if pts else np.zeros((0, 2))
 
 
@@ -265,6 +385,9 @@ def surface_scores_2d(est, sdf, obs: ObservedArea, well_k=None):
     Returns (scores, details for :func:`classify_worst`; None when no estimate is observed).
     """
     est = as_points(est, 2, "est", allow_empty=True)
+    sdf, obs = _callable(sdf, "sdf"), _observed(obs)
+    if well_k is not None:
+        well_k = as_int(well_k, "well_k", minimum=0)
     est = est[obs.reached(est)] if len(est) else est
     if len(est) == 0:
         nan = float("nan")
@@ -293,6 +416,14 @@ def classify_worst(details, sdf, obs: ObservedArea, corners, *, top=0.01, corner
     ``corner`` (within ``corner_r`` of a true corner), ``sparse`` (hit by fewer than ``sparse_k``
     scans) or ``wall`` (a well-seen flat stretch). Returns the shares and (points (k, 2), labels
     (k,) indexing :data:`WORST_CLASSES`)."""
+    if details is not None and (not isinstance(details, dict) or not {"est", "dA", "dB"} <= set(details)):
+        raise TypeError(f"details: expected None or the details of surface_scores_2d (est, dA, dB), "
+                        f"got {type(details).__name__}")
+    sdf, obs = _callable(sdf, "sdf"), _observed(obs)
+    top = as_float(top, "top", minimum=0.0, maximum=1.0, exclusive_minimum=True)
+    corner_r = as_float(corner_r, "corner_r", minimum=0.0)
+    sparse_k = as_int(sparse_k, "sparse_k", minimum=0)
+    corners = _corners(corners)
     if details is None:
         return {f"worst_{c}_share": float("nan") for c in WORST_CLASSES}, (np.zeros((0, 2)), np.zeros(0, int))
     est, dA, dB = details["est"], details["dA"], details["dB"]
@@ -303,7 +434,6 @@ def classify_worst(details, sdf, obs: ObservedArea, corners, *, top=0.01, corner
     g = sdf_gradient(sdf, qa)
     g /= np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
     q = np.vstack([qa - sd[:, None] * g, obs.hits[ib]])
-    corners = np.asarray(corners, float).reshape(-1, 2)
     dc = cKDTree(corners).query(q)[0] if len(corners) else np.full(len(q), np.inf)
     cls = np.where(dc < corner_r, 0, np.where(obs.count(q) < sparse_k, 1, 2))
     return {f"worst_{c}_share": float(np.mean(cls == k)) for k, c in enumerate(WORST_CLASSES)}, (q, cls)
@@ -318,11 +448,14 @@ def class_report(err, var, classes, *, z=1.959964):
     ``coverage95`` (share of points with |err| <= z sigma; the interval is calibrated when it is
     about 0.95).
     """
-    err = np.asarray(err, float)
-    sd = None if var is None else np.sqrt(np.maximum(np.asarray(var, float), 0.0))
+    err = _values(err, "err", finite=False)
+    sd = None if var is None else np.sqrt(np.maximum(_values(var, "var", len(err), finite=False), 0.0))
+    if not isinstance(classes, dict):
+        raise TypeError(f"classes: expected a dict {{name: mask (n,)}}, got {type(classes).__name__}")
+    z = as_positive_float(z, "z")
     out = []
     for name, mask in classes.items():
-        mask = np.asarray(mask, bool)
+        mask = _flags(mask, f"classes[{name!r}]", len(err))
         e = err[mask]
         row = {"class": name, "n": int(mask.sum())}
         if len(e):
@@ -345,9 +478,16 @@ def object_map_scores(sdf_est, sdf_true, *, dist, visible, to_surface, vertex_gr
     at the visible vertices; ``true_normals`` (u, 3): the true normals there. Chamfer is the mean
     of the two directed means (``metrics.chamfer``'s definition).
     """
-    e = np.asarray(sdf_est, float) - np.asarray(sdf_true, float)
-    dist, visible = np.asarray(dist, float), np.asarray(visible, bool)
-    dA, dB = dist[visible], np.asarray(to_surface, float)
+    sdf_est = _values(sdf_est, "sdf_est", finite=False)
+    e = sdf_est - _values(sdf_true, "sdf_true", len(sdf_est))
+    dist = _values(dist, "dist")
+    visible = _flags(visible, "visible", len(dist))
+    dA, dB = dist[visible], _values(to_surface, "to_surface")
+    vertex_grad, true_normals = as_float_array(vertex_grad, "vertex_grad"), as_float_array(true_normals, "true_normals")
+    if vertex_grad.ndim != 2 or vertex_grad.shape[1] != 3:
+        raise ValueError(f"vertex_grad: expected shape (u, 3), got {vertex_grad.shape}")
+    if true_normals.shape != vertex_grad.shape:
+        raise ValueError(f"true_normals: expected the shape of vertex_grad {vertex_grad.shape}, got {true_normals.shape}")
     nan = float("nan")
     out = {"n_sdf_points": int(len(e)), "sdf_rmse_m": float(np.sqrt(np.mean(e * e))) if len(e) else nan,
            "sdf_median_abs_m": float(np.median(np.abs(e))) if len(e) else nan,
@@ -357,7 +497,7 @@ def object_map_scores(sdf_est, sdf_true, *, dist, visible, to_surface, vertex_gr
         out.update(chamfer_m=nan, surface_to_mesh_m=nan, mesh_to_surface_m=nan, normal_median_deg=nan,
                    normal_mean_deg=nan)
         return out
-    ang = angle_deg(np.asarray(vertex_grad, float), np.asarray(true_normals, float))
+    ang = _angles(vertex_grad, true_normals)
     out.update(surface_to_mesh_m=float(dA.mean()), mesh_to_surface_m=float(dB.mean()),
                chamfer_m=float(0.5 * (dA.mean() + dB.mean())), surface_to_mesh_max_m=float(dA.max()),
                surface_to_mesh_all_m=float(dist.mean()), normal_median_deg=float(np.median(ang)),
@@ -379,13 +519,17 @@ def map_scores_2d(query, surface, sdf, obs: ObservedArea, corners, *, n_eval=60_
     the map's variance; :func:`surface_scores_2d` with ``well_k``; :func:`classify_worst` with
     ``sparse_k``. Returns (flat dict of scalars, dict of arrays for pictures).
     """
+    query = _callable(query, "query")
+    n_eval = as_int(n_eval, "n_eval", minimum=1, maximum=MAX_EVAL_POINTS)
+    corner_r = as_float(corner_r, "corner_r", minimum=0.0)
+    well_k, sparse_k = as_int(well_k, "well_k", minimum=0), as_int(sparse_k, "sparse_k", minimum=0)
+    corners = _corners(corners)
     E = sample_eval_points(obs, sdf, n_eval, seed)
     d, g, var = query(E["P"])
     row, e = sdf_map_scores(d, g, E)
     near = E["near"]
     gn = E["G"] / np.maximum(np.linalg.norm(E["G"], axis=1), 1e-9)[:, None]
     q = E["P"] - E["gt"][:, None] * gn                      # nearest true surface point
-    corners = np.asarray(corners, float).reshape(-1, 2)
     dc = cKDTree(corners).query(q)[0] if len(corners) else np.full(len(q), np.inf)
     cnt = obs.count(q)
     corner, sparse = dc < corner_r, (dc >= corner_r) & (cnt < sparse_k)

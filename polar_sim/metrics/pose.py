@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
-from polar_sim._validation import as_float_array, as_intrinsics, as_points, as_pose, as_positive_float
+from polar_sim._validation import as_float, as_float_array, as_int, as_intrinsics, as_points, as_pose, as_positive_float
 
 __all__ = [
     "object_diameter",
@@ -59,6 +59,8 @@ BOP_VSD_THETAS = np.arange(0.05, 0.51, 0.05)
 #: BOP19 MSSD thresholds (fractions of the diameter) and MSPD thresholds (pixels at 640 wide).
 BOP_MSSD_FRACTIONS = np.arange(0.05, 0.51, 0.05)
 BOP_MSPD_PIXELS = np.arange(5, 51, 5).astype(float)
+#: The largest image side :func:`render_depth` renders, pixels.
+MAX_IMAGE_SIDE = 16384
 
 
 def _as_poses(T, name):
@@ -84,7 +86,7 @@ def _out(x, single):
 
 
 def _as_errors(e, name="errors"):
-    a = np.asarray(e, dtype=np.float64).ravel()
+    a = as_float_array(e, name).ravel()
     if a.size == 0:
         raise ValueError(f"{name}: expected at least one error value")
     if np.isnan(a).any() or (a < 0).any():
@@ -149,7 +151,14 @@ def success_5cm5deg(T_gt, T_est, *, max_translation=0.05, max_rotation=np.deg2ra
     """Fraction of poses with translation error < 5 cm and rotation error < 5 deg (radians given)."""
     te = np.atleast_1d(translation_error(T_gt, T_est))
     re = np.atleast_1d(rotation_error(T_gt, T_est))
+    max_translation, max_rotation = _limits(max_translation, max_rotation)
     return float(np.mean((te < max_translation) & (re < max_rotation)))
+
+
+def _limits(max_translation, max_rotation):
+    """The 5 cm / 5 deg limits, m and rad: numbers >= 0 (inf: no limit)."""
+    return (as_float(max_translation, "max_translation", minimum=0.0, allow_inf=True),
+            as_float(max_rotation, "max_rotation", minimum=0.0, allow_inf=True))
 
 
 def add_success(errors, diameter, k=0.1):
@@ -163,13 +172,13 @@ def add_success(errors, diameter, k=0.1):
 def success_rate(errors, threshold):
     """SR(theta) = fraction of errors <= threshold."""
     e = _as_errors(errors)
-    return float(np.mean(e <= threshold))
+    return float(np.mean(e <= as_float(threshold, "threshold", allow_inf=True)))
 
 
 def success_curve(errors, thresholds):
     """Success rate (len(thresholds),) at each threshold (errors <= threshold)."""
     e = np.sort(_as_errors(errors))
-    th = np.asarray(thresholds, dtype=np.float64).ravel()
+    th = _thresholds(thresholds, "thresholds")
     return np.searchsorted(e, th, side="right") / len(e)
 
 
@@ -191,7 +200,8 @@ def frames_until_loss(errors, threshold, patience=10):
 
     The tracking protocol of the spec uses ADD > 0.3 d for 10 frames."""
     e = _as_errors(errors)
-    bad = e > threshold
+    bad = e > as_float(threshold, "threshold", allow_inf=True)
+    patience = as_int(patience, "patience", minimum=1)
     run = 0
     for i, b in enumerate(bad):
         run = run + 1 if b else 0
@@ -209,7 +219,7 @@ def rotation_drift(T_gt, T_est, start=0):
 
     The full rotation counts, including the turn about a symmetry axis that ADD-S cannot see."""
     G, E, _ = _pair(T_gt, T_est)
-    s = int(start)
+    s = as_int(start, "start")
     if not 0 <= s < len(G):
         raise ValueError(f"start: expected a frame index in [0, {len(G)}), got {start!r}")
     Rg = np.einsum("nij,kj->nik", G[s:, :3, :3], G[s, :3, :3])  # R_gt(k) R_gt(s)^T
@@ -227,6 +237,7 @@ def static_segments(T_gt, *, max_rotation=np.deg2rad(1.0), max_translation=0.002
     G, _ = _as_poses(T_gt, "T_gt")
     as_positive_float(max_rotation, "max_rotation")
     as_positive_float(max_translation, "max_translation")
+    min_frames = as_int(min_frames, "min_frames", minimum=1)
     out, s = [], 0
     n = len(G)
     while s < n:
@@ -265,8 +276,7 @@ def static_rotation_drift(T_gt, T_est, *, horizon=300, **segment_kw):
     (:func:`static_segments`, keyword arguments passed on), the largest :func:`rotation_drift`
     within its first ``horizon`` frames. The issue-13 target is 2 deg over 300 frames."""
     G, E, _ = _pair(T_gt, T_est)
-    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 2:
-        raise ValueError(f"horizon: expected an integer >= 2, got {horizon!r}")
+    horizon = as_int(horizon, "horizon", minimum=2)
     segs = static_segments(G, **segment_kw)
     drift, end, frames = [], [], []
     for s, e in segs:
@@ -348,7 +358,9 @@ def render_depth(model_points, K, T, shape, *, radius_px=None):
     P = as_points(model_points, 3, "model_points")
     K = as_intrinsics(K, "K")
     T = as_pose(T, "T")
-    H, W = shape
+    H, W = _image_shape(shape)
+    if radius_px is not None:
+        radius_px = as_int(radius_px, "radius_px", minimum=0, maximum=1000)
     X = P @ T[:3, :3].T + T[:3, 3]
     X = X[X[:, 2] > 1e-6]
     out = np.zeros((H, W), np.float32)
@@ -376,8 +388,17 @@ def _dist_image(depth, K):
     return depth * np.sqrt(u[None, :] ** 2 + v[:, None] ** 2 + 1.0)
 
 
+def _image_shape(shape):
+    """(H, W) of an image to render: two integers in 1..MAX_IMAGE_SIDE."""
+    if shape is None or isinstance(shape, (str, bytes)):
+        raise TypeError(f"shape: expected (H, W), got {type(shape).__name__}")
+    if np.shape(shape) != (2,):
+        raise ValueError(f"shape: expected (H, W), got shape {np.shape(shape)}")
+    return tuple(as_int(v, "shape", minimum=1, maximum=MAX_IMAGE_SIDE) for v in shape)
+
+
 def _as_depth_image(d, name, shape=None):
-    a = np.asarray(d, dtype=np.float64)
+    a = as_float_array(d, name)
     if a.ndim != 2 or (shape is not None and a.shape != shape):
         raise ValueError(f"{name}: expected a depth image of shape {shape or '(H, W)'}, got {a.shape}")
     a = np.where(np.isfinite(a), a, 0.0)
@@ -401,6 +422,8 @@ def vsd(depth_est, depth_gt, depth_test, K, diameter, *, taus=BOP_VSD_TAUS, delt
     delta : visibility tolerance, metres (15 mm in BOP19).
     cost : "step" (BOP) or "tlinear".
 
+    Notes
+    -----
     Visibility (BOP19): a rendered pixel is visible if it has depth and the test depth is missing
     or not more than ``delta`` in front of it; the estimate's visible mask also includes the pixels
     where the true model is visible and the estimate has depth. The error is the mean cost over the
@@ -411,6 +434,7 @@ def vsd(depth_est, depth_gt, depth_test, K, diameter, *, taus=BOP_VSD_TAUS, delt
     dg = _as_depth_image(depth_gt, "depth_gt", de.shape)
     dt = _as_depth_image(depth_test, "depth_test", de.shape)
     d = as_positive_float(diameter, "diameter")
+    delta = as_float(delta, "delta", minimum=0.0)
     if cost not in ("step", "tlinear"):
         raise ValueError(f"cost: unknown value {cost!r}; expected 'step' or 'tlinear'")
     de, dg, dt = _dist_image(de, K), _dist_image(dg, K), _dist_image(dt, K)
@@ -418,7 +442,7 @@ def vsd(depth_est, depth_gt, depth_test, K, diameter, *, taus=BOP_VSD_TAUS, delt
     vis_est = ((de > 0) & ((de - dt <= delta) | (dt == 0))) | (vis_gt & (de > 0))
     inter = vis_gt & vis_est
     union = int((vis_gt | vis_est).sum())
-    taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
+    taus = _thresholds(taus, "taus")
     if union == 0:
         return np.ones(len(taus))
     diff = np.abs(dg[inter] - de[inter])
@@ -436,26 +460,39 @@ def bop_recall(errors, thresholds):
     """Mean over thresholds of the fraction of errors strictly below each threshold.
 
     ``errors`` (n,) for MSSD / MSPD, or (n, n_tau) for VSD (averaged over tau too)."""
-    e = np.asarray(errors, dtype=np.float64)
+    return _recall(errors, "errors", _thresholds(thresholds, "thresholds"))
+
+
+def _thresholds(x, name):
+    """Thresholds (k,), k >= 1, without NaN (inf allowed), from a number or any array."""
+    th = as_float_array(x, name).ravel()
+    if th.size == 0 or np.isnan(th).any():
+        raise ValueError(f"{name}: expected at least one threshold, none NaN")
+    return th
+
+
+def _recall(errors, name, th):
+    """:func:`bop_recall` of ``errors`` (named ``name``) at checked thresholds ``th`` (k,)."""
+    e = as_float_array(errors, name)
     if e.size == 0 or np.isnan(e).any():
-        raise ValueError("errors: expected a non-empty array without NaN")
-    th = np.asarray(thresholds, dtype=np.float64).ravel()
+        raise ValueError(f"{name}: expected a non-empty array without NaN")
     return float(np.mean([(e < t).mean() for t in th]))
 
 
 def ar_vsd(vsd_errors, thetas=BOP_VSD_THETAS):
     """AR_VSD: recall averaged over the VSD thresholds theta and the tolerances (n, n_tau)."""
-    return bop_recall(vsd_errors, thetas)
+    return _recall(vsd_errors, "vsd_errors", _thresholds(thetas, "thetas"))
 
 
 def ar_mssd(mssd_errors, diameter, fractions=BOP_MSSD_FRACTIONS):
     """AR_MSSD: recall averaged over thresholds fractions * diameter (metres)."""
-    return bop_recall(mssd_errors, np.asarray(fractions) * as_positive_float(diameter, "diameter"))
+    return _recall(mssd_errors, "mssd_errors", _thresholds(fractions, "fractions") * as_positive_float(diameter, "diameter"))
 
 
 def ar_mspd(mspd_errors, image_width, pixels=BOP_MSPD_PIXELS):
     """AR_MSPD: recall averaged over thresholds pixels * image_width / 640."""
-    return bop_recall(mspd_errors, np.asarray(pixels) * as_positive_float(image_width, "image_width") / 640.0)
+    return _recall(mspd_errors, "mspd_errors",
+                   _thresholds(pixels, "pixels") * as_positive_float(image_width, "image_width") / 640.0)
 
 
 # -- rates of a run, pooled over runs -------------------------------------------------------
@@ -467,8 +504,10 @@ def _selected(flags, where, name):
     if where is None:
         return f
     w = np.asarray(where)
-    if w.dtype != bool or w.shape != f.shape:
-        raise ValueError(f"where: expected a boolean array of shape {f.shape}, got {w.dtype} {w.shape}")
+    if w.dtype != bool:
+        raise TypeError(f"where: expected a boolean array, got dtype {w.dtype}")
+    if w.shape != f.shape:
+        raise ValueError(f"where: expected a boolean array of shape {f.shape}, got {w.shape}")
     return f[w]
 
 
@@ -496,6 +535,7 @@ def success_5cm5deg_rate(rotation, translation, *, where=None, max_translation=0
     r, t = as_float_array(rotation, "rotation"), as_float_array(translation, "translation")
     if r.ndim != 1 or t.shape != r.shape:
         raise ValueError(f"rotation, translation: expected two 1-D arrays of one length, got {r.shape} and {t.shape}")
+    max_translation, max_rotation = _limits(max_translation, max_rotation)
     return _rate(_selected((t < max_translation) & (r < max_rotation), where, "rotation"))
 
 
@@ -506,8 +546,8 @@ def pooled_rate(rates, weights):
     v, w = as_float_array(rates, "rates"), as_float_array(weights, "weights")
     if v.ndim != 1 or w.shape != v.shape:
         raise ValueError(f"rates, weights: expected two 1-D arrays of one length, got {v.shape} and {w.shape}")
-    if (w < 0).any():
-        raise ValueError("weights: expected weights >= 0")
+    if not (np.isfinite(w) & (w >= 0)).all():
+        raise ValueError("weights: expected finite weights >= 0")
     ok = np.isfinite(v) & (w > 0)
     return float((v[ok] * w[ok]).sum() / w[ok].sum()) if ok.any() else float("nan")
 
@@ -520,6 +560,10 @@ def spearman(x, y):
     a, b = as_float_array(x, "x"), as_float_array(y, "y")
     if a.ndim != 1 or b.shape != a.shape:
         raise ValueError(f"x, y: expected two 1-D arrays of one length, got {a.shape} and {b.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError("x: contains NaN or inf")
+    if not np.isfinite(b).all():
+        raise ValueError("y: contains NaN or inf")
     if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
         return float("nan")
     return float(spearmanr(a, b).statistic)

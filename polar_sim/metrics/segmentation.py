@@ -1,5 +1,6 @@
 """Segmentation metrics: IoU and its success rate, precision/recall, occluder-as-target fraction,
-ROC AUC of probability maps; the rates of a run from per-frame scores (:func:`mask_frame_scores`).
+ROC AUC of probability maps; the rates of a run from per-frame scores (:func:`mask_frame_scores`),
+and the calibration error of a run's probability maps from per-frame reliability counts.
 
 Masks are boolean arrays (H, W) or stacks (n, H, W). Rates are fractions in [0, 1].
 """
@@ -7,6 +8,8 @@ Masks are boolean arrays (H, W) or stacks (n, H, W). Rates are fractions in [0, 
 from __future__ import annotations
 
 import numpy as np
+
+from polar_sim._validation import as_float, as_float_array, as_int
 
 __all__ = [
     "iou",
@@ -20,27 +23,47 @@ __all__ = [
     "iou_success_rate",
     "pooled_precision_recall",
     "pooled_occluder_as_target",
+    "pooled_ece",
 ]
 
 
-def _as_mask(m, name, shape=None):
+def _as_bool_array(m, name):
+    """``m`` as a boolean ndarray of any shape: booleans, or integers that are all 0 or 1.
+
+    Strings, complex numbers, objects and None are the wrong kind (``TypeError``); other numbers
+    the wrong value (``ValueError``)."""
+    if m is None or isinstance(m, (str, bytes)):
+        raise TypeError(f"{name}: expected a boolean mask, got {type(m).__name__}")
     if not isinstance(m, np.ndarray):
-        m = np.asarray(m)
-    if m.dtype != bool:
-        if not (np.issubdtype(m.dtype, np.integer) and np.isin(m, (0, 1)).all()):
-            raise ValueError(f"{name}: expected a boolean mask (or 0/1 integers), got dtype {m.dtype}")
-        m = m.astype(bool)
+        try:
+            m = np.asarray(m)
+        except ValueError as exc:  # ragged: "inhomogeneous shape"
+            raise ValueError(f"{name}: expected a rectangular boolean mask, got a ragged {type(m).__name__}") from exc
+    if m.dtype == bool:
+        return m
+    if m.dtype.kind not in "iuf":
+        raise TypeError(f"{name}: expected a boolean mask (or 0/1 integers), got dtype {m.dtype}")
+    if not (m.dtype.kind in "iu" and np.isin(m, (0, 1)).all()):
+        raise ValueError(f"{name}: expected a boolean mask (or 0/1 integers), got dtype {m.dtype}")
+    return m.astype(bool)
+
+
+def _as_mask(m, name, like=None, like_name=None):
+    """A mask (H, W) or stack (n, H, W); given ``like`` (the mask it is compared with, named
+    ``like_name``), of its shape."""
+    m = _as_bool_array(m, name)
     if m.ndim not in (2, 3):
         raise ValueError(f"{name}: expected shape (H, W) or (n, H, W), got {m.shape}")
-    if shape is not None and m.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape} to match, got {m.shape}")
+    if like is not None and m.shape != like.shape:
+        # which of the two is wrong is the caller's to say: name both
+        raise ValueError(f"{like_name}, {name}: expected one shape, got {like.shape} and {m.shape}")
     return m
 
 
 def iou(mask_a, mask_b):
     """Intersection over union of two masks; (n, H, W) stacks give (n,). Two empty masks give 1."""
     a = _as_mask(mask_a, "mask_a")
-    b = _as_mask(mask_b, "mask_b", a.shape)
+    b = _as_mask(mask_b, "mask_b", a, "mask_a")
     ax = (-2, -1)
     inter = np.logical_and(a, b).sum(axis=ax)
     union = np.logical_or(a, b).sum(axis=ax)
@@ -50,20 +73,26 @@ def iou(mask_a, mask_b):
 
 def iou_success(ious, threshold=0.5):
     """Fraction of frames whose IoU exceeds ``threshold`` (headline 0.5)."""
-    v = np.asarray(ious, dtype=np.float64).ravel()
+    v = _ious(ious)
+    return float(np.mean(v > as_float(threshold, "threshold")))
+
+
+def _ious(x):
+    """IoUs (n,), n >= 1, without NaN, from any array."""
+    v = as_float_array(x, "ious").ravel()
     if v.size == 0 or np.isnan(v).any():
         raise ValueError("ious: expected a non-empty array without NaN")
-    return float(np.mean(v > threshold))
+    return v
 
 
 def iou_success_curve(ious, thresholds=None):
     """Success curve over IoU thresholds (default 101 from 0 to 1) and its mean (the AUC).
 
     Returns ``(thresholds, rates, auc)``."""
-    v = np.asarray(ious, dtype=np.float64).ravel()
-    if v.size == 0 or np.isnan(v).any():
-        raise ValueError("ious: expected a non-empty array without NaN")
-    th = np.linspace(0.0, 1.0, 101) if thresholds is None else np.asarray(thresholds, float).ravel()
+    v = _ious(ious)
+    th = np.linspace(0.0, 1.0, 101) if thresholds is None else as_float_array(thresholds, "thresholds").ravel()
+    if th.size == 0 or np.isnan(th).any():
+        raise ValueError("thresholds: expected at least one threshold, none NaN")
     rates = np.array([np.mean(v > t) for t in th])
     return th, rates, float(rates.mean())
 
@@ -73,7 +102,7 @@ def precision_recall(pred, gt):
 
     Precision is 1 when nothing is predicted; recall is 1 when the truth is empty."""
     p = _as_mask(pred, "pred")
-    g = _as_mask(gt, "gt", p.shape)
+    g = _as_mask(gt, "gt", p, "pred")
     tp = int(np.logical_and(p, g).sum())
     npred, ngt = int(p.sum()), int(g.sum())
     return (tp / npred if npred else 1.0), (tp / ngt if ngt else 1.0)
@@ -87,9 +116,9 @@ def occluder_as_target(pred, occluder, within=None):
     so a large hand elsewhere in the image does not dilute the figure. NaN if no occluder pixel
     is counted."""
     p = _as_mask(pred, "pred")
-    o = _as_mask(occluder, "occluder", p.shape)
+    o = _as_mask(occluder, "occluder", p, "pred")
     if within is not None:
-        o = o & _as_mask(within, "within", p.shape)
+        o = o & _as_mask(within, "within", p, "pred")
     n = int(o.sum())
     return float(np.logical_and(p, o).sum() / n) if n else float("nan")
 
@@ -98,11 +127,10 @@ def roc_auc(scores, labels):
     """Area under the ROC curve of per-pixel scores against boolean labels (ties count one half).
 
     Computed from ranks (Mann-Whitney U); raises if one class is absent."""
-    s = np.asarray(scores, dtype=np.float64).ravel()
-    lab = np.asarray(labels)
-    y = _as_mask(lab.reshape(1, -1) if lab.ndim < 2 else lab.reshape(-1, lab.shape[-1]), "labels").ravel()
+    s = as_float_array(scores, "scores").ravel()
+    y = _as_bool_array(labels, "labels").ravel()
     if s.shape != y.shape:
-        raise ValueError(f"scores: expected {y.shape[0]} values to match labels, got {s.shape[0]}")
+        raise ValueError(f"scores, labels: expected one value per label, got {s.shape[0]} scores and {y.shape[0]} labels")
     if not np.isfinite(s).all():
         raise ValueError("scores: contains NaN or inf")
     npos, nneg = int(y.sum()), int((~y).sum())
@@ -127,8 +155,7 @@ def near_mask(mask, radius_px):
     m = _as_mask(mask, "mask")
     if m.ndim != 2:
         raise ValueError(f"mask: expected shape (H, W), got {m.shape}")
-    if isinstance(radius_px, bool) or not isinstance(radius_px, (int, np.integer)) or radius_px < 0:
-        raise ValueError(f"radius_px: expected an integer >= 0, got {radius_px!r}")
+    radius_px = as_int(radius_px, "radius_px", minimum=0)
     out = np.zeros(m.shape, bool)
     ys, xs = np.nonzero(m)
     if not len(ys):
@@ -149,14 +176,14 @@ def mask_frame_scores(pred, truth, occluder=None, within=None):
     Pooled rates follow from the sums: precision = sum n_tp / sum n_pred, the occluder-as-target
     fraction = sum hand_near_tgt / sum hand_near."""
     p = _as_mask(pred, "pred")
-    g = _as_mask(truth, "truth", p.shape)
+    g = _as_mask(truth, "truth", p, "pred")
     if p.ndim != 2:
         raise ValueError(f"pred: expected one frame (H, W), got {p.shape}")
     out = {"iou": iou(p, g), "n_pred": int(p.sum()), "n_gt": int(g.sum()), "n_tp": int(np.logical_and(p, g).sum())}
     if occluder is not None:
-        o = _as_mask(occluder, "occluder", p.shape)
+        o = _as_mask(occluder, "occluder", p, "pred")
         out["hand_all"], out["hand_all_tgt"] = int(o.sum()), int(np.logical_and(p, o).sum())
-        near = o & _as_mask(within, "within", p.shape) if within is not None else o
+        near = o & _as_mask(within, "within", p, "pred") if within is not None else o
         out["hand_near"], out["hand_near_tgt"] = int(near.sum()), int(np.logical_and(p, near).sum())
     return out
 
@@ -166,14 +193,20 @@ def _where(where, n):
     if where is None:
         return np.ones(n, bool)
     w = np.asarray(where)
-    if w.dtype != bool or w.shape != (n,):
-        raise ValueError(f"where: expected a boolean array of shape ({n},), got {w.dtype} {w.shape}")
+    if w.dtype != bool:
+        raise TypeError(f"where: expected a boolean array, got dtype {w.dtype}")
+    if w.shape != (n,):
+        raise ValueError(f"where: expected a boolean array of shape ({n},), got {w.shape}")
     return w
 
 
 def _counts(x, name):
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name}: expected a 1-D array of pixel counts, got {type(x).__name__}")
     c = np.asarray(x)
-    if c.ndim != 1 or c.dtype.kind not in "iu" or (c < 0).any():
+    if c.dtype.kind not in "iu":
+        raise TypeError(f"{name}: expected integer pixel counts, got dtype {c.dtype}")
+    if c.ndim != 1 or (c < 0).any():
         raise ValueError(f"{name}: expected a 1-D array of pixel counts >= 0, got {c.dtype} {c.shape}")
     return c.astype(np.int64, copy=False)
 
@@ -181,10 +214,10 @@ def _counts(x, name):
 def iou_success_rate(ious, threshold=0.5, *, where=None):
     """Fraction of the frames selected by ``where`` (n,) bool (all if None) whose IoU (n,) exceeds
     ``threshold``; NaN when no frame is selected (:func:`iou_success` for a subset of a run)."""
-    v = np.asarray(ious, dtype=np.float64)
+    v = as_float_array(ious, "ious")
     if v.ndim != 1 or np.isnan(v).any():
         raise ValueError(f"ious: expected a 1-D array without NaN, got shape {v.shape}")
-    ok = (v > threshold)[_where(where, len(v))]
+    ok = (v > as_float(threshold, "threshold"))[_where(where, len(v))]
     return float(ok.mean()) if ok.size else float("nan")
 
 
@@ -212,3 +245,22 @@ def pooled_occluder_as_target(n_occluder, n_occluder_target, *, where=None):
     w = _where(where, len(n))
     h = n[w].sum()
     return float(nt[w].sum() / h) if h else float("nan")
+
+
+def pooled_ece(counts):
+    """Expected calibration error of probability maps pooled over frames (and runs).
+
+    ``counts`` (..., 3, n_bins): per-frame reliability counts (pixel count, sum of p, sum of labels
+    per bin, as :func:`polar_sim.metrics.reliability_counts` gives them), added over the leading
+    axes; the ECE of the sums is :func:`polar_sim.metrics.pooled_reliability`'s. NaN when no pixel
+    is counted (a method without a probability map).
+    """
+    from polar_sim.metrics import pooled_reliability   # where the reliability statistics live
+
+    c = as_float_array(counts, "counts")     # strings, complex numbers, None: TypeError
+    if c.ndim < 2 or c.shape[-2] != 3 or c.shape[-1] < 1:
+        raise ValueError(f"counts: expected an array of reliability counts of shape (..., 3, n_bins), got {c.shape}")
+    c, p, y = c.reshape(-1, 3, c.shape[-1]).sum(axis=0)
+    if not (np.isfinite(c).all() and np.isfinite(p).all() and np.isfinite(y).all()) or (c < 0).any():
+        raise ValueError("counts: expected finite counts and sums, counts >= 0")
+    return pooled_reliability(c, p, y).ece if c.sum() else float("nan")

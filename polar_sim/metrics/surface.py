@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from polar_sim._validation import as_float_array, as_points, as_positive_float
 
 __all__ = [
+    "MAX_SURFACE_POINTS",
     "SurfaceErrorStats",
     "nearest_distances",
     "hausdorff",
@@ -65,12 +66,21 @@ class SurfaceErrorStats:
         )
 
 
+#: The most points a point set may hold in the nearest-neighbour metrics (:func:`hausdorff`,
+#: :func:`chamfer`, :func:`nearest_distances`, :func:`surface_rmse`): a KD-tree of 1e7 points in 3D
+#: takes about 0.5 GB and tens of seconds to build and query; beyond, subsample the surface.
+MAX_SURFACE_POINTS = 10_000_000
+
+
 def _cloud(x, name, dim=None):
-    """Point set (n, 2|3) validated through ``as_points``; ``dim`` fixes the dimension."""
+    """Point set (n, 2|3) validated through ``as_points``; ``dim`` fixes the dimension. At most
+    :data:`MAX_SURFACE_POINTS` points, checked before anything is allocated."""
+    a = as_float_array(x, name)
+    if a.ndim == 2 and a.shape[0] > MAX_SURFACE_POINTS:
+        raise ValueError(f"{name}: at most {MAX_SURFACE_POINTS:,} points (subsample the surface), got {a.shape[0]:,}")
     if dim is None:
-        shape = np.shape(x)
-        dim = shape[1] if len(shape) == 2 and shape[1] in (2, 3) else 3
-    return as_points(x, dim, name)
+        dim = a.shape[1] if a.ndim == 2 and a.shape[1] in (2, 3) else 3
+    return as_points(a, dim, name)
 
 
 def _pair(points_a, points_b):
@@ -116,9 +126,11 @@ def sdf_error(est, truth, *, mask=None) -> SurfaceErrorStats:
     if e.shape != t.shape:
         raise ValueError(f"truth: expected {e.shape[0]} values like est, got {t.shape[0]}")
     if mask is not None:
-        if not isinstance(mask, np.ndarray) or mask.dtype != bool or mask.size != e.size:
-            got = f"{mask.dtype} array of {mask.size}" if isinstance(mask, np.ndarray) else type(mask).__name__
-            raise ValueError(f"mask: expected a boolean array of {e.size} values, got {got}")
+        if not isinstance(mask, np.ndarray) or mask.dtype != bool:
+            got = f"dtype {mask.dtype}" if isinstance(mask, np.ndarray) else type(mask).__name__
+            raise TypeError(f"mask: expected a boolean array, got {got}")
+        if mask.size != e.size:
+            raise ValueError(f"mask: expected {e.size} values like est, got {mask.size}")
         e, t = e[mask.ravel()], t[mask.ravel()]
     if e.size == 0:
         raise ValueError("est: no value to score")

@@ -46,17 +46,18 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from polar_sim.fileio import atomic_write
+from polar_sim.runner.findings import VERDICTS, Finding
+from polar_sim.runner.overrides import conform, declared_kinds
+
 __all__ = ["Experiment", "Check", "Finding", "TrialContext", "RunContext", "VERDICTS", "SIZES"]
 
 SIZES = ("quick", "full")
-VERDICTS = ("held", "partly held", "not held", "not tested the same way")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,26 +90,6 @@ class Check:
         return "slow" if self.timing else "FAIL"
 
 
-@dataclasses.dataclass(frozen=True)
-class Finding:
-    """One row of the dissertation-findings table that ``polar-sim reproduce`` writes.
-
-    ``source``: where the published claim is (chapter, figure or table); ``claim``: the published
-    claim or number; ``ours``: our figure; ``verdict``: one of :data:`VERDICTS`; ``note``: what
-    differs from the published setting (say it when our experiment tests something else).
-    """
-
-    source: str
-    claim: str
-    ours: str
-    verdict: str
-    note: str = ""
-
-    def __post_init__(self):
-        if self.verdict not in VERDICTS:
-            raise ValueError(f"verdict: {self.verdict!r} is not one of {', '.join(VERDICTS)}")
-
-
 def _save_npz_atomic(path: Path, arrays: Mapping[str, Any]):
     clean = {}
     for k, v in arrays.items():
@@ -116,15 +97,8 @@ def _save_npz_atomic(path: Path, arrays: Mapping[str, Any]):
         if a.dtype == object:
             raise TypeError(f"{k}: object arrays cannot be saved (they would need pickle)")
         clean[k] = a
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **clean)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path, "name") as fh:
+        np.savez_compressed(fh, **clean)
     return path
 
 
@@ -306,7 +280,9 @@ class Experiment:
             if key not in self.grid:
                 valid = ", ".join(sorted(self.grid) + ["seed"] + sorted(self.params))
                 raise ValueError(f"{self.name}: unknown parameter {key!r}; valid: {valid}")
-            grid[key] = _as_list(value)
+            declared = self.declared_values(key)
+            grid[key] = [conform(v, declared_kinds(declared), f"{self.name}: axis {key!r}", declared)
+                         for v in _as_list(value)]
         for key, values in grid.items():
             if not values:
                 raise ValueError(f"{self.name}: axis {key!r} has no values")
@@ -328,12 +304,26 @@ class Experiment:
         out.update(self.sizes[size].get("params", {}))
         for key, v in (overrides or {}).items():
             if key in self.params:
-                out[key] = _like(v, self.params[key], f"{self.name}: param {key!r}")
+                if isinstance(v, list) and len(v) == 1 and not isinstance(self.params[key], list):
+                    v = v[0]     # --set KEY=[x] for a scalar param
+                declared = self.declared_values(key)
+                out[key] = conform(v, declared_kinds(declared), f"{self.name}: param {key!r}", declared)
         for key, v in out.items():
             try:
                 json.dumps(v)
             except TypeError:
                 raise ValueError(f"{self.name}: value {v!r} of param {key!r} is not JSON-serialisable") from None
+        return out
+
+    def declared_values(self, key) -> list:
+        """Every value the experiment declares for param or grid axis ``key`` (in ``params`` or
+        ``grid``, then in each split and size): what a ``--set`` value's type is checked against."""
+        field = "params" if key in self.params else "grid"
+        layers = [getattr(self, field)] + [spec.get(field, {}) for spec in (*self.splits.values(), *self.sizes.values())]
+        out = []
+        for layer in layers:
+            if key in layer:
+                out += [layer[key]] if field == "params" else _as_list(layer[key])
         return out
 
     def points(self, size="full", split=None, overrides=None):
@@ -345,20 +335,6 @@ class Experiment:
 
     def seeds_of(self, split) -> list:
         return [int(s) for s in self.splits[self.pick_split(split)]["seeds"]]
-
-
-def _like(value, default, what):
-    """``value`` (a ``--set`` override) if it has the type of the param's ``default`` (an int for a
-    float is fine; a one-element list of a scalar is unwrapped, as ``--set`` may give one)."""
-    if isinstance(value, list) and len(value) == 1 and not isinstance(default, list):
-        value = value[0]
-    num = (int, float)
-    ok = (isinstance(default, bool) and isinstance(value, bool)) or \
-         (isinstance(default, num) and not isinstance(default, bool) and isinstance(value, num) and not isinstance(value, bool)) or \
-         (default is None) or (not isinstance(default, (bool, int, float)) and isinstance(value, type(default)))
-    if not ok:
-        raise ValueError(f"{what}: expected a value like the default {default!r}, got {value!r}")
-    return float(value) if isinstance(default, float) else value
 
 
 def _as_seed(s):

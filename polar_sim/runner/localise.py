@@ -7,9 +7,12 @@
 - :func:`localise_drive`: a ``localizer2d`` plug-in driven step by step along a drive, scored against
   the true poses at every step, with its CPU and wall time per step;
 - :func:`relocalise`: each of a set of single scans localised from a perturbed start, no motion;
-- :func:`pooled_errors`: statistics of per-step errors pooled over trials;
-- :func:`relation_scores`: relation errors (``metrics.relation_errors``) of trajectories on benchmark
-  relations, over all, *local* and *loop* relations.
+- :func:`budget_match`: the particle filter that matches a reference method's CPU per step;
+- :func:`error_cdf_figure`: CDFs of per-step errors.
+
+Scores come from :mod:`polar_sim.metrics`: :func:`~polar_sim.metrics.pose2d_errors` per step,
+:func:`~polar_sim.metrics.pooled_pose2d_errors` over steps and
+:func:`~polar_sim.metrics.relation_scores` on benchmark relations.
 
 Poses are ``(x, y, theta)`` in metres and radians; errors are ``(position m, heading deg)``.
 """
@@ -20,8 +23,9 @@ import time
 
 import numpy as np
 
-__all__ = ["noisy_odometry", "perturbed_start", "heading_error_deg", "localise_drive", "relocalise",
-           "pooled_errors", "relation_scores", "budget_match", "error_cdf_figure"]
+from polar_sim.metrics import pose2d_errors
+
+__all__ = ["noisy_odometry", "perturbed_start", "localise_drive", "relocalise", "budget_match", "error_cdf_figure"]
 
 
 def noisy_odometry(poses, rng, *, scale=1.02, drift_deg_per_m=0.5):
@@ -52,11 +56,6 @@ def perturbed_start(pose, rng, *, offset_m, offset_deg):
                                                np.radians(offset_deg) * rng.choice([-1.0, 1.0])])
 
 
-def heading_error_deg(est, truth):
-    """|est - truth| of two headings (rad), wrapped to [0, 180] degrees."""
-    return abs(np.degrees((est - truth + np.pi) % (2 * np.pi) - np.pi))
-
-
 def localise_drive(loc, angles, ranges, truth, odom, start):
     """Drive ``loc`` (a ``localizer2d``, already fitted) along a recorded drive.
 
@@ -68,67 +67,31 @@ def localise_drive(loc, angles, ranges, truth, odom, start):
     from polar_sim.geometry import between2d
 
     loc.reset(start)
-    err, cpu, wall = [], [], []
+    est, cpu, wall = [], [], []
     for i in range(len(truth)):
         inc = between2d(odom[i - 1], odom[i]) if i else np.zeros(3)
         t0, c0 = time.perf_counter(), time.process_time()
         pose = loc.step(angles, ranges[i], inc)
         cpu.append(1e3 * (time.process_time() - c0))
         wall.append(1e3 * (time.perf_counter() - t0))
-        err.append((np.hypot(*(pose[:2] - truth[i, :2])), heading_error_deg(pose[2], truth[i, 2])))
-    return {"err": np.asarray(err), "cpu_ms": np.asarray(cpu), "wall_ms": np.asarray(wall)}
+        est.append(np.array(pose, dtype=float))     # a copy: a localiser may reuse its pose buffer
+    return {"err": pose2d_errors(np.asarray(est).reshape(-1, 3), truth), "cpu_ms": np.asarray(cpu), "wall_ms": np.asarray(wall)}
 
 
 def relocalise(loc, angles, ranges, poses, rng, *, offset_m=0.2, offset_deg=3.0, steps=3):
     """Localise each scan ``ranges[k]`` (k, m) alone: from its pose ``poses[k]`` perturbed by
     :func:`perturbed_start`, ``steps`` calls of ``loc.step`` with no motion. Returns (err (k, 2)
     position m / heading deg against ``poses``, CPU ms of the ``steps`` calls (k,))."""
-    err, cpu = [], []
+    est, truth, cpu = [], [], []
     for r, p in zip(ranges, poses):
         loc.reset(perturbed_start(p, rng, offset_m=offset_m, offset_deg=offset_deg))
         c0 = time.process_time()
         for _ in range(steps):
             pose = loc.step(angles, r, np.zeros(3))
         cpu.append(1e3 * (time.process_time() - c0))
-        err.append((np.hypot(*(pose[:2] - p[:2])), heading_error_deg(pose[2], p[2])))
-    return np.asarray(err), np.asarray(cpu)
-
-
-def pooled_errors(err, fail_m):
-    """Statistics of (n, 2) errors (position m, heading deg) pooled over steps: median, p90 and max of
-    the position error, median and p90 of the heading error, and the steps more than ``fail_m`` off."""
-    e = np.asarray(err, float)
-    return {"steps": len(e), "pos_median_m": float(np.median(e[:, 0])), "pos_p90_m": float(np.percentile(e[:, 0], 90)),
-            "pos_max_m": float(e[:, 0].max()), "head_median_deg": float(np.median(e[:, 1])),
-            "head_p90_deg": float(np.percentile(e[:, 1], 90)), "fail_steps": int((e[:, 0] > fail_m).sum())}
-
-
-def relation_scores(trajectories, t_abs, relations, *, local_gap=5):
-    """Relation errors of each trajectory on the benchmark relations among its poses.
-
-    ``trajectories``: ``{name: poses (n, 3)}``, poses at times ``t_abs`` (n,) (sorted);
-    ``relations``: (r, 5) rows ``(t_a, t_b, dx, dy, dtheta)`` (Kümmerle et al. 2009); those whose two
-    times are both in ``t_abs`` are scored. A relation is *local* when its two scans are at most
-    ``local_gap`` apart in the log, else a *loop* (a place revisited). Returns a flat dict:
-    ``{name}{part}_{trans_mean_m, trans_max_m, rot_mean_deg, rot_max_deg}`` for part in "", "_local",
-    "_loop", and ``n_relations``, ``n_loop_relations``.
-    """
-    from polar_sim.metrics import relation_errors
-
-    t_abs, rel = np.asarray(t_abs), np.asarray(relations, float)
-    ok = np.isin(rel[:, 0], t_abs) & np.isin(rel[:, 1], t_abs)
-    pairs = np.column_stack([np.searchsorted(t_abs, rel[ok, 0]), np.searchsorted(t_abs, rel[ok, 1])])
-    loop = np.abs(pairs[:, 1] - pairs[:, 0]) > local_gap
-    out = {}
-    for name, P in trajectories.items():
-        for part, sel in (("", np.ones(len(pairs), bool)), ("_local", ~loop), ("_loop", loop)):
-            if not sel.any():
-                continue
-            e = relation_errors(np.asarray(P), pairs[sel], rel[ok, 2:][sel])
-            out.update({f"{name}{part}_trans_mean_m": e.trans_mean, f"{name}{part}_trans_max_m": e.trans_max,
-                        f"{name}{part}_rot_mean_deg": e.rot_mean_deg, f"{name}{part}_rot_max_deg": e.rot_max_deg})
-    out.update(n_loop_relations=int(loop.sum()), n_relations=int(ok.sum()))
-    return out
+        est.append(np.array(pose, dtype=float))
+        truth.append(np.asarray(p, dtype=float))
+    return pose2d_errors(np.asarray(est).reshape(-1, 3), np.asarray(truth).reshape(-1, 3)), np.asarray(cpu)
 
 
 def budget_match(stats, *, reference="icpg", prefix="pf"):

@@ -172,11 +172,11 @@ register_method("localizer2d", "icpg", _gm.ICPGLocalizer2D, description="ICP-G o
 # -- vo (the ground experiments) --
 
 
-def _groundvo_factory(model, sampling, **fixed):
+def _groundvo_factory(model, sampling):
     def factory(K, camera_height, *, seed=0, **params):
         from polar_sim.ground import GroundVO
 
-        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **{**fixed, **params})
+        return GroundVO(K, camera_height, model=model, sampling=sampling, seed=seed, **params)
 
     factory.__name__ = f"groundvo_{model}_{sampling}"
     return factory
@@ -197,16 +197,24 @@ for _name, (_model, _sampling) in {"u2": ("2param", "uniform"), "w2": ("2param",
     register_method("vo", _name, _groundvo_factory(_model, _sampling),
                     description=f"GroundVO, {_model} ground model, {_sampling} RANSAC sampling")
 def _w6_nocal(K, camera_height, *, seed=0, **params):
-    from polar_sim.ground import GroundVO
+    from polar_sim.ground import CalibrationConfig, ClassifierConfig, GroundVO
 
-    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, calibration="none",
-                    train_depth="off", decay_samples="off", ng_outlier_sigma=3.0, ng_outlier_history=False, **params)
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed,
+                    calibration=CalibrationConfig(method="none"),
+                    classifier=ClassifierConfig(train_depth=None, decay_samples=None), **params)
+
+
+def _w6_ng6h(K, camera_height, *, seed=0, **params):
+    from polar_sim.ground import ClassifierConfig, GroundVO
+
+    return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed,
+                    classifier=ClassifierConfig(ng_outlier_sigma=6.0, ng_outlier_history=True), **params)
 
 
 register_method("vo", "w6_nocal", _w6_nocal,
                 description="w6 with the spec's classifier training (no depth limit, plain decay by alpha) "
                             "and uncalibrated ground_prob: the earlier behaviour, for comparison")
-register_method("vo", "w6_ng6h", _groundvo_factory("6param", "weighted", ng_outlier_sigma=6.0, ng_outlier_history=True),
+register_method("vo", "w6_ng6h", _w6_ng6h,
                 description="w6 with the stricter non-ground outlier rule (6 sigma, never-inlier tracks): "
                             "better on weakly textured ground, not the default")
 register_method("vo", "mono", _held_scale_vo,
@@ -214,7 +222,8 @@ register_method("vo", "mono", _held_scale_vo,
                             "the true speed once and then held through the structure; needs speed_truth=")
 
 # -- tracker (the tracking experiments) --
-#: Built-in trackers: ObjectTracker configurations (keyword arguments over its defaults).
+#: Built-in trackers: ObjectTracker configurations (``set_params`` names over its defaults: the
+#: top-level parameters, and a stage config's fields as ``stage__field``).
 TRACKERS = {
     "ww": ({}, "ObjectTracker, the default: W head, confidence-weighted self-labels"),
     "wu": ({"appearance": "wu"}, "ObjectTracker, W head (weighted sum of per-scale heads), uniform self-labels"),
@@ -222,15 +231,17 @@ TRACKERS = {
     "su": ({"appearance": "su"}, "ObjectTracker, S head, uniform self-labels"),
     "h": ({"appearance": "h"}, "ObjectTracker with the 216-bin HSV Naive Bayes (the ground chapter's classifier)"),
     "shape-only": ({"appearance": "none"}, "ablation: appearance term off (prior x depth only)"),
-    "no-motion": ({"motion": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
-    "spatial-prior": ({"spatial_prior": True}, "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
-    "spatial-prior-0.1": ({"spatial_prior": True, "epsilon": 0.1}, "ablation: the silhouette prior softened to epsilon 0.1"),
-    "alpha-beta": ({"motion": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
-    "no-hold": ({"hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
-    "lost-by-silhouette": ({"coverage": "silhouette"},
+    "no-motion": ({"motion__filter": "none"}, "ablation: motion prior off (the prediction is the last pose)"),
+    "spatial-prior": ({"attention__spatial_prior": True},
+                      "ablation: the blurred predicted silhouette as the prior pi (epsilon 0.02)"),
+    "spatial-prior-0.1": ({"attention__spatial_prior": True, "attention__epsilon": 0.1},
+                          "ablation: the silhouette prior softened to epsilon 0.1"),
+    "alpha-beta": ({"motion__filter": "alpha-beta"}, "ablation: the spec's alpha-beta filter instead of the EKF"),
+    "no-hold": ({"registration__hold_unobserved": False}, "ablation: velocity integrated along unobserved directions"),
+    "lost-by-silhouette": ({"guard__coverage": "silhouette"},
                            "ablation: lost when too few inliers per pixel of the whole predicted silhouette, hidden "
                            "pixels included (the rule before the visible-pixel coverage)"),
-    "plain-icp": ({"appearance": "none", "registration": "plain"}, "baseline: robust ICP on every ROI point"),
+    "plain-icp": ({"appearance": "none", "registration__method": "plain"}, "baseline: robust ICP on every ROI point"),
 }
 
 
@@ -238,8 +249,8 @@ def _tracker(config):
     def factory(model_points, K, initial_pose, *, model_normals=None, random_state=0, **kw):
         from polar_sim.tracking import ObjectTracker
 
-        return ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state,
-                             **{**config, **kw})
+        tr = ObjectTracker(model_points, K, initial_pose, model_normals=model_normals, random_state=random_state)
+        return tr.set_params(**{**config, **kw})
     return factory
 
 

@@ -2,16 +2,23 @@
 
 - :func:`map_picture`: a mapper's SDF, variance and ``surface()`` sampled on a grid, as arrays a
   trial saves (``ctx.save_arrays``) for the summary;
-- :func:`map_panel`: those arrays drawn (SDF where observed, zero level, path);
+- :func:`map_panel`: those arrays drawn (SDF where observed, grey where never observed, zero
+  level, path);
 - :func:`map_figure`: the three-panel figure of a whole log (update-time histogram, SDF, variance);
 - :func:`error_figure`: |SDF error| near surfaces and the worst 1 % of the surface, classed.
 
-Coordinates in metres; SDF in metres; variance in m^2; times in ms.
+Coordinates in metres; SDF in metres; variance in m^2; times in ms. Legends sit under the axes
+and colour bars beside them (:mod:`polar_sim.plotting`), so neither covers a map.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from polar_sim.plotting import colorbar_beside, legend_under
+
+#: Grey of never-observed map cells (the map's distance there is an extrapolation).
+UNSEEN_GREY = "0.75"
 
 __all__ = ["map_picture", "map_panel", "map_figure", "error_figure"]
 
@@ -35,11 +42,16 @@ def map_picture(m, pts, step):
 
 
 def map_panel(ax, z, title, *, var_max=1.0):
-    """Draw :func:`map_picture` arrays: the SDF where the variance is below ``var_max`` (never observed
-    space blank), the surface, the path."""
+    """Draw :func:`map_picture` arrays: the SDF where the variance is below ``var_max`` (never
+    observed space grey: the map's distance there is only an extrapolation), the surface, the path."""
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.patches import Patch
+
     ext = [z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]]
-    show = np.where(~(z["var"] >= var_max), z["sdf"], np.nan)
-    im = ax.imshow(np.clip(show, -1.0, 2.0), origin="lower", extent=ext, cmap="RdBu", vmin=-2.0, vmax=2.0)
+    unseen = z["var"] >= var_max
+    ax.set_facecolor(UNSEEN_GREY)   # NaN cells show the face: grey, unlike the white of SDF = 0
+    im = ax.imshow(np.where(unseen, np.nan, np.clip(z["sdf"], -1.0, 2.0)), origin="lower", extent=ext, cmap="RdBu",
+                   norm=TwoSlopeNorm(vmin=-1.0, vcenter=0.0, vmax=2.0))
     if len(z["lines"]):
         # a lone vertex between NaN separators is a point of the zero level (an object below the
         # grid's resolution): give every vertex a dot small enough to vanish along the lines
@@ -48,8 +60,11 @@ def map_panel(ax, z, title, *, var_max=1.0):
     ax.plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:orange", lw=1.0, label="path")
     ax.set(title=title, xlabel="x (m)", ylabel="y (m)", aspect="equal")
     ax.title.set_fontsize(9)
-    ax.legend(loc="lower left", fontsize=7)
-    ax.figure.colorbar(im, ax=ax, shrink=0.7, label=f"SDF (m); blank: variance >= {var_max:g} (never observed)")
+    handles, _ = ax.get_legend_handles_labels()
+    legend_under(ax, handles + [Patch(color=UNSEEN_GREY, label=f"never observed (variance >= {var_max:g})")], ncol=3,
+                 fontsize=7)
+    colorbar_beside(ax.figure, ax, im, "SDF (m), clipped to -1..2")
+    ax.figure.subplots_adjust(wspace=0.35)    # the colour bar's label clear of the next panel
 
 
 def error_figure(ax, z, r, scene):
@@ -58,7 +73,7 @@ def error_figure(ax, z, r, scene):
     ax[0].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0)
     sc = ax[0].scatter(z["P"][:, 0], z["P"][:, 1], c=np.abs(z["err"]), s=1.5, cmap="inferno_r", vmin=0, vmax=0.1, lw=0)
     ax[0].plot(z["path"][:, 0], z["path"][:, 1], "-", c="tab:blue", lw=1, label="drive")
-    ax[0].figure.colorbar(sc, ax=ax[0], shrink=0.8, label="|SDF error| (m), points within 0.3 m of observed surfaces")
+    colorbar_beside(ax[0].figure, ax[0], sc, "|SDF error| (m), clipped to 0.1,\nat points within 0.3 m of observed surfaces")
     ax[0].set_title(f"{scene} seed {r['seed']}, {r['method']}: SDF error near surfaces (RMSE {r['near_rmse_m'] * 100:.1f} cm)",
                     fontsize=9)
     ax[1].scatter(z["hits"][:, 0], z["hits"][:, 1], s=0.2, c="0.6", lw=0, label="observed true surface")
@@ -75,7 +90,9 @@ def error_figure(ax, z, r, scene):
         a.set_aspect("equal")
         a.set_xlabel("x (m)")
         a.set_ylabel("y (m)")
-        a.legend(loc="lower left", fontsize=7, markerscale=2)
+        legend_under(a, ncol=3, fontsize=7, markerscale=2)
+    # room between the panels for the colour bar's label, and under each row for its legends
+    ax[0].figure.subplots_adjust(wspace=0.45, hspace=0.4)
 
 
 def map_figure(z, *, mapper, title):
@@ -92,13 +109,13 @@ def map_figure(z, *, mapper, title):
     top = float(np.percentile(cpu, 99.5))
     ax[0].hist(np.minimum(cpu, top), bins=60, range=(0.0, top), color="tab:blue")
     ax[0].axvline(np.median(cpu), color="k", lw=1, label=f"median {np.median(cpu):.2f} ms")
-    ax[0].legend(title=f"{int((cpu > top).sum())} scans above {top:.1f} ms (max {cpu.max():.0f}) in the last bin", fontsize=8,
-                 title_fontsize=8)
+    legend_under(ax[0], title=f"{int((cpu > top).sum())} scans above {top:.1f} ms (max {cpu.max():.0f}) in the last bin",
+                 ncol=1, title_fontsize=8)
     ax[0].set(xlabel="update CPU time per scan (ms)", ylabel="scans", title=f"{mapper}: update time over the whole log (Fig 7.12a)")
     map_panel(ax[1], z, "SDF and zero level of the whole log (Fig 7.19)")
     im = ax[2].imshow(np.log10(np.maximum(z["var"], 1e-6)), origin="lower", cmap="magma",
                       extent=[z["xs"][0], z["xs"][-1], z["ys"][0], z["ys"][-1]])
     ax[2].set(title="log10 variance of the SDF", xlabel="x (m)", ylabel="y (m)", aspect="equal")
-    fig.colorbar(im, ax=ax[2], shrink=0.7, label="log10 variance (m^2)")
+    colorbar_beside(fig, ax[2], im, "log10 variance (m^2)")
     fig.suptitle(title)
     return fig

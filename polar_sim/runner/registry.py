@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-import sys
 from pathlib import Path
 
 from polar_sim.runner.experiment import Experiment
@@ -13,26 +12,14 @@ __all__ = ["list_experiments", "get_experiment", "experiments_dir"]
 
 
 def experiments_dir() -> Path:
-    try:
-        import polar_sim.experiments as pkg
-
-        return Path(pkg.__path__[0])
-    except ModuleNotFoundError:
-        return Path(__file__).resolve().parents[2] / "experiments"
+    """The folder of the shipped experiment files (``experiments/``, imported as ``polar_sim.experiments``)."""
+    return Path(_package().__path__[0])
 
 
 def _package():
-    try:
-        return importlib.import_module("polar_sim.experiments")
-    except ModuleNotFoundError:
-        # Source checkout without an install: expose experiments/ under the package name.
-        d = experiments_dir()
-        spec = importlib.util.spec_from_file_location("polar_sim.experiments", d / "__init__.py",
-                                                      submodule_search_locations=[str(d)])
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules["polar_sim.experiments"] = mod
-        spec.loader.exec_module(mod)
-        return mod
+    # One import path in a source checkout and in an install: polar_sim/experiments is a link to
+    # experiments/ in the repository, and the same folder packaged as polar_sim.experiments in a wheel.
+    return importlib.import_module("polar_sim.experiments")
 
 
 def list_experiments():

@@ -1,4 +1,11 @@
-"""Helpers for experiment summaries: tables, grouped statistics, figures."""
+"""Helpers for experiment summaries: tables, grouped statistics, figures, and values with units.
+
+Findings and check figures carry their units (:func:`length`, :func:`percent`, :func:`duration`,
+:func:`number`): "3.48 cm", "99.7 %", "2.81 ms", never a raw ``0.03483``.
+
+>>> length(0.03483), length(0.0044, "cm", decimals=2), percent(0.997), duration(0.00281), number(12345.6)
+('3.48 cm', '0.44 cm', '99.7 %', '2.81 ms', '12346')
+"""
 
 from __future__ import annotations
 
@@ -7,7 +14,56 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["markdown_table", "nonempty_columns", "is_empty", "group_rows", "fmt", "cell", "savefig", "write_csv_table"]
+__all__ = ["markdown_table", "nonempty_columns", "is_empty", "group_rows", "fmt", "cell", "savefig", "write_csv_table",
+           "number", "length", "percent", "duration"]
+
+
+def number(x, digits=3, decimals=None) -> str:
+    """``x`` to ``digits`` significant digits, in plain notation (no ``e-05``): ``0.0123``,
+    ``12346``; or with a fixed number of ``decimals`` (figures set side by side)."""
+    x = float(x)
+    if not math.isfinite(x):
+        return str(x)
+    if decimals is None:
+        decimals = 0 if x == 0 else max(0, digits - 1 - math.floor(math.log10(abs(x))))
+    return f"{x:.{decimals}f}"
+
+
+_LENGTH_UNITS = {"um": 1e-6, "mm": 1e-3, "cm": 1e-2, "m": 1.0, "km": 1e3}
+
+
+def length(metres, unit=None, digits=3, decimals=None) -> str:
+    """A length given in metres, as text with its unit: ``length(0.03483)`` is ``"3.48 cm"``.
+
+    ``unit``: ``"um"``, ``"mm"``, ``"cm"``, ``"m"`` or ``"km"``; by default the one that reads best
+    (mm below 1 cm, cm below 1 m, m below 1 km). Give one unit (and ``decimals``) to figures
+    that are compared.
+    """
+    x = float(metres)
+    if unit is None:
+        a = abs(x)
+        unit = "um" if 0 < a < 1e-3 else "mm" if a < 1e-2 else "cm" if a < 1 else "m" if a < 1e3 else "km"
+    if unit not in _LENGTH_UNITS:
+        raise ValueError(f"unit: expected one of {', '.join(_LENGTH_UNITS)}, got {unit!r}")
+    return f"{number(x / _LENGTH_UNITS[unit], digits, decimals)} {'µm' if unit == 'um' else unit}"
+
+
+def percent(fraction, digits=1) -> str:
+    """A fraction (0..1) as a percentage with ``digits`` decimals: ``percent(0.997)`` is ``"99.7 %"``."""
+    return f"{100 * float(fraction):.{digits}f} %"
+
+
+def duration(seconds, unit=None, digits=3, decimals=None) -> str:
+    """A time given in seconds, as text with its unit: ``duration(0.00281)`` is ``"2.81 ms"``.
+    ``unit``: ``"us"``, ``"ms"``, ``"s"`` or ``"min"``; by default the one that reads best."""
+    x = float(seconds)
+    scale = {"us": 1e-6, "ms": 1e-3, "s": 1.0, "min": 60.0}
+    if unit is None:
+        a = abs(x)
+        unit = "us" if 0 < a < 1e-3 else "ms" if a < 1 else "s" if a < 120 else "min"
+    if unit not in scale:
+        raise ValueError(f"unit: expected one of {', '.join(scale)}, got {unit!r}")
+    return f"{number(x / scale[unit], digits, decimals)} {'µs' if unit == 'us' else unit}"
 
 
 def fmt(x, digits=4):

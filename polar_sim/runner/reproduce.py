@@ -19,60 +19,64 @@ import time
 import traceback
 from pathlib import Path
 
+from polar_sim.fileio import write_text
+from polar_sim.runner.findings import findings_table
 from polar_sim.runner.registry import get_experiment, list_experiments
 from polar_sim.runner.report import cell
 
 __all__ = ["reproduce", "write_report", "markdown_to_html"]
 
 
-def reproduce(out, *, quick=False, split=None, only=None, workers=1, backend="local", address=None,
+def reproduce(out, *, quick=None, split=None, only=None, workers=1, backend="local", address=None,
               trial_timeout=None, progress=True, report_only=False):
     """Run every experiment (or ``only`` these) into ``out/<name>`` and write the report.
 
-    ``split`` (``"dev"`` or ``"test"``) applies to the experiments that declare it; the others run
-    their default split, which the report states. Returns ``({name: RunResult}, report_path)``.
-    An experiment that raises is reported as an error and the others still run.
+    ``quick``: the CI size (default the full size). ``split`` (``"dev"`` or ``"test"``) applies to
+    the experiments that declare it; the others run their default split, which the report states.
+    Returns ``({name: RunResult}, report_path)``. An experiment that raises is reported as an error
+    and the others still run. Before anything runs, a folder ``out/<name>`` that holds a run of
+    another size, split or protocol, and (with ``backend="ray"``) a cluster that does not answer,
+    raise ``ValueError`` naming ``out`` (or ``address``): nothing is run or written, and a good
+    report in ``out`` is never replaced by one of failures.
 
     ``report_only=True`` runs nothing: it reads the finished run folders ``out/<name>`` back
     (:func:`~polar_sim.runner.run.load_run`; their ``trials/`` are not needed) and writes the report
-    from them, e.g. for runs made over several sessions or on several machines. A folder that is
-    missing, unfinished, or of another size or split is reported as an error.
+    from them, e.g. for runs made over several sessions or on several machines. The size is the
+    folders' (``quick`` given must agree). A folder that is missing, unfinished, or of a size or
+    split other than the rest's, raises ``ValueError`` naming ``out``, and nothing is written.
     """
-    from polar_sim.runner.run import load_run, run_experiment
+    from polar_sim.runner.run import run_experiment
 
     root = Path(out)
     names = list(only) if only else list_experiments()
     for n in names:
         get_experiment(n)        # unknown names fail before anything runs
+    if report_only:
+        results, walls, size = _assemble(root, names, quick, split)
+        report = write_report(results, root, walls=walls, wall_s=sum(walls.values()), quick=size == "quick",
+                              assembled=True)
+        return results, report
+    size = "quick" if quick else "full"
+    _refuse_other_runs(root, names, size, split)
+    if backend == "ray":
+        from polar_sim.runner.backends import ray_connect
+
+        ray_connect(int(workers), address)
     t0 = time.time()
     results, errors, walls = {}, {}, {}
-    for name in names:
-        exp = get_experiment(name)
-        sp = split if (split in exp.splits) else None
+    for i, name in enumerate(names, start=1):
+        sp = split if (split in get_experiment(name).splits) else None
         t = time.time()
-        if report_only:
-            try:
-                r = load_run(root / name, name)
-                want = ("quick" if quick else "full", exp.pick_split(sp))
-                if (r.config.get("size"), r.config.get("split")) != want:
-                    raise ValueError(f"out: {root / name} holds the {r.config.get('size')} size on the "
-                                     f"{r.config.get('split')} split, not {want[0]} on {want[1]}")
-                results[name] = r
-                walls[name] = _run_wall(r.config, 0.0)
-            except ValueError as exc:
-                errors[name] = str(exc)
-            continue
         try:
-            results[name] = run_experiment(name, quick=quick, split=sp, out=root / name, workers=workers,
+            results[name] = run_experiment(name, size=size, split=sp, out=root / name, workers=workers,
                                            backend=backend, address=address, trial_timeout=trial_timeout,
-                                           progress=progress)
+                                           progress=progress, label=f"[{i}/{len(names)}] {name}")
         except Exception as exc:  # noqa: BLE001 - one broken experiment must not stop the report
             errors[name] = f"{type(exc).__name__}: {exc}"
             (root / name).mkdir(parents=True, exist_ok=True)
             (root / name / "error.txt").write_text(traceback.format_exc())
         walls[name] = time.time() - t
-    wall_s = sum(walls.values()) if report_only else time.time() - t0
-    report = write_report(results, root, errors=errors, walls=walls, wall_s=wall_s, quick=quick, assembled=report_only)
+    report = write_report(results, root, errors=errors, walls=walls, wall_s=time.time() - t0, quick=size == "quick")
     if errors:
         # Errors become failed runs so that the exit code says so.
         from polar_sim.runner.experiment import Check
@@ -81,6 +85,56 @@ def reproduce(out, *, quick=False, split=None, only=None, workers=1, backend="lo
         for name, err in errors.items():
             results[name] = RunResult(root / name, [], [Check("experiment ran", False, err)], [{"error": err}])
     return results, report
+
+
+def _refuse_other_runs(root, names, size, split):
+    """``ValueError`` naming ``out`` if a folder ``root/<name>`` holds a run that this one would not
+    resume (another size, split or protocol, or a corrupt config.json): checked for every
+    experiment before any runs, so the report is not replaced by one of refused runs."""
+    from polar_sim.runner.run import read_folder_config
+
+    for name in names:
+        exp = get_experiment(name)
+        sp = exp.pick_split(split if split in exp.splits else None)
+        read_folder_config(root / name, {"experiment": name, "size": size, "split": sp,
+                                         "params": exp.resolve_params(size, sp)})
+
+
+def _assemble(root, names, quick, split):
+    """The finished runs ``root/<name>`` for ``--report-only``: ``({name: RunResult}, walls, size)``.
+    Every named folder must be a finished run, all of one size (``quick``'s if given) and, where
+    an experiment declares ``split``, of that split; otherwise ``ValueError`` naming ``out``."""
+    from polar_sim.runner.run import load_run
+
+    if not root.is_dir():
+        raise ValueError(f"out: {str(root)!r} is not a folder (--report-only reads the finished run folders in it)")
+    loaded, problems = {}, []
+    for name in names:
+        try:
+            loaded[name] = load_run(root / name, name)
+        except ValueError as exc:
+            problems.append(f"{name}: {str(exc).removeprefix('out: ')}")
+    nothing = "; no report was written"
+    if problems:
+        hint = f"; --only {' '.join(loaded)} assembles the ones it holds" if loaded else ""
+        raise ValueError(f"out: {len(problems)} of {len(names)} experiments have no finished run in {str(root)!r} "
+                         f"(first: {problems[0]}){hint}{nothing}")
+    sizes = {}
+    for name, r in loaded.items():
+        sizes.setdefault(r.config.get("size"), []).append(name)
+    if len(sizes) > 1:
+        raise ValueError(f"out: {str(root)!r} mixes sizes (" + "; ".join(f"{s}: {', '.join(n)}" for s, n in sizes.items())
+                         + f"){nothing}")
+    (size,) = sizes
+    if quick is not None and size != ("quick" if quick else "full"):
+        raise ValueError(f"out: {str(root)!r} holds {size}-size runs, not {'quick' if quick else 'full'}-size ones "
+                         f"({'drop' if quick else 'add'} --quick){nothing}")
+    if split is not None:
+        other = [(n, r.config.get("split")) for n, r in loaded.items()
+                 if split in get_experiment(n).splits and r.config.get("split") != split]
+        if other:
+            raise ValueError(f"out: {other[0][0]} in {str(root)!r} holds the {other[0][1]} split, not {split}{nothing}")
+    return loaded, {n: _run_wall(r.config, 0.0) for n, r in loaded.items()}, size
 
 
 def _rel(p, root):
@@ -137,11 +191,11 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
     findings = [(name, f) for name, r in results.items() for f in r.findings]
     lines += ["## Findings", "",
               "For each published result we reproduce: the published claim, our figure, and a verdict "
-              "(held / partly held / not held / not tested the same way).", ""]
+              "(held / partly held / not held / not tested the same way). Only a full-size run on the protocol's "
+              "seeds gives a verdict: a smaller run, or cells that cannot separate the methods (every one at "
+              "100 %, say), read *insufficient evidence*, with the sample n the figures rest on.", ""]
     if findings:
-        lines += ["| source | published | ours | verdict | note | experiment |", "|---|---|---|---|---|---|"]
-        lines += [f"| {cell(f.source)} | {cell(f.claim)} | {cell(f.ours)} | **{f.verdict}** | {cell(f.note)} | {name} |"
-                  for name, f in findings]
+        lines += findings_table(findings, experiment_column=True)
     else:
         lines.append("(no experiment in this run states findings)")
     lines += ["", "## Experiments", "",
@@ -175,14 +229,14 @@ def write_report(results, out_dir, *, errors=None, walls=None, wall_s=None, quic
         lines += ["", text]
     md = "\n".join(lines) + "\n"
     path = out_dir / "report.md"
-    path.write_text(md)
-    (out_dir / "report.html").write_text(markdown_to_html(md, base=out_dir, title="polar_sim report"))
-    (out_dir / "report.json").write_text(json.dumps(
+    write_text(path, md, "out")
+    write_text(out_dir / "report.html", markdown_to_html(md, base=out_dir, title="polar_sim report"), "out")
+    write_text(out_dir / "report.json", json.dumps(
         {"provenance": prov, "wall_s": wall_s, "errors": errors,
          "experiments": {n: {"checks": [dict(name=c.name, status=c.status, detail=c.detail) for c in r.checks],
                              "findings": [f.__dict__ for f in r.findings], "trials": len(r.table),
                              "trial_errors": len(r.failures), "split": r.config.get("split")}
-                         for n, r in results.items()}}, indent=2, default=str))
+                         for n, r in results.items()}}, indent=2, default=str), "out")
     return path
 
 

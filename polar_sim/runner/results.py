@@ -11,10 +11,10 @@ import csv
 import hashlib
 import json
 import math
-import os
 import re
-import tempfile
 from pathlib import Path
+
+from polar_sim.fileio import atomic_write
 
 __all__ = ["ResultsFile", "trial_key", "trial_dir", "RESERVED"]
 
@@ -111,15 +111,8 @@ class ResultsFile:
             return
         # First row, or a metric seen for the first time: rewrite with the wider header, atomically.
         fields += new
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".results.", suffix=".tmp", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "w", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=fields)
-                w.writeheader()
-                for r in rows + [row]:
-                    w.writerow({k: _cell(r.get(k)) for k in fields})
-            os.replace(tmp, self.path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_write(self.path, "results", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=fields)
+            w.writeheader()
+            for r in rows + [row]:
+                w.writerow({k: _cell(r.get(k)) for k in fields})

@@ -1,5 +1,5 @@
-"""Running an experiment: trials in this process, on a local pool of worker processes or on Ray,
-rows written as they finish, then the summary, the figures, the checks and the findings.
+"""Running an experiment: trials in this process, on a local pool of worker processes or on Ray
+(:mod:`polar_sim.runner.backends`), rows written as they finish, then the summary, the figures, the checks and the findings.
 
 A run folder holds ``config.json`` (what was run, and where: version, commit, packages, machine;
 and ``history``, every invocation on the folder with its commit, so a run resumed at another commit
@@ -19,19 +19,17 @@ import dataclasses
 import datetime as _dt
 import json
 import logging
-import multiprocessing as mp
-import multiprocessing.connection as mpc
-import os
 import time
-import traceback
 from pathlib import Path
 
-from tqdm.auto import tqdm
-
 import polar_sim
-from polar_sim.runner.experiment import Check, RunContext, TrialContext
+from polar_sim.fileio import write_text
+from polar_sim.progress import progress_bar
+from polar_sim.runner.backends import BACKENDS, Running, ray_connect
+from polar_sim.runner.experiment import Check, RunContext
+from polar_sim.runner.findings import Finding, findings_table, weigh
 from polar_sim.runner.registry import get_experiment
-from polar_sim.runner.results import RESERVED, ResultsFile, trial_dir, trial_key
+from polar_sim.runner.results import ResultsFile, trial_key
 
 __all__ = ["run_experiment", "load_run", "RunResult", "default_out_dir", "run_commits"]
 
@@ -70,210 +68,6 @@ def default_out_dir(name, root="polar_sim_out"):
     return Path(root) / "runs" / name / stamp
 
 
-def _base_row(params, seed, size, split):
-    row = dict(params)
-    row.update(seed=int(seed), split=split, size=size)
-    return row
-
-
-def _error_row(params, seed, size, split, error, elapsed):
-    row = _base_row(params, seed, size, split)
-    row.update(status="error", error=error, elapsed_s=round(elapsed, 4), trial_key=trial_key(params, seed))
-    return row
-
-
-def _execute(exp, params, seed, tdir, size, split, run_params=None):
-    """Run one trial (in this process or a worker). ``exp`` is an Experiment or a registered
-    name (workers re-import registered experiments by name). Returns the result row."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    exp = get_experiment(exp)
-    tdir = Path(tdir)
-    tdir.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    row = _base_row(params, seed, size, split)
-    try:
-        metrics = exp.trial(dict(params), int(seed), TrialContext(tdir, size, split, dict(run_params or {})))
-        if not isinstance(metrics, dict):
-            raise TypeError(f"trial returned {type(metrics).__name__}, expected a dict of metrics")
-        clash = set(metrics) & (set(params) | RESERVED)
-        if clash:
-            raise ValueError(f"trial metrics reuse reserved or parameter names: {sorted(clash)}")
-        row.update(status="ok", error="")
-        row.update(metrics)
-    except Exception as exc:  # a failed trial is recorded, not fatal to the sweep
-        row.update(status="error", error=f"{type(exc).__name__}: {exc}")
-        (tdir / "error.txt").write_text(traceback.format_exc())
-    row["elapsed_s"] = round(time.perf_counter() - t0, 4)
-    row["trial_key"] = trial_key(params, seed)
-    return row
-
-
-def _portable(exp):
-    """What to send to a worker: the registered name if there is one, else the object itself
-    (its functions must then be importable module-level functions)."""
-    from polar_sim.runner.registry import list_experiments
-
-    return exp.name if exp.name in list_experiments() and get_experiment(exp.name) is exp else exp
-
-
-# -- backends -------------------------------------------------------------------------------------
-def _run_serial(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
-    for p, s in todo:
-        yield _execute(exp, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params)
-
-
-def _worker_main(conn):
-    """A pool worker: runs the trials it is sent, one at a time, until it gets ``None``."""
-    while True:
-        try:
-            msg = conn.recv()
-        except EOFError:
-            return
-        if msg is None:
-            return
-        conn.send(_execute(*msg))
-
-
-class _Worker:
-    def __init__(self, ctx):
-        self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_main, args=(child,), daemon=True)
-        self.proc.start()
-        child.close()
-        self.task = None      # (params, seed, started_at)
-
-    def stop(self, kill=False):
-        if kill and self.proc.is_alive():
-            self.proc.kill()
-        else:
-            try:
-                self.conn.send(None)
-            except (BrokenPipeError, OSError):
-                pass
-        self.proc.join(timeout=5)
-        if self.proc.is_alive():
-            self.proc.kill()
-            self.proc.join()
-        self.conn.close()
-
-
-def _run_pool(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
-    # spawn: a forked child of a parent that holds a GL context deadlocks.
-    ctx = mp.get_context("spawn")
-    portable = _portable(exp)
-    queue = list(todo)
-    pool = [_Worker(ctx) for _ in range(min(workers, max(len(queue), 1)))]
-    try:
-        while queue or any(w.task for w in pool):
-            for w in pool:
-                if w.task is None and queue:
-                    p, s = queue.pop(0)
-                    w.conn.send((portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params))
-                    w.task = (p, s, time.monotonic())
-            busy = [w for w in pool if w.task]
-            wait_s = 1.0 if timeout is None else max(0.05, min(w.task[2] + timeout for w in busy) - time.monotonic())
-            mpc.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], timeout=min(wait_s, 5.0))
-            for i, w in enumerate(pool):
-                if w.task is None:
-                    continue
-                p, s, t0 = w.task
-                row, restart = None, False
-                got = w.conn.poll()
-                if got:
-                    try:
-                        row = w.conn.recv()
-                    except (EOFError, OSError):   # the worker's end closed: it died
-                        w.proc.join(timeout=5)
-                        got = False
-                if got:
-                    pass
-                elif not w.proc.is_alive():
-                    row, restart = _error_row(p, s, size, split, f"worker process died (exit code {w.proc.exitcode})",
-                                              time.monotonic() - t0), True
-                elif timeout is not None and time.monotonic() - t0 > timeout:
-                    row, restart = _error_row(p, s, size, split, f"timed out after {timeout:g} s (trial_timeout)",
-                                              time.monotonic() - t0), True
-                if row is None:
-                    continue
-                w.task = None
-                if restart:
-                    w.stop(kill=True)
-                    pool[i] = _Worker(ctx)
-                yield row
-    finally:
-        for w in pool:
-            w.stop(kill=bool(w.task))
-
-
-def _ray_init(workers, address):
-    try:
-        import ray
-    except ImportError as exc:
-        raise ValueError("backend: 'ray' needs the cluster extra: pip install 'polar-sim[cluster]'") from exc
-    if ray.is_initialized():
-        return ray
-    address = address or os.environ.get("RAY_ADDRESS") or None
-    _check_reachable(address)
-    try:
-        # With an address (or RAY_ADDRESS) this joins a running cluster; otherwise a local one starts.
-        ray.init(address=address, num_cpus=None if address else workers, log_to_driver=False,
-                 include_dashboard=False, ignore_reinit_error=True)
-    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
-        raise ValueError(f"address: cannot join the Ray cluster at {address!r}: {type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else ''}") from None
-    return ray
-
-
-def _check_reachable(address, timeout=5.0):
-    """Fail fast on a HOST:PORT nobody listens at (ray.init would retry for minutes)."""
-    import socket
-
-    if not address or address == "auto" or "://" in address:
-        return
-    host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"address: expected 'auto' or HOST:PORT, got {address!r}")
-    try:
-        socket.create_connection((host, int(port)), timeout=timeout).close()
-    except OSError as exc:
-        raise ValueError(f"address: cannot reach the Ray cluster at {address!r} ({exc.strerror or exc}); "
-                         "start it with `ray start --head` or check the address") from None
-
-
-def _run_ray(exp, todo, out_dir, size, split, run_params, workers, timeout, address):
-    ray = _ray_init(workers, address)
-    remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
-    portable = _portable(exp)
-    queue = list(todo)
-    in_flight = max(1, int(workers)) if address is None and not os.environ.get("RAY_ADDRESS") else \
-        max(1, int(ray.cluster_resources().get("CPU", workers)))
-    pending = {}
-    try:
-        while queue or pending:
-            while queue and len(pending) < in_flight:
-                p, s = queue.pop(0)
-                ref = remote.remote(portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params)
-                pending[ref] = (p, s, time.monotonic())
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0 if timeout is not None else None)
-            for ref in done:
-                p, s, t0 = pending.pop(ref)
-                try:
-                    yield ray.get(ref)
-                except ray.exceptions.RayError as exc:
-                    yield _error_row(p, s, size, split, f"worker failed: {type(exc).__name__}: "
-                                     f"{str(exc).splitlines()[0] if str(exc) else ''}", time.monotonic() - t0)
-            if timeout is not None:
-                for ref, (p, s, t0) in list(pending.items()):
-                    if time.monotonic() - t0 > timeout:
-                        ray.cancel(ref, force=True)
-                        pending.pop(ref)
-                        yield _error_row(p, s, size, split, f"timed out after {timeout:g} s (trial_timeout)",
-                                         time.monotonic() - t0)
-    finally:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-
-
 # -- the run --------------------------------------------------------------------------------------
 def _check_axes(exp, grid):
     """Method axes name known methods or importable factories; axes with ``choices`` hold only
@@ -290,16 +84,19 @@ def _check_axes(exp, grid):
             raise ValueError(f"{axis}: {exp.name} has no {axis} {bad[0]!r}; valid: {', '.join(map(str, valid))}")
 
 
-def _read_config(out_dir, config):
-    """The folder's earlier config.json, or ``{}``. Refuses a folder that holds another
-    experiment, size or split (rows would mix), and a corrupt config.json (left as it is)."""
-    path = out_dir / "config.json"
+def read_folder_config(out_dir, config):
+    """The run folder's earlier config.json, or ``{}``. Refuses (``ValueError`` naming ``out``) a
+    folder that holds another experiment, size, split or params than ``config``'s (rows would
+    mix), and a corrupt config.json (left as it is)."""
+    path = Path(out_dir) / "config.json"
     if not path.is_file():
         return {}
     try:
         old = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)") from None
+    except ValueError:                      # not JSON, or not UTF-8
+        old = None
+    if not isinstance(old, dict):
+        raise ValueError(f"out: {path} is corrupt; choose another --out (it was left as it is)")
     for key in ("experiment", "size", "split", "params"):
         # a folder written before params existed has none to compare, and its trials' keys decide
         if key in old and old[key] != config[key]:
@@ -333,14 +130,11 @@ def run_commits(config):
 
 
 def _write_config(out_dir, config):
-    path = out_dir / "config.json"
-    tmp = path.with_name(".config.json.tmp")
-    tmp.write_text(json.dumps(config, indent=2, default=str))
-    os.replace(tmp, path)
+    write_text(out_dir / "config.json", json.dumps(config, indent=2, default=str), "out")
 
 
 def run_experiment(name, *, quick=False, size=None, split=None, out=None, workers=1, backend="local",
-                   address=None, overrides=None, trial_timeout=None, progress=True):
+                   address=None, overrides=None, trial_timeout=None, progress=True, label=None):
     """Run (or resume) an experiment and write its results, summary, figures, checks, findings.
 
     Parameters
@@ -365,6 +159,12 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     trial_timeout : float, optional
         Seconds a trial may run before it is stopped and recorded as failed (runs trials in worker
         processes even with one worker).
+    progress : bool
+        Show a progress bar of the trials on stderr (only on a terminal, and never with
+        ``POLAR_SIM_QUIET=1``: :mod:`polar_sim.progress`); with worker processes it shows how long
+        the running trials have run.
+    label : str, optional
+        The bar's label (default: the experiment's name).
     """
     exp = get_experiment(name)
     if backend not in ("local", "ray"):
@@ -373,8 +173,6 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
     if trial_timeout is not None and not (isinstance(trial_timeout, (int, float)) and trial_timeout > 0):
         raise ValueError(f"trial_timeout: expected a positive number of seconds, got {trial_timeout!r}")
-    if backend == "ray":
-        _check_reachable(address or os.environ.get("RAY_ADDRESS") or None)
     size = exp.pick_size(size or ("quick" if quick else "full"))
     split = exp.pick_split(split)
     grid, seeds = exp.resolve(size, split, overrides)
@@ -384,6 +182,8 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     out_dir = Path(out) if out is not None else default_out_dir(exp.name)
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out: {out_dir} exists and is not a folder")
+    if backend == "ray":
+        ray_connect(int(workers), address)   # before the folder is touched: no cluster, one line, in seconds
     out_dir.mkdir(parents=True, exist_ok=True)
     if out is None:
         latest = out_dir.parent / "latest"
@@ -401,21 +201,21 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
               "grid": grid, "params": run_params, "seeds": seeds, "backend": backend, "workers": int(workers),
               "polar_sim": polar_sim.__version__, "provenance": provenance()}
     results = ResultsFile(out_dir / "results.csv")
-    history = _history(_read_config(out_dir, config))   # another size, split or params: refused
+    history = _history(read_folder_config(out_dir, config))   # another size, split or params: refused
     done = results.done_keys(size, split)  # reads (and checks) the file before anything is written
     todo = [(p, s) for p, s in points if trial_key(p, s) not in done]
     this_run = {"git_commit": config["provenance"]["git_commit"], "started": config["provenance"]["started"],
                 "wall_s": None, "trials_todo": len(todo)}
     config["history"] = history + [this_run]
     _write_config(out_dir, config)
-    if backend == "ray":
-        runner = _run_ray
-    else:
-        runner = _run_pool if (workers > 1 or trial_timeout is not None) else _run_serial
-    bar = tqdm(total=len(points), initial=len(points) - len(todo), desc=exp.name, unit="trial",
-               disable=not progress)
+    runner = BACKENDS["ray" if backend == "ray" else "pool" if (workers > 1 or trial_timeout is not None) else "serial"]
+    bar = progress_bar(total=len(points), initial=len(points) - len(todo), desc=label or exp.name, unit="trial",
+                       enabled=progress)
     try:
         for row in runner(exp, todo, out_dir, size, split, run_params, int(workers), trial_timeout, address):
+            if isinstance(row, Running):          # a heartbeat: the bar's clock moves during long trials
+                bar.set_postfix_str(row.describe(), refresh=True)
+                continue
             results.append(row)
             bar.update(1)
             if row["status"] != "ok":
@@ -430,6 +230,7 @@ def run_experiment(name, *, quick=False, size=None, split=None, out=None, worker
     body = exp.summarize(ok_rows, rctx) if (exp.summarize and ok_rows) else ""
     checks = list(exp.checks(ok_rows, rctx)) if (exp.checks and ok_rows) else []
     findings = list(exp.findings(ok_rows, rctx)) if (exp.findings and ok_rows) else []
+    findings = _weighed(exp, findings, config, len(ok_rows))
     if failures:
         checks.append(Check("every trial ran", False, f"{len(failures)} of {len(table)} trials failed; "
                                                       f"first: {failures[0]['error']}"))
@@ -449,8 +250,6 @@ def load_run(out, name=None):
     that is not a finished run (a file missing or corrupt, or trials of its grid still to run)
     raises ``ValueError`` naming the folder and what is missing; it is read only, never changed.
     """
-    from polar_sim.runner.experiment import Finding
-
     out_dir = Path(out)
     need = ["config.json", "results.csv", "checks.json", "findings.json"]
     missing = [f for f in need if not (out_dir / f).is_file()]
@@ -463,7 +262,7 @@ def load_run(out, name=None):
         checks = [Check(c["name"], bool(c["passed"]), c.get("detail", ""), bool(c.get("known_miss", False)),
                         bool(c.get("timing", False))) for c in raw_checks]
         findings = [Finding(**f) for f in raw_findings]
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError) as exc:  # not JSON, a field missing, or of a wrong type
         raise ValueError(f"out: {out_dir} holds a corrupt config.json, checks.json or findings.json ({exc})") from None
     exp = get_experiment(config.get("experiment") if name is None else name)
     if config.get("experiment") != exp.name:
@@ -484,7 +283,16 @@ def load_run(out, name=None):
         raise ValueError(f"out: {out_dir} was interrupted before its summary was written "
                          "(run the experiment into it again to summarise)")
     failures = [r for r in table if r.get("status") != "ok"]
+    findings = _weighed(exp, findings, config, len(table) - len(failures))   # folders written before weighing
     return RunResult(out_dir, table, checks, failures, findings, config)
+
+
+def _weighed(exp, findings, config, n_ok):
+    """The findings with their verdicts weighed against the run's size, seeds and sample
+    (:func:`polar_sim.runner.findings.weigh`)."""
+    full_seeds = len(exp.resolve("full", config["split"])[1])
+    return [weigh(f, size=config["size"], n_trials=n_ok, seeds=len(config.get("seeds") or []) or None,
+                  full_seeds=full_seeds) for f in findings]
 
 
 def _cell(text):
@@ -501,10 +309,8 @@ def _write_summary(out_dir, exp, size, split, seeds, ok_rows, body, checks, find
     lines += [f"| {_cell(c.name)} | {c.status if c.status != 'FAIL' else '**FAIL**'} | {_cell(c.detail)} |"
               for c in checks]
     if findings:
-        lines += ["", "## Findings", "", "| source | published | ours | verdict | note |", "|---|---|---|---|---|"]
-        lines += [f"| {_cell(f.source)} | {_cell(f.claim)} | {_cell(f.ours)} | {f.verdict} | {_cell(f.note)} |"
-                  for f in findings]
-    (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
-    (out_dir / "checks.json").write_text(json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
-                                                    indent=2, default=str))
-    (out_dir / "findings.json").write_text(json.dumps([dataclasses.asdict(f) for f in findings], indent=2))
+        lines += ["", "## Findings", ""] + findings_table(findings)
+    write_text(out_dir / "summary.md", "\n".join(lines) + "\n", "out")
+    write_text(out_dir / "checks.json", json.dumps([dict(dataclasses.asdict(c), status=c.status) for c in checks],
+                                                   indent=2, default=str), "out")
+    write_text(out_dir / "findings.json", json.dumps([dataclasses.asdict(f) for f in findings], indent=2), "out")

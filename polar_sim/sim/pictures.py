@@ -7,10 +7,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from polar_sim.plotting import colorbar_beside, legend_under, nice_ceil
 from polar_sim.sim.truth import LABELS
 
 __all__ = ["colourise_depth", "colourise_labels", "LABEL_COLOURS", "render_scene_pictures", "save_png", "save_figure",
-           "image_figure", "camera_figure", "lidar_map_figure", "colorbar_beside"]
+           "image_figure", "camera_figure", "lidar_map_figure"]
 
 #: RGB colour per label (none, ground, obstacle, target, occluder, robot).
 LABEL_COLOURS = np.array([[0, 0, 0], [90, 160, 60], [200, 60, 50], [250, 200, 30], [230, 140, 180],
@@ -55,14 +56,6 @@ def save_figure(fig, path):
     return path
 
 
-def colorbar_beside(fig, ax, mappable, label, *, size="4%", pad=0.08):
-    """A colour bar exactly as tall as ``ax`` on its right (never over its title), labelled ``label``."""
-    from mpl_toolkits.axes_grid1 import make_axes_locatable
-
-    cax = make_axes_locatable(ax).append_axes("right", size=size, pad=pad)
-    return fig.colorbar(mappable, cax=cax, label=label)
-
-
 def image_figure(rgb, title, *, caption=None):
     """A titled figure of one RGB image (no axes ticks), for renders a user looks at."""
     import matplotlib
@@ -103,27 +96,31 @@ def camera_figure(frame, title):
     present = sorted(set(np.unique(frame.labels).tolist()) & set(LABELS.values()))
     names = {v: k for k, v in LABELS.items()}
     names[LABELS["none"]] = "none (sky, nothing hit)"
-    ax[2].legend(handles=[Patch(color=LABEL_COLOURS[v] / 255.0, label=names[v]) for v in present],
-                 loc="lower right", fontsize=8, framealpha=0.8)
     for a in ax:
         a.set_xlabel("u [px]")
         a.set_ylabel("v [px]")
+    legend_under(ax[2], [Patch(color=LABEL_COLOURS[v] / 255.0, label=names[v]) for v in present])
     fig.suptitle(title)
     return fig
 
 
 def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=400):
-    """Top-down map around the robot: the exact SDF of the static scene in the lidar plane
-    (colour bar in metres, zero level in black), the scan's end points and the sensor pose.
-    The window covers the scan's end points plus ``margin`` (at most ``max_half`` m each way); when
-    fewer than half the beams return (open ground), it covers the lidar's range circle instead, drawn
-    dashed, and the legend says how many beams met nothing within range."""
+    """Top-down map of the world: the exact SDF of the static scene in the lidar plane (colour bar in
+    metres, zero level in black), the scan's end points and the sensor pose.
+
+    The window covers the whole world when the scene declares its ``bounds`` (``world.meta``), with
+    the robot and the scan; otherwise the scan's end points plus ``margin`` (at most ``max_half`` m
+    each way). When fewer than half the beams return (open ground), it also covers the lidar's
+    range circle, drawn dashed, and the legend says how many beams met nothing within range. The
+    colour scale runs from -1 m to a round number above the 95th percentile of the distances in the
+    window, so that open ground is not one saturated colour."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import TwoSlopeNorm
     from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter
 
     scan = world.lidar(lidar)
     rmax = float(world.lidar_spec(lidar).max_range)
@@ -134,17 +131,23 @@ def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=
     n_beams, n_ret = len(scan.ranges), len(W)
     sparse = n_ret < n_beams / 2
     span = np.vstack([W, [[cx, cy]]] + ([[[cx - rmax, cy - rmax], [cx + rmax, cy + rmax]]] if sparse else []))
-    lo = np.maximum(span.min(0) - margin, [cx - max_half - margin, cy - max_half - margin])
-    hi = np.minimum(span.max(0) + margin, [cx + max_half + margin, cy + max_half + margin])
+    bounds = (getattr(world, "meta", None) or {}).get("bounds")
+    if bounds is not None:   # the whole world, and whatever of the scan lies beyond it
+        x0, x1, y0, y1 = (float(b) for b in bounds)
+        lo, hi = np.minimum(span.min(0), [x0, y0]) - 1.0, np.maximum(span.max(0), [x1, y1]) + 1.0
+    else:
+        lo = np.maximum(span.min(0) - margin, [cx - max_half - margin, cy - max_half - margin])
+        hi = np.minimum(span.max(0) + margin, [cx + max_half + margin, cy + max_half + margin])
     grow = np.maximum(0.6 * float(max(hi - lo)) - (hi - lo), 0.0)   # no thin strips: short side >= 0.6 long
     lo, hi = lo - grow / 2, hi + grow / 2
     res = float(max(hi - lo)) / n_cells
     xs, ys = np.arange(lo[0], hi[0], res), np.arange(lo[1], hi[1], res)
     X, Y = np.meshgrid(xs, ys)
     sdf = world.sdf(np.stack([X.ravel(), Y.ravel()], 1)).reshape(X.shape)
-    fig, ax = plt.subplots(figsize=(8.0, 6.5))
-    im = ax.imshow(np.clip(sdf, -1.0, 3.0), origin="lower", extent=[xs[0], xs[-1], ys[0], ys[-1]], cmap="RdBu",
-                   norm=TwoSlopeNorm(vmin=-1.0, vcenter=0.0, vmax=3.0))
+    vmax = nice_ceil(max(float(np.percentile(sdf, 95)), 1.0))
+    fig, ax = plt.subplots(figsize=(8.0, 7.0))
+    im = ax.imshow(np.clip(sdf, -1.0, vmax), origin="lower", extent=[xs[0], xs[-1], ys[0], ys[-1]], cmap="RdBu",
+                   norm=TwoSlopeNorm(vmin=-1.0, vcenter=0.0, vmax=vmax))
     ax.contour(X, Y, sdf, levels=[0.0], colors="k", linewidths=0.8)
     handles = [Line2D([], [], color="k", lw=0.8, label="scene surface (zero level)")]
     if len(W):
@@ -164,31 +167,32 @@ def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=
     ax.arrow(cx, cy, L * np.cos(yaw), L * np.sin(yaw), width=0.15 * L, color="k", zorder=4)
     handles.append(Line2D([], [], ls="", marker=r"$\rightarrow$", markersize=12, color="k",
                           label="lidar position and heading"))
-    colorbar_beside(fig, ax, im, "exact signed distance in the lidar plane [m]\n(clipped to -1..3; < 0 inside objects)",
-                    size="3%")
+    cb = colorbar_beside(fig, ax, im, f"exact signed distance in the lidar plane [m]\n(clipped to -1..{vmax:g}; < 0 "
+                                      "inside objects)", size="3%")
+    cb.set_ticks(np.r_[-1.0, -0.5, np.linspace(0.0, vmax, 6)])   # the two halves of the bar differ in scale
+    cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title)
-    from matplotlib.transforms import ScaledTranslation
-
-    below = ax.transAxes + ScaledTranslation(0, -0.5, fig.dpi_scale_trans)   # half an inch under the axes
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0), bbox_transform=below, ncol=2, fontsize=8,
-              frameon=False)
+    legend_under(ax, handles)
     ax.set_aspect("equal")
     return fig
 
 
-def render_scene_pictures(world, out_dir, *, width=640, height=480):
+def render_scene_pictures(world, out_dir, *, width=640, height=480, progress=None):
     """Write a labelled picture of every camera (``<scene>_<cam>.png``: RGB, depth with its colour
     bar, labels with their legend) and an overview (``<scene>_overview.png``: a top-down exact-SDF
-    map with the lidar scan where the scene has a 2D lidar, else a third-person render).
-    Returns the written paths."""
+    map of the world with the lidar scan where the scene has a 2D lidar, else a third-person
+    render). ``progress``, if given, is called with no argument after each picture. Returns the
+    written paths."""
     out_dir = Path(out_dir)
+    tick = progress or (lambda: None)
     paths = []
     for cam in world.cameras:
         f = world.camera(cam, width=width, height=height)
         paths.append(save_figure(camera_figure(f, f"{world.scene}: camera {cam!r} at t = {f.t:.2f} s, "
                                                   f"{width}x{height}"), out_dir / f"{world.scene}_{cam}.png"))
+        tick()
     lidars2d = [n for n in world.lidars if getattr(world.lidar(n), "angles", None) is not None]
     if lidars2d:
         fig = lidar_map_figure(world, lidars2d[0], f"{world.scene} from above at t = {world.time:.2f} s: exact SDF "
@@ -196,4 +200,5 @@ def render_scene_pictures(world, out_dir, *, width=640, height=480):
     else:
         fig = image_figure(world.render_view(width=width, height=height), f"{world.scene}: third-person view")
     paths.append(save_figure(fig, out_dir / f"{world.scene}_overview.png"))
+    tick()
     return paths

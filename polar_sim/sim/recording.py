@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 
 import cv2
@@ -45,6 +46,37 @@ def _decode_png(buf, shape, dtype, where):
     return np.ascontiguousarray(img.reshape(shape).astype(dtype))
 
 
+def _check_meta(meta):
+    """A copy of ``meta`` (a dict with string keys and JSON values; None is ``{}``) that saves and
+    loads back equal. Raises ``TypeError`` naming ``meta`` for anything else (``0`` or ``[]`` used
+    to become ``{}``; a non-string key would come back as a string)."""
+    if meta is None:
+        return {}
+    if not isinstance(meta, Mapping):
+        raise TypeError(f"meta: expected a dict of JSON values (or None), got {type(meta).__name__}")
+    try:
+        _check_keys(meta)
+        json.dumps(dict(meta))      # fail early on metadata that cannot be saved
+    except (TypeError, ValueError) as exc:
+        raise TypeError(str(exc) if str(exc).startswith("meta:") else
+                        f"meta: values must be JSON (str, int, float, bool, None, lists, dicts): {exc}") from None
+    except RecursionError:
+        raise TypeError("meta: nested too deeply (or holds itself)") from None
+    return dict(meta)
+
+
+def _check_keys(value):
+    """Every dict key in ``value`` (nested in dicts, lists and tuples) is a string."""
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise TypeError(f"meta: keys must be strings (JSON object keys), got {k!r}")
+            _check_keys(v)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            _check_keys(v)
+
+
 class Recording:
     """An in-memory sequence of frames with JSON-able metadata.
 
@@ -57,8 +89,7 @@ class Recording:
     """
 
     def __init__(self, meta=None):
-        self.meta = dict(meta or {})
-        json.dumps(self.meta)  # fail early on metadata that cannot be saved
+        self.meta = _check_meta(meta)
         self._frames = []
         self._schema = None
 

@@ -22,9 +22,9 @@ import dataclasses
 import cv2
 import mujoco
 import numpy as np
-from tqdm.auto import tqdm
 
 from polar_sim.control import PurePursuit
+from polar_sim.progress import progress_bar
 from polar_sim.sim import sequences
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.truth import LABELS
@@ -158,7 +158,7 @@ def _height_along_down(w, T_wc):
     return float(d) if d >= 0 else np.nan
 
 
-def record_route(name, *, max_frames=None, progress=True):
+def record_route(name, *, max_frames=None, progress=None):
     """Drive route ``name`` and return its :class:`Recording` (see the module docstring).
 
     Per frame: ``rgb`` (188, 621, 3) uint8, ``ground_mask`` (188, 621) bool, ``T_world_cam``
@@ -167,6 +167,10 @@ def record_route(name, *, max_frames=None, progress=True):
     right), ``speed`` (m/s), ``h_y`` (m), ``surface_coeffs`` (6,), ``static`` (bool).
     Meta: ``K`` of the reduced image, ``dt``, ``camera_height``, ``route``, ``length_m``,
     ``appearance`` (the resolved spec, None for the default look), ``zones`` (zone families).
+    ``progress``: a bar of the metres driven, on stderr (:func:`polar_sim.progress.progress_bar`: by
+    default on a terminal unless ``POLAR_SIM_QUIET=1``; ``False``: never); a callable is called with
+    the number of frames recorded so far after each frame instead (``polar-sim demo`` draws its own
+    bars from it).
     """
     spec = route_spec(name)
     if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer))
@@ -187,7 +191,9 @@ def record_route(name, *, max_frames=None, progress=True):
         K_full = None
         rec = None
         frames = 0
-        bar = tqdm(total=int(length), desc=name, unit="m", disable=not progress)
+        tick = progress if callable(progress) else None
+        bar = progress_bar(total=int(length), desc=f"recording {name}", unit="m",
+                           enabled=False if tick is not None else progress, leave=None)
         k = 0
         while True:
             pose2d = w.truth()["robot_pose2d"]
@@ -221,6 +227,8 @@ def record_route(name, *, max_frames=None, progress=True):
             })
             frames += 1
             bar.update(int(s) - bar.n)
+            if tick is not None:
+                tick(frames)
             if s >= length or (max_frames is not None and frames >= max_frames) or k >= n_max - 1:
                 break
             v = float(min(profile[k], np.sqrt(2.0 / max(abs(follower.steer(pose2d, profile[k])) / max(profile[k], 0.1), 1e-3))))
@@ -233,7 +241,7 @@ def record_route(name, *, max_frames=None, progress=True):
     return rec
 
 
-def load_route(name, *, max_frames=None, progress=False):
+def load_route(name, *, max_frames=None, progress=None):
     """The recording of route ``name`` (its first ``max_frames`` frames if given) as a lazy
     :class:`~polar_sim.sim.recording.RecordingReader` from the recording cache
     (:func:`polar_sim.sim.sequences.cached`, kind ``"rover_route"``), recorded first if absent."""

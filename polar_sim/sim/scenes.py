@@ -31,15 +31,9 @@ MAX_MESH_FACES = 5_000_000
 
 
 def scene_dir() -> Path:
-    """The folder of the shipped MJCF scenes and assets."""
-    try:
-        p = Path(str(resources.files("polar_sim.scenes")))
-        if (p / "rover_flat.xml").is_file():
-            return p
-    except ModuleNotFoundError:
-        pass
-    # Running from a source checkout without installing: scenes/ sits beside polar_sim/.
-    return Path(__file__).resolve().parents[2] / "scenes"
+    """The folder of the shipped MJCF scenes and assets (``scenes/``, packaged as ``polar_sim.scenes``)."""
+    # polar_sim/scenes is a link to scenes/ in a source checkout, and the packaged folder in a wheel.
+    return Path(str(resources.files("polar_sim.scenes")))
 
 
 @dataclasses.dataclass(frozen=True)

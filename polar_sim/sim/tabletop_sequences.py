@@ -47,6 +47,7 @@ import zlib
 
 import numpy as np
 
+from polar_sim.progress import progress_bar
 from polar_sim.sim.recording import Recording
 from polar_sim.sim.sensors import DepthNoise
 
@@ -237,9 +238,10 @@ def _cache_key(name, seed, n, width, height, noise):
             "width": int(width), "height": int(height), "noise": bool(noise)}
 
 
-def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, height=480, progress=False):
+def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, height=480, progress=None):
     """The recording of :func:`record_sequence` from the one cache (:mod:`polar_sim.sim.sequences`,
-    kind ``"tabletop"``), recorded on first use under the cache's lock; a lazy
+    kind ``"tabletop"``), recorded on first use under the cache's lock (a 450-frame sequence takes
+    minutes: a progress bar counts its frames); a lazy
     :class:`~polar_sim.sim.recording.RecordingReader` (``len``, ``meta``, ``stack``, ``frames``)."""
     from polar_sim._validation import as_int
     from polar_sim.sim import sequences
@@ -253,7 +255,7 @@ def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, heigh
 
 
 def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=640, height=480,
-                    progress=False) -> Recording:
+                    progress=None) -> Recording:
     """Run sequence ``name`` and record every camera frame with its truth (see the module doc).
 
     Parameters
@@ -271,8 +273,11 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         Also save the recording there (``.npz``). :func:`cached_sequence` keeps it in the cache.
     width, height : int
         Image size; the intrinsics scale with it (fovy is fixed).
-    progress : bool
-        Show a tqdm bar.
+    progress : bool or callable, optional
+        A bar of the frames recorded, on stderr (:func:`polar_sim.progress.progress_bar`: by
+        default shown on a terminal unless ``POLAR_SIM_QUIET=1``; ``False``: never); a callable
+        is called with the number of frames recorded so far after each frame, instead of a bar
+        (``polar-sim demo`` draws its own bars from it).
     """
     from polar_sim._validation import as_int
     from polar_sim.geometry import inv_pose
@@ -303,12 +308,10 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         if s.split != "dev" or "appearance" in w.meta:  # (the dev recordings' headers stay as they were)
             meta.update(split=s.split, appearance=w.meta.get("appearance"))
         rec = Recording(meta)
-        it = range(n)
-        if progress:
-            from tqdm import tqdm
-
-            it = tqdm(it, desc=name, unit="frame")
-        for k in it:
+        tick = progress if callable(progress) else None
+        frames = progress_bar(range(n), enabled=False if tick is not None else progress, desc=f"recording {name}",
+                              unit="frame", leave=None)
+        for k in frames:
             if k > 0:
                 w.step()
             f = f0 if k == 0 else w.camera("rgbd", width=width, height=height)
@@ -330,6 +333,8 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
                 "light_scale": float(tr.get("light_scale", 1.0)),
                 "phase": PHASES.index(tr.get("phase", "rest")),
             })
+            if tick is not None:
+                tick(k + 1)
     finally:
         w.close()
     if out is not None:

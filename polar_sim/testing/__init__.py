@@ -4,7 +4,7 @@ and gymnasium's ``check_env``).
 >>> from polar_sim.testing import check_module, check_polar_env, run_battery
 >>> for check in check_module("GPISMap2D"):       # small named checks; each raises AssertionError
 ...     check()
->>> for check in check_polar_env("polar_sim/GPISNav-v0"):
+>>> for check in check_polar_env("polar_sim/GPISNav-v1"):
 ...     check()
 >>> counts = run_battery("GPISMap2D.update", n=200)   # the full-size battery of one entry point
 

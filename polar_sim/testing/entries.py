@@ -179,15 +179,22 @@ def _ep_groundvo_process():
 
 
 def _ep_tracker_init():
-    from polar_sim.tracking import ObjectTracker
+    from polar_sim.tracking import LearningConfig, ObjectTracker, RegistrationConfig
 
     def args(t, tmp):
         seq, pts, nrm, _ = _cached("trk", _track_sequence)
-        return {"model_points": pts.copy(), "K": seq.K.copy(), "initial_pose": seq.poses[0].copy()}
+        return {"model_points": pts.copy(), "K": seq.K.copy(), "initial_pose": seq.poses[0].copy(), "appearance": "ww",
+                "registration": RegistrationConfig(), "learning": LearningConfig(), "fps": 30.0, "calibrate": True,
+                "random_state": 0}
 
-    return EntryPoint("ObjectTracker", setup=lambda tmp: None, args=args,
-                      call=lambda t, a: ObjectTracker(a["model_points"], a["K"], a["initial_pose"]),
-                      kinds={"model_points": "points", "K": "K", "initial_pose": "pose"})
+    def call(t, a):
+        kw = {k: v for k, v in a.items() if k not in ("model_points", "K", "initial_pose")}
+        return ObjectTracker(a["model_points"], a["K"], a["initial_pose"], **kw)
+
+    return EntryPoint("ObjectTracker", setup=lambda tmp: None, args=args, call=call,
+                      kinds={"model_points": "points", "K": "K", "initial_pose": "pose", "appearance": "choice",
+                             "registration": "object", "learning": "object", "fps": "float+", "calibrate": "bool",
+                             "random_state": "seed"})
 
 
 def _ep_tracker_process():
@@ -485,7 +492,7 @@ def _cli_argvs(tmp):
     for v in bad_int:
         cases += [("--width", f"int:{v}", ["render", "office2d", "--width", v, "--height", "24", "--out", out_ok]),
                   ("--height", f"int:{v}", ["render", "office2d", "--width", "32", "--height", v, "--out", out_ok]),
-                  ("--episodes", f"int:{v}", ["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", v]),
+                  ("--episodes", f"int:{v}", ["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--episodes", v]),
                   ("--workers", f"int:{v}", ["run", "sensors", "--quick", "--workers", v, "--out", out_ok]),
                   ("--n-boot", f"int:{v}", ["compare", out_ok, out_ok, "--n-boot", v])]
     for v in ["-1", "abc", "1.5", "99999999999999999999", "", "nan", "1e3"]:
@@ -496,10 +503,10 @@ def _cli_argvs(tmp):
         cases += [("--out", f"out:{v[:12]}", ["render", "office2d", "--width", "32", "--height", "24", "--out", v]),
                   ("--out", f"out:{v[:12]}", ["demo", "--out", v])]
     for v in ["[1]", "{bad", "null", '"str"', "1", '{"no_such_kwarg": 1}', "{}" * 1000, '{"a": NaN}', "[" * 5000, "true"]:
-        cases.append(("--env-kwargs", f"json:{v}", ["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", "1",
+        cases.append(("--env-kwargs", f"json:{v}", ["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--episodes", "1",
                                                     "--env-kwargs", v, "--out", out_ok]))
     for v in ["nope:thing", "os:getcwd", "random.x", ""]:
-        cases.append(("--policy", f"policy:{v}", ["eval", "polar_sim/GPISNav-v0", "--policy", v, "--episodes", "1", "--out", out_ok]))
+        cases.append(("--policy", f"policy:{v}", ["eval", "polar_sim/GPISNav-v1", "--policy", v, "--episodes", "1", "--out", out_ok]))
     for v in ["train", "", "ñ"]:
         cases.append(("--split", f"split:{v}", ["run", "sensors", "--quick", "--split", v, "--out", out_ok]))
     for v in ["-1", "abc", "0", "nan", "inf", "-inf", "1e-400", ""]:
@@ -509,7 +516,7 @@ def _cli_argvs(tmp):
     for v in bad_int:
         cases.append(("--workers", f"int:{v}", ["reproduce", "--quick", "--only", "sensors", "--workers", v, "--out", out_ok]))
     for v in bad_seed:
-        cases.append(("--seed", f"int:{v}", ["eval", "polar_sim/GPISNav-v0", "--policy", "random", "--episodes", "1",
+        cases.append(("--seed", f"int:{v}", ["eval", "polar_sim/GPISNav-v1", "--policy", "random", "--episodes", "1",
                                               "--seed", v, "--out", out_ok]))
     for v in ["nope", "", "ñ" * 20, "sensors,nope"]:
         cases.append(("--only", f"only:{v[:12]}", ["reproduce", "--quick", "--only", v, "--out", out_ok]))
@@ -541,7 +548,7 @@ def _cli_argvs(tmp):
     for v in ["", "../x", "battery;rm", "ñ", "x" * 3000]:
         cases.append(("bench", f"bench:{v[:12]}", ["bench", v]))
     for argv in ([], ["frobnicate"], ["run"], ["render"], ["compare", "a"], ["list", "--bogus"], ["demo", "--bogus"],
-                 ["reproduce", "--only", "--quick", "--bogus"], ["eval", "polar_sim/GPISNav-v0"], ["run", "--quick"],
+                 ["reproduce", "--only", "--quick", "--bogus"], ["eval", "polar_sim/GPISNav-v1"], ["run", "--quick"],
                  ["render", "office2d", "--width"], ["eval", "--policy", "random"]):
         cases.append(("usage", f"usage:{' '.join(argv)[:20]}", list(argv)))
     return cases

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from polar_sim.geometry import inv_pose, se3_exp, se3_log
+from polar_sim.registration.robust import robust_weight
 from polar_sim.tracking._kernels import icp_normal_equations, icp_residuals
 from polar_sim.tracking.visibility import project_model
 
-__all__ = ["ICPResult", "weighted_icp", "tukey", "unobserved_directions", "symmetry_directions"]
+__all__ = ["ICPResult", "weighted_icp", "unobserved_directions", "symmetry_directions"]
 
 
 @dataclass
@@ -40,12 +41,6 @@ class ICPResult:
     sigma: float
     vis: np.ndarray
     support: np.ndarray | None = None
-
-
-def tukey(u):
-    """Tukey biweight (1 - u^2)^2 for |u| < 1, else 0."""
-    a = 1.0 - u * u
-    return np.where(a > 0.0, a * a, 0.0)
 
 
 def _normal_equations(J, r, w, m, n, y, mu):
@@ -126,69 +121,80 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
         filter.
     """
     X = np.ascontiguousarray(X, dtype=np.float64)
-    T = T_init.copy()
-    P, N = model.P, model.N
     sig_floor = float(np.median(sigma_d)) if len(sigma_d) else 1e-3
-    mu2 = float(tangential_weight) ** 2
-    H = np.zeros((6, 6))
-    g = np.zeros(6)
-    sigma = sig_floor
-    it = 0
-    vis = vis_init
-    ok_any = False
-    done = False
-    gate = gate0
+    step = dict(w0=w0, model=model, exact=exact, min_points=min_points, sig_floor=sig_floor,
+                mu2=float(tangential_weight) ** 2, prior=prior)
+    T, vis, gate, sigma, it, ok = T_init.copy(), vis_init, gate0, sig_floor, 0, False
     for outer in range(int(np.ceil(max_iterations / vis_every))):
         if outer > 0 or vis is None:
-            vis = project_model(P, N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
+            vis = project_model(model.P, model.N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
         gate = max(gate0 * gate_decay**outer, gate_floor)
+        stop = False
         for _ in range(vis_every):
             if it >= max_iterations:
-                done = True
+                stop = True
                 break
             it += 1
-            idx, res = _correspond(X, T, model, vis, gate, exact)
-            sel = idx >= 0
-            if sel.sum() < min_points:
-                ok_any = False
-                done = True
+            delta, gain, cost, sigma = _gauss_newton_step(X, T, vis, gate, sigma, **step)
+            if delta is None:   # too few correspondences, or a singular system
+                ok, stop = False, True
                 break
-            r = res[sel]
-            sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), sig_floor)
-            w = np.zeros(len(X))
-            w[sel] = w0[sel] * tukey(r / (4.685 * sigma))
-            icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                                 P, N, idx, res, w, mu2, H, g)
-            tr = np.trace(H)
-            if not np.isfinite(tr) or tr <= 0:
-                ok_any = False
-                done = True
-                break
-            Hs, gs = H, g
-            cost = float(w @ (res * res))
-            if prior is not None:
-                # MAP: data in units of the robust scale, plus the prediction's information
-                e = se3_log(inv_pose(prior[0]) @ T)
-                s2 = sigma * sigma
-                Hs, gs = H / s2 + prior[1], g / s2 + prior[1] @ e
-                cost = cost / s2 + float(e @ prior[1] @ e)
-            delta = -np.linalg.solve(Hs + 1e-6 * np.trace(Hs) * np.eye(6), gs)
-            T = T @ se3_exp(delta)
-            ok_any = True
+            T, ok = T @ se3_exp(delta), True
             # converged: a tiny step, or a step that no longer lowers the cost (delta^T H delta is the
             # Gauss-Newton decrease; motion along an unobservable direction, such as a cylinder
             # turning about its axis, is large but free, and would otherwise run to max_iterations)
-            gain = float(delta @ Hs @ delta)
             small = np.linalg.norm(delta[:3]) < tol_rot and np.linalg.norm(delta[3:]) < tol_trans
             if small or gain < rel_decrease * cost:
-                done = True
+                stop = True
                 break
-        if done:
+        if stop:
             break
-    if not ok_any:
+    if not ok:
         return ICPResult(T_init.copy(), np.eye(6), 0.0, np.inf, 0, 0, it, False, sigma,
-                         vis if vis is not None else np.zeros(len(P), bool))
-    # final correspondences at the converged pose: fitness, RMSE, covariance
+                         vis if vis is not None else np.zeros(len(model.P), bool))
+    return _converged(X, w0, model, T, K, shape, gate, sigma, delta1, exact, it)
+
+
+def _robust(w0, sel, res, sigma):
+    """IRLS weights (n,): the prior weights times Tukey's biweight of the residuals at 4.685 x the
+    robust scale ``sigma`` (m), 0 without a correspondence."""
+    w = np.zeros(len(w0))
+    w[sel] = w0[sel] * robust_weight(res[sel], "tukey", 4.685 * sigma)
+    return w
+
+
+def _gauss_newton_step(X, T, vis, gate, sigma, *, w0, model, exact, min_points, sig_floor, mu2, prior):
+    """One IRLS Gauss-Newton step at T: ``(delta (6,), predicted decrease, cost, sigma)``, with
+    delta None when fewer than ``min_points`` points correspond or the system is singular (sigma is
+    the robust scale, MAD of the residuals floored at ``sig_floor``, or the one given when no scale
+    could be measured)."""
+    idx, res = _correspond(X, T, model, vis, gate, exact)
+    sel = idx >= 0
+    if sel.sum() < min_points:
+        return None, 0.0, 0.0, sigma
+    r = res[sel]
+    sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), sig_floor)
+    w = _robust(w0, sel, res, sigma)
+    H, g = np.zeros((6, 6)), np.zeros(6)
+    icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                         model.P, model.N, idx, res, w, mu2, H, g)
+    tr = np.trace(H)
+    if not np.isfinite(tr) or tr <= 0:
+        return None, 0.0, 0.0, sigma
+    cost = float(w @ (res * res))
+    if prior is not None:
+        # MAP: data in units of the robust scale, plus the prediction's information
+        e = se3_log(inv_pose(prior[0]) @ T)
+        s2 = sigma * sigma
+        H, g = H / s2 + prior[1], g / s2 + prior[1] @ e
+        cost = cost / s2 + float(e @ prior[1] @ e)
+    delta = -np.linalg.solve(H + 1e-6 * np.trace(H) * np.eye(6), g)
+    return delta, float(delta @ H @ delta), cost, sigma
+
+
+def _converged(X, w0, model, T, K, shape, gate, sigma, delta1, exact, iterations):
+    """The result at the converged pose T: final correspondences, fitness, RMSE, covariance."""
+    P, N = model.P, model.N
     vis = project_model(P, N, T[:3, :3], T[:3, 3], K, shape, model.spacing).vis
     idx, res = _correspond(X, T, model, vis, gate, exact)
     sel = idx >= 0
@@ -196,11 +202,11 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     sw = float(w0.sum())
     fitness = float(w0[inl].sum() / sw) if sw > 0 else 0.0
     rmse = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else np.inf
-    w = np.zeros(len(X))
-    w[sel] = w0[sel] * tukey(res[sel] / (4.685 * sigma))
+    w = _robust(w0, sel, res, sigma)
     # covariance from point-to-plane alone: the tangential term's Hessian claims information that
     # its sliding nearest-neighbour residuals do not have (a cylinder turning about its axis would
     # look well measured and the filter would reject its true motion)
+    H, g = np.zeros((6, 6)), np.zeros(6)
     icp_normal_equations(X, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
                          P, N, idx, res, w, 0.0, H, g)
     tr = np.trace(H)
@@ -209,7 +215,7 @@ def weighted_icp(X, w0, model, T_init, K, shape, *, sigma_d, delta1, gate0, gate
     except np.linalg.LinAlgError:
         cov = np.eye(6)
     cov = 0.5 * (cov + cov.T)
-    return ICPResult(T, cov, fitness, rmse, int(inl.sum()), int(sel.sum()), it, True, sigma, vis, idx[inl])
+    return ICPResult(T, cov, fitness, rmse, int(inl.sum()), int(sel.sum()), iterations, True, sigma, vis, idx[inl])
 
 
 def unobserved_directions(model, support, cov, *, step=None, min_std=0.001, n_probe=3, max_rms=0.1,

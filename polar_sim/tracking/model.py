@@ -2,7 +2,7 @@
 
 All geometry is held in the *centred* model frame (object frame shifted to the points' centroid):
 the tracker's pose perturbations rotate about the object's centre, which decouples rotation from
-translation in the motion filter and in the gates (see the README, "Object tracking").
+translation in the motion filter and in the gates (see ``docs/guide/tracking.md``, "Where this departs from the spec").
 """
 
 from __future__ import annotations

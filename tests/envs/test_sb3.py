@@ -15,7 +15,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
 
 import polar_sim.envs  # noqa: F401
-from polar_sim.envs.learning import ObsNormaliser, load_policy, make_model, ppo_recipe, save_policy
+from polar_sim.envs.learning import ObsNormaliser, load_model, make_model, ppo_recipe, save_policy
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -38,7 +38,7 @@ def test_recipe_trains_saves_and_loads(obs_mode, recurrent, tmp_path):
     with np.load(tmp_path / "policy.npz", allow_pickle=False) as f:  # no object arrays in the file
         assert all(f[k].dtype != object for k in f.files)
     env = gym.make("polar_sim/GPISNav-Room-v1", **kw)
-    loaded, norm2 = load_policy(tmp_path / "policy.npz", env)
+    loaded, norm2, _ = load_model(tmp_path / "policy.npz", env)
     obs, _ = env.reset(seed=10_000)
     o = {k: v[None] for k, v in norm(obs).items()}
     np.testing.assert_array_equal(norm(obs)["goal"], norm2(obs)["goal"])
@@ -56,7 +56,7 @@ def test_policy_file_version_is_checked(tmp_path):
     p = tmp_path / "bad.npz"
     np.savez(p, meta=np.array(json.dumps({"format_version": 99})))
     with pytest.raises(ValueError, match="format version"):
-        load_policy(p, gym.make("polar_sim/GPISNav-Room-v1"))
+        load_model(p, gym.make("polar_sim/GPISNav-Room-v1"))
 
 
 # The example script runs its whole loop at a tiny size: training, the curve, the baselines, the

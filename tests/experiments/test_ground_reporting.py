@@ -10,6 +10,7 @@ import re
 import numpy as np
 import pytest
 
+from polar_sim.experiments import _ground_candidates as C
 from polar_sim.experiments import _ground_common as G
 from polar_sim.experiments import ground_appearance as GA
 from polar_sim.experiments import ground_odometry as GO
@@ -163,7 +164,8 @@ def test_table_drops_empty_columns_and_says_why():
 def _series(families, iou):
     """ground_appearance's per-trial series: one settled frame per family zone with IoU ``iou[k]``
     and a perfectly calibrated 4x4 probability map."""
-    from polar_sim.metrics.ground import class_prob_sums, reliability_counts
+    from polar_sim.metrics.calibration import reliability_counts
+    from polar_sim.metrics.ground import class_prob_sums
 
     prob, mask = np.full((4, 4), 0.5), np.arange(16).reshape(4, 4) % 2 == 0
     n = len(families)
@@ -226,7 +228,7 @@ def test_no_internal_references(name):
     from polar_sim.runner.registry import get_experiment
 
     mod = importlib.import_module(f"polar_sim.experiments.{name}")
-    for text in (get_experiment(name).description, mod.__doc__, G.__doc__, G.candidate_set.__doc__):
+    for text in (get_experiment(name).description, mod.__doc__, G.__doc__, C.__doc__, C.candidate_set.__doc__):
         assert not re.search(r"issue \d|§|spec ", text), text
 
 

@@ -22,9 +22,6 @@ def _passed(res):
 
 
 def _common():
-    from polar_sim.runner.registry import _package
-
-    _package()
     from polar_sim.experiments import _tracking_common as C
 
     return C
@@ -195,9 +192,10 @@ def test_variant_checks_follow_the_params(tmp_path):
 # The pooled ECE of per-frame reliability counts: |sum of truth - sum of P| per bin over the pixels,
 # NaN for a run without any P(target) pixel (it used to read 0).
 def test_pooled_ece_of_a_run():
-    C = _common()
-    b = np.zeros((2, 3, C.N_BINS))
-    assert np.isnan(C.ece(b))
+    from polar_sim import metrics
+
+    b = np.zeros((2, 3, _common().N_BINS))
+    assert np.isnan(metrics.pooled_ece(b))
     b[0, :, 1] = (2, 0.2, 0.0)      # two pixels at P = 0.1, both background
     b[1, :, 13] = (3, 2.7, 3.0)     # three at P = 0.9, all target
-    assert C.ece(b) == pytest.approx(0.5 / 5, abs=1e-15)
+    assert metrics.pooled_ece(b) == pytest.approx(0.5 / 5, abs=1e-15)

@@ -4,7 +4,7 @@ than its raw posterior on the synthetic corridor (scored against the exact groun
 import numpy as np
 from ground_helpers import run
 
-from polar_sim.ground import GroundVO
+from polar_sim.ground import CalibrationConfig, GroundVO
 from polar_sim.ground.calibration import PlattCalibrator, sigmoid
 from polar_sim.ground.classifier import GroundColourModel
 from polar_sim.metrics.calibration import expected_calibration_error
@@ -59,7 +59,8 @@ def test_decay_samples_forgets_in_proportion_to_the_evidence():
 def test_groundvo_calibrated_map_is_better_calibrated(corridor):
     kw = dict(seed=0)
     cal = run(GroundVO(corridor["K"], corridor["camera_height"], **kw), corridor)
-    raw = run(GroundVO(corridor["K"], corridor["camera_height"], calibration="none", **kw), corridor)
+    raw = run(GroundVO(corridor["K"], corridor["camera_height"], calibration=CalibrationConfig(method="none"), **kw),
+              corridor)
     frames = range(10, len(cal))
     y = np.concatenate([corridor["ground_mask"][i].ravel() for i in frames])
     e_cal = expected_calibration_error(np.concatenate([cal[i].ground_prob.ravel() for i in frames]), y)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from polar_sim.metrics.calibration import pooled_reliability, reliability_counts
 from polar_sim.metrics.ground import (class_mean_prob_bounds, class_prob_sums, classifier_iou, kitti_scores,
-                                      kitti_scores_pooled, pool_by_family, pooled_reliability,
-                                      reliability_counts)
+                                      kitti_scores_pooled, pool_by_family)
 
 
 def _maps(seed, n=(40, 60)):
@@ -57,8 +57,14 @@ def test_pool_by_family_pools_settled_frames_of_each_zone_across_routes():
     np.testing.assert_allclose(out["checker"]["psums"], ps[chk].sum(axis=0))
     assert out["grass"]["frames"] == 2
     assert pooled_reliability(*out["grass"]["bins"]).n == 2 * 40 * 60
+    s = ps[chk].sum(axis=0)
+    assert out["checker"]["p_ground"] == pytest.approx(s[0] / s[1]) and out["checker"]["p_nonground"] == pytest.approx(s[2] / s[3])
     del b["psums"]
-    assert pool_by_family([a, b])["checker"]["psums"] is None  # a route without the sums: no exact means
+    est = pool_by_family([a, b])["checker"]
+    assert est["psums"] is None  # a route without the sums: no exact means, the bins' estimate
+    bounds = class_mean_prob_bounds(*est["bins"])
+    assert (est["p_ground"], est["p_nonground"]) == (bounds["ground"][0], bounds["nonground"][0])
+    assert bounds["ground"][1] <= s[0] / s[1] <= bounds["ground"][2]
 
 
 def test_kitti_scores_of_a_perfect_estimate_are_zero():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from ground_helpers import DT, HEIGHT, SPEED, YAW_RATE, run
-from polar_sim.ground import STATUSES, GroundVO
+from polar_sim.ground import STATUSES, FilterConfig, GroundModelConfig, GroundVO, MotionConfig, TrackingConfig
 
 
 def _vo(seq, **kw):
@@ -70,12 +70,16 @@ def test_ground_probability_learns_the_ground(corridor, default_run):
 
 
 @pytest.mark.parametrize("kw", [dict(model="2param", sampling="uniform"), dict(model="plane3"),
-                                dict(model="3param"), dict(compat="code"), dict(integration="3d"),
-                                dict(downsample=1, max_features=300), dict(estimate_foe=True),
-                                dict(n_global=1, ground_warp=False, exact_flow=False)])
+                                dict(model="3param"), dict(published=True), dict(integration="3d"),
+                                dict(downsample=1, tracking=TrackingConfig(max_features=300)),
+                                dict(motion=MotionConfig(estimate_foe=True)),
+                                dict(motion=MotionConfig(n_global=1, exact_flow=False),
+                                     tracking=TrackingConfig(ground_warp=False))])
 def test_variants_run_and_estimate_speed(corridor, kw):
     # Every model, the published behaviour, 3-D integration, full resolution and the FOE variant track the speed.
-    es = run(_vo(corridor, **kw), corridor, range(12))
+    kw = dict(kw)
+    make = GroundVO.published if kw.pop("published", False) else GroundVO
+    es = run(make(corridor["K"], corridor["camera_height"], seed=0, **kw), corridor, range(12))
     raw = np.array([e.speed_raw for e in es[2:]])
     assert np.nanmedian(raw) == pytest.approx(SPEED, rel=0.1)
     assert all(e.status in STATUSES for e in es)
@@ -114,10 +118,7 @@ def test_bad_input_raises_and_leaves_the_estimator_unchanged(corridor):
                                       (dict(camera_height=0.0), "camera_height"),
                                       (dict(camera_height=-1.0), "camera_height"),
                                       (dict(model="9param"), "model"), (dict(sampling="greedy"), "sampling"),
-                                      (dict(compat="paper"), "compat"), (dict(downsample=3), "downsample"),
-                                      (dict(ng_outlier_sigma=0.0), "ng_outlier_sigma"),
-                                      (dict(ng_outlier_sigma=float("nan")), "ng_outlier_sigma"),
-                                      (dict(ng_outlier_history="yes"), "ng_outlier_history")])
+                                      (dict(downsample=3), "downsample"), (dict(integration="2d"), "integration")])
 def test_bad_parameters_raise_value_error(corridor, kw, match):
     # K not 3x3, non-positive camera height, unknown choices: ValueError naming the argument.
     args = dict(K=corridor["K"], camera_height=1.0)
@@ -155,7 +156,7 @@ def test_static_scene_zeroes_the_speed(corridor):
 
 def test_no_ground_candidates_coasts(corridor):
     # With the horizon set below the image no point is a ground candidate: status "no_ground", no raise.
-    vo = _vo(corridor, horizon_row=479.5, speed_prior=4.0)
+    vo = _vo(corridor, ground=GroundModelConfig(horizon_row=479.5), filters=FilterConfig(speed_prior=4.0))
     es = run(vo, corridor, range(6))
     assert all(e.status == "no_ground" for e in es[2:])
     assert all(e.speed == 4.0 for e in es) and all(e.diagnostics["n_inliers"] == 0 for e in es)

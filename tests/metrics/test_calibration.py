@@ -51,13 +51,23 @@ def test_bad_input(prob, labels, kw, match):
         metrics.reliability(np.array(["a"]), np.array([True]))
 
 
-# the plot draws one line per curve plus the diagonal, with labelled axes
-def test_plot_reliability():
-    import matplotlib
+# Summed per-frame reliability counts give exactly the reliability of the pooled samples.
+def test_pooled_reliability_equals_reliability_of_the_pool():
+    rng = np.random.default_rng(0)
+    ps = [rng.random((6, 7)) for _ in range(4)]
+    ys = [rng.random((6, 7)) < p for p in ps]
+    summed = [sum(x) for x in zip(*[metrics.reliability_counts(p, y) for p, y in zip(ps, ys)])]
+    a, b = metrics.pooled_reliability(*summed), metrics.reliability(np.stack(ps), np.stack(ys))
+    assert a.n == b.n and np.isclose(a.ece, b.ece) and np.isclose(a.mce, b.mce)
+    np.testing.assert_array_equal(a.count, b.count)
+    with pytest.raises(ValueError, match="no samples"):
+        metrics.pooled_reliability(np.zeros(15, int), np.zeros(15), np.zeros(15))
 
-    matplotlib.use("Agg")
-    rng = np.random.default_rng(1)
-    p = rng.uniform(size=1000)
-    r = metrics.reliability(p, rng.uniform(size=1000) < p)
-    ax = metrics.plot_reliability([r, r], ["a", "b"])
-    assert len(ax.lines) == 3 and ax.get_xlabel() and ax.get_ylabel()
+
+# Scoring never draws: the metrics package does not import matplotlib (plots are the experiments').
+def test_metrics_import_no_matplotlib():
+    import subprocess
+    import sys
+
+    code = "import sys, polar_sim.metrics; print('matplotlib' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"

@@ -84,17 +84,33 @@ def test_oracle_step_speeds():
         oracle_step_speeds([0.0, 0.0], [0.0, 1.0])
 
 
-# Summed per-frame reliability counts give exactly the reliability of the pooled samples.
-def test_pooled_reliability_equals_reliability_of_the_pool():
-    from polar_sim.metrics.calibration import reliability
-    from polar_sim.metrics.ground import pooled_reliability, reliability_counts
 
-    rng = np.random.default_rng(0)
-    ps = [rng.random((6, 7)) for _ in range(4)]
-    ys = [rng.random((6, 7)) < p for p in ps]
-    summed = [sum(x) for x in zip(*[reliability_counts(p, y) for p, y in zip(ps, ys)])]
-    a, b = pooled_reliability(*summed), reliability(np.stack(ps), np.stack(ys))
-    assert a.n == b.n and np.isclose(a.ece, b.ece) and np.isclose(a.mce, b.mce)
-    np.testing.assert_array_equal(a.count, b.count)
-    with pytest.raises(ValueError, match="no samples"):
-        pooled_reliability(np.zeros(15, int), np.zeros(15), np.zeros(15))
+# ΔV of raw and filtered speeds: image k's values against the true speed of its middle frame k - 1;
+# frames without a raw speed are left out; by hand on a 4-frame series.
+def test_speed_error_scales_by_hand():
+    from polar_sim.metrics.ground import speed_error_scales
+
+    true = np.array([1.0, 2.0, 3.0, 4.0])
+    raw = np.array([np.nan, 1.5, np.nan, 2.0])      # errors vs true[k-1]: 0.5 (k=1), -1.0 (k=3)
+    filt = np.array([0.0, 1.0, 2.5, 3.0])           # errors vs true[k-1]: 0, 0.5, 0 (k=1..3)
+    dv_raw, dv_f = speed_error_scales(raw, filt, true)
+    assert dv_raw == pytest.approx(0.75) and dv_f == pytest.approx(0.5 / 3)
+    assert np.isnan(speed_error_scales(np.full(4, np.nan), filt, true)[0])
+    with pytest.raises(ValueError, match="speed_raw, speed, speed_true"):
+        speed_error_scales(raw[:3], filt, true)
+
+
+# Settled / transition / all-frame IoU statistics of a series, by hand; NaN IoUs are left out.
+def test_iou_summary_by_hand():
+    from polar_sim.metrics.ground import iou_summary
+
+    iou = np.array([0.1, 0.9, 0.8, np.nan, 0.5, 0.95])
+    settled = np.array([0, 1, 1, 1, 0, 1], bool)
+    scored = np.array([0, 1, 1, 1, 1, 1], bool)
+    s = iou_summary(iou, settled, scored, 0.85)
+    assert s["n_settled"] == 3 and s["iou_settled_mean"] == pytest.approx((0.9 + 0.8 + 0.95) / 3)
+    assert s["share_settled_ge_target"] == pytest.approx(2 / 3)
+    assert s["iou_settled_p10"] == pytest.approx(np.percentile([0.9, 0.8, 0.95], 10))
+    assert s["iou_transition_mean"] == 0.5 and s["iou_all_mean"] == pytest.approx((0.9 + 0.8 + 0.5 + 0.95) / 4)
+    empty = iou_summary(iou, np.zeros(6, bool), np.zeros(6, bool), 0.85)
+    assert empty["n_settled"] == 0 and np.isnan(empty["iou_settled_mean"]) and np.isnan(empty["iou_transition_mean"])

@@ -105,3 +105,19 @@ def test_pooled_ece_of_frame_counts_by_hand():
     assert r.ece == pytest.approx((0.2 + 0.3 + 0.95) / 7, abs=1e-15)
     assert r.ece == pytest.approx(metrics.reliability(np.r_[frames[0][0], frames[1][0]],
                                                       np.r_[frames[0][1], frames[1][1]]).ece, abs=1e-15)
+
+
+def test_pooled_ece_of_stacked_frame_counts():
+    # pooled_ece adds stacked per-frame counts (frames, 3, bins) over the leading axes: the same frames
+    # as above give (0.2 + 0.3 + 0.95) / 7, stacked by frame or by run; no pixel gives NaN
+    frames = [(np.array([0.1, 0.1]), np.array([False, False])),
+              (np.array([0.9, 0.9, 0.9, 0.95, 1.0]), np.array([True, True, True, False, True]))]
+    stack = np.stack([np.stack(metrics.reliability_counts(pr, lab)) for pr, lab in frames]).astype(float)
+    assert stack.shape == (2, 3, 15)
+    assert metrics.pooled_ece(stack) == pytest.approx((0.2 + 0.3 + 0.95) / 7, abs=1e-15)
+    assert metrics.pooled_ece(stack[None]) == metrics.pooled_ece(stack)
+    assert np.isnan(metrics.pooled_ece(np.zeros((4, 3, 15))))
+    for bad, err in ((np.zeros((3,)), ValueError), (np.zeros((2, 4, 15)), ValueError),
+                     (np.full((1, 3, 15), "x"), TypeError), (-np.ones((1, 3, 15)), ValueError)):
+        with pytest.raises(err, match="counts"):
+            metrics.pooled_ece(bad)

@@ -73,6 +73,24 @@ def test_bad_input_raises(call):
         call()
 
 
+# issue 34: roc_auc took string and complex arrays (converting or dropping the imaginary part); they
+# are the wrong kind of input. Shapes that disagree name both arguments (either may be wrong).
+@pytest.mark.parametrize("scores, labels, name", [
+    (np.array(["0.1", "0.9"]), [False, True], "scores"),
+    (np.array([0.1, 0.9]) + 1j, [False, True], "scores"),
+    ([0.1, 0.9], np.array(["no", "yes"]), "labels"),
+    ([0.1, 0.9], np.array([0, 1]) + 0j, "labels"),
+])
+def test_roc_auc_refuses_strings_and_complex(scores, labels, name):
+    with pytest.raises(TypeError, match=f"^{name}:"):
+        metrics.roc_auc(scores, labels)
+
+
+def test_mask_shape_errors_name_both_masks():
+    with pytest.raises(ValueError, match=r"^mask_a, mask_b: expected one shape, got \(2, 4, 5\) and \(4, 5\)"):
+        metrics.iou(np.zeros((2, 4, 5), bool), np.zeros((4, 5), bool))
+
+
 def test_near_mask_is_a_disc_dilation():
     # one pixel dilated by r = 3: exactly the pixels within Euclidean distance 3
     m = np.zeros((20, 20), bool)

@@ -96,7 +96,7 @@ def test_exported_from_the_metrics_package():
         (lambda: surface_rmse(np.zeros((3, 4)), np.zeros((3, 4))), "points_est"),
         (lambda: sdf_error([1.0, 2.0], [1.0]), "truth"),
         (lambda: sdf_error([1.0, np.nan], [1.0, 1.0]), "est"),
-        (lambda: sdf_error([1.0, 2.0], [1.0, 1.0], mask=[True, False]), "mask"),
+        (lambda: sdf_error([1.0, 2.0], [1.0, 1.0], mask=np.array([True, False, True])), "mask"),
         (lambda: normal_angles(np.zeros((2, 2)), np.ones((2, 2))), "est_normals"),
         (lambda: normal_angles(np.ones((2, 2)), np.ones((3, 2))), "true_normals"),
         (lambda: sample_polyline([[0.0, 0.0], [1.0, 0.0]], 0.0), "spacing"),
@@ -107,3 +107,19 @@ def test_bad_input_raises(call, name):
     # Wrong shapes, NaN, mismatched lengths, zero normals, bad spacing: ValueError naming the argument.
     with pytest.raises(ValueError, match=name):
         call()
+
+
+# issue 34: hausdorff on 10^8 broadcast points hung. A point set beyond MAX_SURFACE_POINTS is refused
+# by name and with the limit, before anything as large is allocated (the broadcast view is 24 bytes).
+@pytest.mark.parametrize("fn", [hausdorff, chamfer, nearest_distances, surface_rmse])
+def test_too_many_points_are_refused_before_any_work(fn):
+    from polar_sim.metrics import MAX_SURFACE_POINTS
+
+    huge = np.broadcast_to(np.zeros(3), (10**8, 3))
+    assert huge.base.nbytes == 24
+    with pytest.raises(ValueError, match=r"^\w+: at most 10,000,000 points") as e:
+        fn(huge, np.ones((3, 3)))
+    assert str(e.value).split(":")[0] in ("points_a", "points", "points_est")
+    with pytest.raises(ValueError, match=r"^(points_b|reference|points_true): at most"):
+        fn(np.ones((3, 3)), huge)
+    assert MAX_SURFACE_POINTS == 10_000_000

@@ -174,7 +174,7 @@ PARAMS_EXP = Experiment("params_toy", "", grid={"a": [1, 2]}, trial=_params_tria
 def test_sizes_as_params(tmp_path):
     assert PARAMS_EXP.resolve_params("full") == {"frames": 300, "res": 0.05}
     assert PARAMS_EXP.resolve_params("quick", overrides={"res": [1]}) == {"frames": 30, "res": 1.0}
-    with pytest.raises(ValueError, match="param 'frames': expected a value like the default 300"):
+    with pytest.raises(TypeError, match=r"param 'frames': expected an integer \(declared: 300, 30\), got \"many\""):
         PARAMS_EXP.resolve_params("full", overrides={"frames": "many"})
     with pytest.raises(ValueError, match="unknown parameter 'nope'; valid: a, seed, frames, res"):
         PARAMS_EXP.resolve("full", overrides={"nope": 1})
@@ -193,6 +193,28 @@ def test_sizes_as_params(tmp_path):
     with pytest.raises(ValueError, match="holds rows of size/split quick/dev, not full/dev"):
         run_experiment(PARAMS_EXP, out=tmp_path / "q", progress=False)
     assert (tmp_path / "q" / "results.csv").read_bytes() == before
+
+
+# A --set value of the wrong type for a declared param or axis is refused before any trial runs,
+# naming the param, the type its declared values have and the value (an integer param given 2.5
+# used to run int(2.5) while config.json recorded 2.5); an integer where numbers are declared is
+# recorded as the number that ran.
+@pytest.mark.parametrize("key, value, expected", [
+    ("frames", 2.5, "an integer"), ("frames", True, "an integer"), ("frames", [30, 60], "an integer"),
+    ("frames", None, "an integer"), ("res", "fine", "a number"), ("res", False, "a number"),
+    ("a", [1.5], "an integer"), ("a", ["x"], "an integer"), ("mode", 3, "a string"),
+    ("limit", 2.5, "null or an integer"), ("scale", [0.5, "x"], "a number"), ("scale", 0.5, "a list of a number"),
+])
+def test_set_refuses_wrong_types(tmp_path, key, value, expected):
+    exp = Experiment("typed", "", grid={"a": [1, 2], "mode": ["x"]}, trial=_params_trial, splits={"dev": {"seeds": [0]}},
+                     params={"frames": 300, "res": 0.05, "limit": None, "scale": [0.5, 1.0]},
+                     sizes={"quick": {"params": {"frames": 30, "limit": 5}}, "full": {}})
+    with pytest.raises(TypeError, match=f"typed: (param|axis) '{key}'.*: expected {expected}.*got "):
+        run_experiment(exp, out=tmp_path / "t", overrides={key: value}, progress=False)
+    assert not (tmp_path / "t").exists()
+    assert exp.resolve_params("full", overrides={"res": 1, "limit": 7, "scale": [1, 2.5], "frames": [60]}) == \
+        {"frames": 60, "res": 1.0, "limit": 7, "scale": [1.0, 2.5]}
+    assert exp.resolve("full", overrides={"a": [3], "mode": "y"})[0] == {"a": [3], "mode": ["y"]}
 
 
 # An axis with declared choices refuses another value before any trial runs (a typo in

@@ -64,8 +64,25 @@ def test_schema_checks():
     rec.append({"a": np.zeros(3)})
     with pytest.raises(ValueError, match="differ"):
         rec.append({"a": np.zeros(4)})
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="meta"):
         Recording(meta={"x": object()})
+
+
+# meta is a dict of JSON values or None: 0, [] or "" used to become {} silently, and a
+# non-string key would come back from the file as a string.
+@pytest.mark.parametrize("meta", [0, [], "", [("a", 1)], {1: "x"}, {"a": {2: 3}}])
+def test_meta_refused(meta):
+    with pytest.raises(TypeError, match="meta"):
+        Recording(meta=meta)
+
+
+def test_meta_accepted(tmp_path):
+    assert Recording().meta == {} and Recording(None).meta == {}
+    src = {"a": [1, 2.5, None, True], "b": {"c": "d"}}
+    rec = Recording(meta=src)
+    rec.append({"t": 0.0})
+    assert rec.meta == src and rec.meta is not src
+    assert Recording.load(rec.save(tmp_path / "m.npz")).meta == src
 
 
 def _synthetic(n=6, big=False):

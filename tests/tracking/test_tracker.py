@@ -19,8 +19,9 @@ def mug():
 
 
 def _track(seq, P, N, frames, **kw):
+    # kw: set_params names (a stage config's fields as stage__field)
     kw.setdefault("model_normals", N)
-    tr = ObjectTracker(P, seq.K, seq.poses[0], **kw)
+    tr = ObjectTracker(P, seq.K, seq.poses[0]).set_params(**kw)
     return tr, [tr.process(f["rgb"], f["depth"]) for f in frames]
 
 
@@ -74,8 +75,9 @@ def moving_mug():
     return seq, P, N, [seq.frame(i) for i in range(N_FRAMES)]
 
 
-@pytest.mark.parametrize("kw", [dict(appearance="none"), dict(motion="none"), dict(motion="alpha-beta"),
-                                dict(spatial_prior=True), dict(correspondence="kdtree"), dict(hold_unobserved=False),
+@pytest.mark.parametrize("kw", [dict(appearance="none"), dict(motion__filter="none"),
+                                dict(motion__filter="alpha-beta"), dict(attention__spatial_prior=True),
+                                dict(registration__correspondence="kdtree"), dict(registration__hold_unobserved=False),
                                 dict(calibrate=False), dict(appearance="Su"), dict(appearance="wu"),
                                 dict(appearance="SW"), dict(appearance="h")])
 def test_variants_and_ablations_track_a_moving_object(moving_mug, kw):
@@ -98,7 +100,7 @@ def test_static_revolved_object_does_not_spin():
     frames = [seq.frame(i) for i in range(60)]
     drift = {}
     for hold in (True, False):
-        _, res = _track(seq, P, N, frames, hold_unobserved=hold)
+        _, res = _track(seq, P, N, frames, registration__hold_unobserved=hold)
         drift[hold] = np.rad2deg(metrics.rotation_drift(seq.poses, np.stack([r.pose for r in res]))).max()
         if hold:
             assert all(r.n_unobserved == 1 for r in res)
@@ -136,7 +138,7 @@ def test_static_revolved_object_touched_by_a_moving_hand_does_not_spin():
     assert frames[-1]["hand"].sum() > 500 and not np.array_equal(frames[0]["hand"], frames[-1]["hand"])
     drift = {}
     for hold in (True, False):
-        _, res = _track(seq, P, N, frames, hold_unobserved=hold)
+        _, res = _track(seq, P, N, frames, registration__hold_unobserved=hold)
         drift[hold] = np.rad2deg(metrics.rotation_drift(seq.poses, np.stack([r.pose for r in res]))).max()
         assert not any(r.lost for r in res)
         assert all(r.n_unobserved >= 1 for r in res[1:]) == hold
@@ -173,7 +175,7 @@ def test_plain_icp_baseline_runs(mug):
     # the plain-ICP baseline (all ROI points, no label weighting) runs and returns valid poses;
     # under touch and on a table it is expected to drift - that is what the variants are scored against
     seq, P, N, frames = mug
-    _, res = _track(seq, P, N, frames[:8], registration="plain")
+    _, res = _track(seq, P, N, frames[:8], registration__method="plain")
     assert all(np.isfinite(r.pose).all() and r.mask.shape == seq.shape for r in res)
 
 
@@ -205,9 +207,9 @@ def test_lost_when_fully_occluded_then_recovers():
 
 def test_mostly_hidden_object_is_tracked_not_lost():
     # a board in front hides all but about 12 % of a static mug from frame 10 on. Its visible part
-    # still fits, so with coverage="visible" (the default) the tracker keeps it: never lost, the
+    # still fits, so with guard.coverage="visible" (the default) the tracker keeps it: never lost, the
     # mask covers the visible part (IoU > 0.5 against the true visible mask) and the pose holds.
-    # Counting the hidden pixels as expected (coverage="silhouette", the rule before) declares it lost
+    # Counting the hidden pixels as expected (guard.coverage="silhouette", the rule before) declares it lost
     import trimesh
 
     from polar_sim.geometry import make_pose
@@ -224,7 +226,7 @@ def test_mostly_hidden_object_is_tracked_not_lost():
     P, N = seq.model(3000)
     lost = {}
     for cov in ("visible", "silhouette"):
-        _, res = _track(seq, P, N, frames, coverage=cov)
+        _, res = _track(seq, P, N, frames, guard__coverage=cov)
         lost[cov] = sum(r.lost for r in res[10:])
         if cov == "visible":
             assert all(metrics.iou(r.mask, f["mask"]) > 0.5 for r, f in zip(res, frames))
@@ -258,21 +260,22 @@ def _bad_inputs(seq, P):
         dict(model_normals=np.zeros_like(P)),
         dict(appearance="xx"),
         dict(motion="kalman"),
-        dict(registration="exact"),
-        dict(tau_y=1.5),
-        dict(n_registration=2),
+        dict(registration={"method": "plain"}),
+        dict(fps=0.0),
+        dict(calibrate="yes"),
         dict(random_state=-1),
     ]
 
 
 @pytest.mark.parametrize("i", range(14))
 def test_bad_construction_raises(mug, i):
-    # bad model points, normals, K, initial pose or parameters raise ValueError at construction
+    # bad model points, normals, K, initial pose or parameters raise ValueError (TypeError for a wrong
+    # kind of value, such as a stage given as a string or a dict) at construction
     seq, P, N, _ = mug
     args = dict(model_points=P, K=seq.K, initial_pose=seq.poses[0])
     args.update(_bad_inputs(seq, P)[i])
     mp, K, T0 = args.pop("model_points"), args.pop("K"), args.pop("initial_pose")
-    with pytest.raises(ValueError):
+    with pytest.raises((ValueError, TypeError), match=next(iter(_bad_inputs(seq, P)[i]))):
         ObjectTracker(mp, K, T0, **args)
 
 

@@ -10,6 +10,7 @@ configurations on synthetic RGB-D (format 2, recorded on an x86-64 machine witho
 to within float round-off, see below).
 """
 
+import dataclasses
 import hashlib
 import json
 import sys
@@ -18,7 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from polar_sim.tracking import ObjectTracker
+from polar_sim.errors import PolarSimError
+from polar_sim.tracking import (AttentionConfig, GuardConfig, LearningConfig, MotionConfig, ObjectTracker,
+                                RegistrationConfig)
 from polar_sim.tracking.synthetic import make_sequence
 
 REFERENCE = Path(__file__).with_name("tracker_reference.json")
@@ -29,9 +32,9 @@ FORMAT_VERSION = 2
 CASES = [
     ("ww_640", dict(obj="mug", shape=(480, 640)), {}, 10),
     ("h_320", dict(obj="mug", shape=(240, 320)), dict(appearance="h"), 12),
-    ("prior_ab_320", dict(obj="box", shape=(240, 320)), dict(spatial_prior=True, motion="alpha-beta",
+    ("prior_ab_320", dict(obj="box", shape=(240, 320)), dict(attention__spatial_prior=True, motion__filter="alpha-beta",
                                                               appearance="su", calibrate=False), 12),
-    ("kdtree_320", dict(obj="cylinder", shape=(240, 320), hand=False), dict(correspondence="kdtree",
+    ("kdtree_320", dict(obj="cylinder", shape=(240, 320), hand=False), dict(registration__correspondence="kdtree",
                                                                             appearance="wu"), 12),
 ]
 
@@ -68,7 +71,7 @@ def _run(case):
     _, seq_kw, params, n = case
     seq = make_sequence(n, **seq_kw)
     P, N = seq.model(3000)
-    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, random_state=2, **params)
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, random_state=2).set_params(**params)
     out = []
     for i in range(n):
         f = seq.frame(i)
@@ -127,13 +130,96 @@ def small():
 
 
 def test_constructor_only_stores_its_parameters(small):
-    # the instance holds exactly its documented parameters, as given (no copies, no derived state)
+    # the instance holds exactly its documented parameters, as given (no copies, no derived state):
+    # at most 15, the stage configs among them, whose fields get_params lists as stage__field
     seq, P, N, _ = small
-    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, appearance="Su", tau_y=0.6)
-    assert set(vars(tr)) == set(ObjectTracker._param_names())
-    assert tr.model_points is P and tr.K is seq.K and tr.model_normals is N
-    p = tr.get_params()
-    assert p["appearance"] == "Su" and p["tau_y"] == 0.6 and p["motion"] == "ekf" and len(p) == 36
+    reg = RegistrationConfig(tau_y=0.6)
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N, appearance="Su", registration=reg)
+    assert set(vars(tr)) == set(ObjectTracker._param_names()) and len(ObjectTracker._param_names()) <= 15
+    assert tr.model_points is P and tr.K is seq.K and tr.model_normals is N and tr.registration is reg
+    shallow, deep = tr.get_params(deep=False), tr.get_params()
+    assert set(shallow) == set(ObjectTracker._param_names()) and shallow["appearance"] == "Su"
+    stages = {"motion": MotionConfig, "attention": AttentionConfig, "registration": RegistrationConfig,
+              "guard": GuardConfig, "learning": LearningConfig}
+    fields = {f"{k}__{f.name}" for k, c in stages.items() for f in dataclasses.fields(c)}
+    assert set(deep) == set(shallow) | fields
+    assert deep["registration__tau_y"] == 0.6 and deep["motion__filter"] == "ekf" and deep["guard__lost_after"] == 10
+
+
+def test_set_params_reaches_stage_fields(small):
+    # stage__field changes one field: a new config with that field, the others as they were
+    seq, P, N, _ = small
+    tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N)
+    old = tr.registration
+    tr.set_params(registration__tau_y=0.6, registration__max_points=500, motion__filter="none")
+    assert tr.registration == dataclasses.replace(old, tau_y=0.6, max_points=500) and old.tau_y == 0.5
+    assert tr.motion == MotionConfig(filter="none")
+    # a whole config and one of its fields in the same call: the field wins
+    tr.set_params(guard=GuardConfig(lost_after=3), guard__fitness_min=0.4)
+    assert tr.guard == GuardConfig(lost_after=3, fitness_min=0.4)
+    for bad, err, match in ((dict(registration__gain=1), ValueError, "registration__gain: unknown field"),
+                            (dict(registration__tau_y=1.0), ValueError, r"registration__tau_y: .*\(0.0, 1.0\)"),
+                            (dict(learning__epochs=2.0), TypeError, "learning__epochs"),
+                            (dict(appearance__x=1), ValueError, "appearance__x: appearance is not a stage"),
+                            (dict(guard="strict"), TypeError, "guard: expected a GuardConfig")):
+        before = tr.get_params()
+        with pytest.raises(err, match=match):
+            tr.set_params(**bad)
+        assert all(tr.get_params()[k] is before[k] for k in before)
+
+
+# Every field of every stage is checked where the config is made: type, range, finiteness, and the sizes
+# bounded before anything is allocated. The issue's probe: n_registration=10**9 was accepted silently and
+# epochs=10**9 hung past 60 s; both are refused at once, naming the field and the limit.
+BAD_FIELDS = [
+    (RegistrationConfig, dict(max_points=10**9), ValueError, "max_points: expected an integer <= 1000000"),
+    (LearningConfig, dict(epochs=10**9), ValueError, "epochs: expected an integer <= 100"),
+    (LearningConfig, dict(n_samples=10**12), ValueError, "n_samples: expected an integer <= 10000"),
+    (LearningConfig, dict(replay=10**6), ValueError, "replay: expected an integer <= 100"),
+    (RegistrationConfig, dict(max_iterations=2**63), ValueError, "max_iterations: expected an integer <= 1000"),
+    (RegistrationConfig, dict(max_points=5), ValueError, "max_points: expected an integer >= 6"),
+    (RegistrationConfig, dict(tau_y=1.0), ValueError, "tau_y"),
+    (RegistrationConfig, dict(tau_y=np.nan), ValueError, "tau_y"),
+    (RegistrationConfig, dict(method="exact"), ValueError, "method: unknown value"),
+    (RegistrationConfig, dict(em_refine=1), TypeError, "em_refine: expected True or False"),
+    (RegistrationConfig, dict(max_points=3000.0), TypeError, "max_points: expected an integer"),
+    (MotionConfig, dict(filter="kalman"), ValueError, "filter: unknown value"),
+    (MotionConfig, dict(filter=None), TypeError, "filter: expected a string"),
+    (MotionConfig, dict(velocity_decay=1.5), ValueError, "velocity_decay"),
+    (AttentionConfig, dict(epsilon=0.5), ValueError, "epsilon"),
+    (AttentionConfig, dict(sigma_min_px=1e300), ValueError, "sigma_min_px: .*1000"),
+    (AttentionConfig, dict(spatial_prior="yes"), TypeError, "spatial_prior"),
+    (GuardConfig, dict(max_jump=(0.5, -1.0)), ValueError, "max_jump"),
+    (GuardConfig, dict(max_jump=0.5), ValueError, "max_jump"),
+    (GuardConfig, dict(max_mahalanobis=0.0), ValueError, "max_mahalanobis"),
+    (GuardConfig, dict(lost_after=0), ValueError, "lost_after"),
+    (GuardConfig, dict(coverage="all"), ValueError, "coverage"),
+    (GuardConfig, dict(fitness_min="0.5"), TypeError, "fitness_min"),
+    (LearningConfig, dict(lr=np.inf), ValueError, "lr"),
+    (LearningConfig, dict(decay=-0.1), ValueError, "decay"),
+]
+
+
+@pytest.mark.parametrize("cls,kw,err,match", BAD_FIELDS, ids=[f"{c.__name__}-{next(iter(k))}" for c, k, _, _ in BAD_FIELDS])
+def test_stage_configs_refuse_bad_fields(cls, kw, err, match):
+    with pytest.raises(err, match=match):
+        cls(**kw)
+
+
+def test_stage_configs_accept_their_limits_and_inf_gate():
+    # the bounds are inclusive where documented; the Mahalanobis gate can be switched off with inf
+    assert RegistrationConfig(max_points=1_000_000, max_iterations=1000).max_points == 1_000_000
+    assert LearningConfig(epochs=0, replay=100, n_samples=10_000).epochs == 0
+    assert GuardConfig(max_mahalanobis=np.inf, min_inliers=0).max_mahalanobis == np.inf
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        RegistrationConfig().tau_y = 0.7
+
+
+def test_published_preset_is_refused_with_the_reason():
+    # the thesis gives no setting of the tracker: published() says so instead of inventing a preset
+    with pytest.raises(PolarSimError, match="no published preset: the thesis material .* gives no"):
+        ObjectTracker.published()
+    assert issubclass(PolarSimError, ValueError)
 
 
 def test_learned_state_appears_on_the_first_frame_and_reset_removes_it(small):
@@ -156,8 +242,8 @@ def test_set_params_checks_in_one_place_and_leaves_the_tracker_unchanged(small):
     tr = ObjectTracker(P, seq.K, seq.poses[0], model_normals=N)
     tr.process(frames[0]["rgb"], frames[0]["depth"])
     before = (tr.get_params(), tr.pose_.copy(), tr.n_frames_)
-    for bad in (dict(tau_y=1.5), dict(appearance="xx"), dict(initial_pose=np.eye(4) * 2),
-                dict(model_points=np.zeros((0, 3))), dict(max_jump=(0.5, -1.0), tau_y=0.4)):
+    for bad in (dict(registration__tau_y=1.5), dict(appearance="xx"), dict(initial_pose=np.eye(4) * 2),
+                dict(model_points=np.zeros((0, 3))), dict(guard__max_jump=(0.5, -1.0), registration__tau_y=0.4)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             tr.set_params(**bad)
         assert tr.get_params().keys() == before[0].keys()
@@ -165,11 +251,11 @@ def test_set_params_checks_in_one_place_and_leaves_the_tracker_unchanged(small):
         assert np.array_equal(tr.pose_, before[1]) and tr.n_frames_ == before[2]
     with pytest.raises(ValueError, match="unknown parameter"):
         tr.set_params(gain=2.0)
-    tr.set_params(tau_y=0.6).reset()
-    assert tr.tau_y == 0.6 and not hasattr(tr, "pose_")
+    tr.set_params(registration__tau_y=0.6).reset()
+    assert tr.registration.tau_y == 0.6 and not hasattr(tr, "pose_")
     # the constructor checks with the same function: a bad value fails there too, naming it
-    with pytest.raises(ValueError, match="lost_after"):
-        ObjectTracker(P, seq.K, seq.poses[0], lost_after=0)
+    with pytest.raises(TypeError, match="guard"):
+        ObjectTracker(P, seq.K, seq.poses[0], guard={"lost_after": 0})
 
 
 def _record():

@@ -178,3 +178,21 @@ def test_unobserved_directions_of_a_face_without_its_edges():
     expect[0, 0] = expect[4, 1] = expect[5, 2] = 1.0
     assert U.shape == (6, 3)
     assert np.allclose(np.abs(U.T @ expect).sum(axis=0), 1.0, atol=0.02)
+
+
+def test_icp_weights_are_the_registration_package_tukey_bit_for_bit():
+    # one home for robust weights (issue 34): the ICP's IRLS weights come from
+    # polar_sim.registration.robust_weight("tukey"); they equal, bit for bit, the biweight the ICP had
+    # of its own, (1 - u^2)^2 for |u| < 1 else 0 with u = r / (4.685 sigma), at every residual
+    # including the cut-off itself, both signs, zero and far outliers
+    from polar_sim.registration import robust_weight
+
+    rng = np.random.default_rng(0)
+    sigma = 0.0017
+    c = 4.685 * sigma
+    r = np.concatenate([rng.normal(0.0, 2 * c, 200_000), np.linspace(-2 * c, 2 * c, 10_001), [c, -c, 0.0, -0.0, 1e3]])
+    u = r / c
+    a = 1.0 - u * u
+    old = np.where(a > 0.0, a * a, 0.0)
+    assert np.array_equal(robust_weight(r, "tukey", c), old)
+    assert old[-5] == 0.0 and old[-3] == 1.0 and (old >= 0).all()

@@ -1,0 +1,220 @@
+"""The runners behind :func:`polar_sim.envs.recipes.train` (torch, stable-baselines3, sb3-contrib).
+
+Each runner takes ``(env_id, params, seed, curve, progress)`` with checked ``params``, appends
+learning-curve rows to ``curve`` and returns ``(policy, env_steps)``; the policy has ``save(path)``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecNormalize
+from tqdm.auto import tqdm
+
+from polar_sim.envs.action_maps import wrap_action
+from polar_sim.envs.evaluate import evaluate
+from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
+from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
+                                     make_model, ppo_recipe, sb3_recipe)
+
+__all__ = ["RUNNERS", "bar_disable", "one_torch_thread"]
+
+DEV_SEED = 1000
+
+
+@contextlib.contextmanager
+def one_torch_thread():
+    """Run torch on one thread, then restore the caller's setting: the nets are small (one thread is
+    as fast on 2 shared cores), and one thread makes a run bit-for-bit repeatable from its seed."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(n)
+
+
+def bar_disable(progress):
+    """tqdm's ``disable`` for ``progress``: None shows the bar only on a terminal."""
+    return None if progress is None else not progress
+
+
+def _train_env_kwargs(p):
+    return {**p["env_kwargs"], "pose_source": p["train_pose_source"]}
+
+
+class _Clock:
+    """Wall and CPU seconds since the run started (the learning curve's time axis)."""
+
+    def __init__(self):
+        self.wall, self.cpu = time.perf_counter(), time.process_time()
+
+    def row(self, steps):
+        return {"steps": int(steps), "wall_s": time.perf_counter() - self.wall, "cpu_s": time.process_time() - self.cpu}
+
+
+def _score(env_id, policy, p, curve, clock, steps):
+    """Append the dev-world success and collision rates of ``policy`` at ``steps`` to ``curve``."""
+    row = clock.row(steps)
+    _, s = evaluate(env_id, policy, episodes=p["eval_episodes"], seed=DEV_SEED, env_kwargs=policy.env_kwargs,
+                    progress=False)
+    row.update(success=s["success_rate"], collision=s["mean_collision"], eval_wall_s=clock.row(steps)["wall_s"]
+               - row["wall_s"])
+    curve.append(row)
+
+
+def _dagger(env_id, p, seed, curve, progress, clock=None):
+    clock = clock or _Clock()
+    cfg = DAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
+                       hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
+                       batch_size=p["batch_size"], lr=p["lr"], obs_keys=tuple(p["obs_keys"]), seed=seed)
+
+    def after_round(k, policy, row):
+        if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
+            _score(env_id, policy, p, curve, clock, row["steps"])
+
+    recipe = {"name": "dagger", "params": p, "seed": seed, "train_seeds": list(TRAIN_SEEDS)}
+    policy, hist = train_dagger(env_id, expert=p["expert"], config=cfg, env_kwargs=_train_env_kwargs(p),
+                                policy_env_kwargs=dict(p["env_kwargs"]), recipe=recipe,
+                                progress=progress, callback=after_round)
+    return policy, hist[-1]["steps"]
+
+
+class _Progress(BaseCallback):
+    """A tqdm bar over the env steps, and a dev-world checkpoint every ``every`` steps."""
+
+    def __init__(self, total, desc, progress, every=0, checkpoint=None):
+        super().__init__()
+        self.bar = tqdm(total=total, desc=desc, unit="step", disable=bar_disable(progress))
+        self.every, self.checkpoint, self.next = every, checkpoint, every
+
+    def _on_step(self):
+        self.bar.update(self.num_timesteps - self.bar.n)
+        if self.every and self.num_timesteps >= self.next:
+            self.next += self.every
+            self.checkpoint(self.num_timesteps)
+        return True
+
+    def _on_training_end(self):
+        self.bar.close()
+
+
+def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
+    return make_vec_env("polar_sim.envs:" + env_id, n_envs=p["n_envs"], seed=TRAIN_SEEDS[0] + seed * 97,
+                        env_kwargs=_train_env_kwargs(p), wrapper_class=wrapper, wrapper_kwargs=wrapper_kwargs)
+
+
+def _feature_wrapper(env, action, keys, mean=None, std=None):
+    return FeatureObservation(wrap_action(env, action), keys, mean, std)
+
+
+def _ppo_kwargs(p, hidden, log_std_init, activation="tanh"):
+    kw = {k: p[k] for k in ("learning_rate", "n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda",
+                            "clip_range", "ent_coef")}
+    kw["policy_kwargs"] = {"net_arch": {"pi": list(hidden), "vf": list(hidden)}, "log_std_init": log_std_init,
+                           "activation_fn": activation}
+    return kw
+
+
+def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None):
+    """The numpy policy of a PPO MlpPolicy on FeatureObservation (normalised by ``venv`` if
+    ``mean`` is None)."""
+    if mean is None:
+        rms = venv.obs_rms
+        mean, std, clip = rms.mean, np.sqrt(rms.var + venv.epsilon), venv.clip_obs
+    else:
+        clip = 10.0
+    space = venv.unwrapped.envs[0].unwrapped.observation_space
+    shapes = {k: space[k].shape for k in keys}
+    return export_mlp(model, mean, std, keys=keys, obs_shapes=shapes, recipe=recipe, clip=clip, env_id=env_id,
+                      env_kwargs=dict(p["env_kwargs"]))
+
+
+def _ppo(env_id, p, seed, curve, progress):
+    if p["obs_mode"] == "grid":
+        return _sb3(env_id, p, seed, curve, progress, name="ppo")
+    clock = _Clock()
+    keys = list(p["obs_keys"])
+    action = {"name": "forward_drive", "kwargs": {}}
+    recipe = {"name": "ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
+              "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"]), "action": action}
+    venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, {"action": action, "keys": keys}),
+                        norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=p["gamma"])
+    model = make_model(recipe, venv, seed=seed)
+    ckpt = (lambda n: _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n))
+    model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt))
+    policy = _mlp_of(model, venv, p, keys, recipe, env_id)
+    venv.close()
+    return policy, model.num_timesteps
+
+
+def _dagger_ppo(env_id, p, seed, curve, progress):
+    clock = _Clock()
+    imitation, steps0 = _dagger(env_id, p, seed, curve, progress, clock)
+    keys = imitation.obs_keys
+    recipe = {"name": "dagger_ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
+              "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"], p["activation"]), "action": None}
+    wk = {"action": None, "keys": keys, "mean": imitation.mean, "std": imitation.std}
+    venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=False, norm_reward=True,
+                        gamma=p["gamma"])
+    model = load_mlp_into(make_model(recipe, venv, seed=seed), imitation)
+
+    def export():
+        return _mlp_of(model, venv, p, keys, recipe, env_id, imitation.mean, imitation.std)
+
+    actor = list(model.policy.mlp_extractor.policy_net.parameters()) + list(model.policy.action_net.parameters()) \
+        + [model.policy.log_std]
+    total = p["critic_warmup_steps"] + p["finetune_steps"]
+    cb = _Progress(total, f"dagger_ppo {env_id}", progress, p["eval_every"],
+                   lambda n: _score(env_id, export(), p, curve, clock, steps0 + n))
+    if p["critic_warmup_steps"]:
+        # A fresh critic's advantages are noise: fit it with the imitation actor frozen first,
+        # so that the first policy updates do not undo the imitation.
+        for t in actor:
+            t.requires_grad_(False)
+        model.learn(p["critic_warmup_steps"], callback=cb)
+        for t in actor:
+            t.requires_grad_(True)
+    model.learn(p["finetune_steps"], callback=cb, reset_num_timesteps=not p["critic_warmup_steps"])
+    policy = export()
+    venv.close()
+    return policy, steps0 + model.num_timesteps
+
+
+def _sb3(env_id, p, seed, curve, progress, name):
+    """PPO on the grid, RecurrentPPO, SAC, TQC: SB3 policies on the Dict observation."""
+    clock = _Clock()
+    if name in ("sac", "tqc"):
+        recipe = sb3_recipe(name.upper())
+        recipe["kwargs"].update({k: p[k] for k in ("learning_rate", "buffer_size", "learning_starts", "batch_size",
+                                                   "gamma")})
+    else:
+        recipe = ppo_recipe(p["obs_mode"], recurrent=name == "recurrent_ppo")
+        recipe["kwargs"].update({k: p[k] for k in ("learning_rate", "n_steps", "batch_size", "n_epochs", "gamma",
+                                                   "gae_lambda", "clip_range", "ent_coef")})
+        recipe["kwargs"]["policy_kwargs"]["log_std_init"] = p["log_std_init"]
+    recipe.update(name=name, params=p, seed=seed)
+    env_kwargs = {**p["env_kwargs"], "obs_mode": p["obs_mode"]}
+    pp = {**p, "env_kwargs": env_kwargs}
+    venv = VecNormalize(_vec_env(env_id, pp, seed, wrap_action, {"action": recipe["action"]}), norm_obs=True,
+                        norm_reward=name not in ("sac", "tqc"), clip_obs=10.0, gamma=p["gamma"])
+    model = make_model(recipe, venv, seed=seed)
+
+    def export():
+        return SB3Policy(model, ObsNormaliser.from_vecnormalize(venv), recipe, env_id, env_kwargs)
+
+    model.learn(p["steps"], callback=_Progress(p["steps"], f"{name} {env_id}", progress, p["eval_every"],
+                                               lambda n: _score(env_id, export(), pp, curve, clock, n)))
+    policy = export()
+    venv.close()
+    return policy, model.num_timesteps
+
+
+RUNNERS = {"dagger": _dagger, "dagger_ppo": _dagger_ppo, "ppo": _ppo,
+           "recurrent_ppo": lambda *a: _sb3(*a, name="recurrent_ppo"),
+           "sac": lambda *a: _sb3(*a, name="sac"), "tqc": lambda *a: _sb3(*a, name="tqc")}

@@ -1,0 +1,141 @@
+"""A feed-forward policy evaluated in numpy: what the shipped policies are, and what the
+imitation and PPO recipes export (torch is needed to train, not to act)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polar_sim.envs.action_maps import check_action, env_action
+from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
+
+__all__ = ["MLPPolicy", "ACTIVATIONS"]
+
+ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, 0.0)}
+
+
+class MLPPolicy:
+    """``policy(obs) -> action``: the observation keys ``obs_keys`` flattened and concatenated,
+    normalised as ``clip((x - mean) / std, -clip, clip)``, through dense layers
+    ``h <- activation(W h + b)`` (none after the last), mapped to the env's action by ``action``.
+
+    Parameters
+    ----------
+    weights, biases : list of ndarray
+        Layer ``i`` has ``W`` of shape (out_i, in_i) (torch's ``nn.Linear`` layout) and ``b`` of
+        shape (out_i,); the last layer outputs the 2 action values.
+    obs_keys : sequence of str
+        The observation keys read, in order.
+    obs_shapes : dict
+        key -> shape of each key read, checked against an env's observation space.
+    mean, std : ndarray of shape (n_features,)
+        The feature normalisation (std > 0).
+    clip : float, default=10.0
+        Bound of the normalised features.
+    activation : {"tanh", "relu"}
+    action : dict or None
+        The action parametrisation (:func:`polar_sim.envs.action_maps.env_action`).
+    env_id : str, optional
+        The env id the policy was made for.
+    env_kwargs : dict, optional
+        The ``gym.make`` arguments it acts with (e.g. ``{"obs_mode": "stencil"}``).
+    recipe : dict, optional
+        How it was trained (recipe name and parameters, splits, steps); informational.
+    """
+
+    def __init__(self, weights, biases, *, obs_keys, obs_shapes, mean, std, clip=10.0, activation="tanh",
+                 action=None, env_id=None, env_kwargs=None, recipe=None):
+        self.weights = [np.asarray(w, np.float64) for w in weights]
+        self.biases = [np.asarray(b, np.float64) for b in biases]
+        self.obs_keys = list(obs_keys)
+        self.obs_shapes = {k: tuple(int(n) for n in obs_shapes[k]) for k in self.obs_keys}
+        self.mean = np.asarray(mean, np.float64)
+        self.std = np.asarray(std, np.float64)
+        self.clip = float(clip)
+        self.activation = activation
+        self.action = check_action(action)
+        self.env_id = env_id
+        self.env_kwargs = dict(env_kwargs or {})
+        self.recipe = dict(recipe or {})
+        self._check()
+
+    def _check(self):
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation: expected one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+        n = sum(int(np.prod(s)) for s in self.obs_shapes.values())
+        if self.mean.shape != (n,) or self.std.shape != (n,) or not (self.std > 0).all():
+            raise ValueError(f"mean, std: expected shape ({n},) (the features of {self.obs_keys}) and std > 0, "
+                             f"got {self.mean.shape} and {self.std.shape}")
+        if not self.weights or len(self.weights) != len(self.biases):
+            raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
+                             f"{len(self.weights)} and {len(self.biases)}")
+        fan_in = n
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
+                raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
+                                 f"and b (out,)")
+            if not (np.isfinite(w).all() and np.isfinite(b).all()):
+                raise ValueError(f"weights: layer {i} holds NaN or inf")
+            fan_in = w.shape[0]
+        if fan_in != 2:
+            raise ValueError(f"weights: the last layer outputs {fan_in} values, expected 2 (v, omega)")
+
+    def features(self, obs):
+        """The normalised feature vector (n_features,) of one observation dict."""
+        try:
+            x = np.concatenate([np.asarray(obs[k], np.float64).reshape(-1) for k in self.obs_keys])
+        except KeyError as exc:
+            raise ValueError(f"obs: the policy reads {self.obs_keys}; {exc} is missing") from None
+        if x.shape != self.mean.shape:
+            raise ValueError(f"obs: {x.size} features from {self.obs_keys}, expected {self.mean.size}")
+        return np.clip((x - self.mean) / self.std, -self.clip, self.clip)
+
+    def raw_output(self, obs):
+        """The last layer's output (2,) before the action map."""
+        h = self.features(obs)
+        act = ACTIVATIONS[self.activation]
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = w @ h + b
+            if i < len(self.weights) - 1:
+                h = act(h)
+        return h
+
+    def __call__(self, obs):
+        return env_action(self.action, self.raw_output(obs))
+
+    def reset(self):
+        """Nothing to forget: the policy is memoryless (the map in the observation is the memory)."""
+
+    def check_env(self, env, name="env"):
+        """Raise ``ValueError`` unless ``env`` observes every key this policy reads, shaped as trained."""
+        check_observation_space(self.obs_shapes, env.observation_space, name)
+
+    # -- the file --------------------------------------------------------------------------
+    def save(self, path):
+        """Write the policy to ``path`` (.npz, :mod:`polar_sim.envs.policy_file`)."""
+        meta = {"kind": "mlp", "obs_keys": self.obs_keys, "obs_shapes": self.obs_shapes, "clip": self.clip,
+                "activation": self.activation, "action": self.action, "env_id": self.env_id,
+                "env_kwargs": self.env_kwargs, "recipe": self.recipe, "layers": len(self.weights)}
+        arrays = {"obs_mean": self.mean, "obs_std": self.std}
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            arrays[f"layer{i}/W"], arrays[f"layer{i}/b"] = w, b
+        write_policy_file(path, meta, arrays)
+        return path
+
+    @classmethod
+    def load(cls, path, env=None, name="path"):
+        """The policy in ``path``; with ``env``, also checked against its observation space."""
+        meta, arrays = read_policy_file(path, name)
+        if meta["kind"] != "mlp":
+            raise ValueError(f"{name}: a policy of kind {meta['kind']!r}, expected 'mlp'")
+        try:
+            n = int(meta["layers"])
+            policy = cls([arrays[f"layer{i}/W"] for i in range(n)], [arrays[f"layer{i}/b"] for i in range(n)],
+                         obs_keys=meta["obs_keys"], obs_shapes=meta["obs_shapes"], mean=arrays["obs_mean"],
+                         std=arrays["obs_std"], clip=meta["clip"], activation=meta["activation"],
+                         action=meta["action"], env_id=meta["env_id"], env_kwargs=meta["env_kwargs"],
+                         recipe=meta["recipe"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{name}: the policy file lacks or garbles {exc}") from None
+        if env is not None:
+            policy.check_env(env)
+        return policy
