@@ -25,7 +25,7 @@ from polar_sim.gpis._tree import Tree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS"]
+__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS", "MAX_QUERY_POINTS"]
 
 #: Query points with a coordinate beyond this (metres) get the prior (see ``query``).
 FAR_COORD = 1e100
@@ -33,6 +33,9 @@ FAR_COORD = 1e100
 #: (both cover only the data, clipped to the map's reach): ``update`` refuses a scan beyond them.
 MAX_CLUSTER_CELLS = 1 << 27
 MAX_FREE_CELLS = 1 << 29
+#: Points per ``query`` call: the answers take 8 * (dim + 2) bytes a point (2.7 GB at the limit in
+#: 3D) and the kernels as much again; query larger sets in parts.
+MAX_QUERY_POINTS = 1 << 26
 
 _STATE = ("tree_", "gps_", "n_updates_")
 
@@ -390,11 +393,14 @@ class GPISMapBase(Parameterised):
         Any finite point is answered. A point with a coordinate beyond ``FAR_COORD`` (1e100 m),
         where squared distances overflow, gets the prior: its distance to the origin (positive,
         finite, overflow-safe), the unit gradient away from the origin and the prior variance
-        ``1 + map_noise``; no NaN.
+        ``1 + map_noise``; no NaN. More than ``MAX_QUERY_POINTS`` (2**26) points in one call raise
+        ``ValueError`` (query them in parts).
         """
         check_updated(self, "tree_")
+        _check_count(points)
         # C order: a strided view would compile every distance kernel a second time (layout A)
         pts = np.ascontiguousarray(as_points(points, self.dim, "points", allow_empty=True))
+        _check_count(pts)
         n = len(pts)
         d = self.dim
         if n == 0:
@@ -575,3 +581,11 @@ class GPISMapBase(Parameterised):
     def load(cls, path):
         """Read a map written by :meth:`save`; raises ``ValueError`` on a bad file."""
         return _io.load(cls, path)
+
+
+def _check_count(points):
+    """Refuse more than :data:`MAX_QUERY_POINTS` points, before anything of their size is allocated."""
+    n = len(points) if isinstance(points, np.ndarray) and points.ndim >= 1 else None
+    if n is not None and n > MAX_QUERY_POINTS:
+        raise ValueError(f"points: {n} points in one query, more than the limit {MAX_QUERY_POINTS} "
+                         "(MAX_QUERY_POINTS); query them in parts")
