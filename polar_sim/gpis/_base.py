@@ -450,7 +450,7 @@ class GPISMapBase(Parameterised):
 
     def _faithful(self, pts):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
-        tr, g = self.tree_, self.gps_
+        tr = self.tree_
         sptr, sidx = self._sample_index_
         var_unobs = 1.0 + float(self.map_noise)
         n, d = pts.shape

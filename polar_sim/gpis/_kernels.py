@@ -6,7 +6,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from polar_sim.gpis._native import K, entry
+from polar_sim.gpis._native import entry
 from polar_sim.gpis._tree import _insert, _lin, _node_of, _remove, slot_members
 
 __all__ = ["apply_new", "apply_reeval", "candidates", "dirty_slots", "gather_training",
