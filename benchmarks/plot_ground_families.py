@@ -16,7 +16,6 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import cv2  # noqa: E402
-import numpy as np  # noqa: E402
 
 SCENE, SEED, STEPS, ACTION = "rover_flat", 10_003, 20, (6.0, 0.0)
 

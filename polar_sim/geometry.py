@@ -30,6 +30,7 @@ __all__ = [
     "between2d",
     "quat_to_matrix",
     "matrix_to_quat",
+    "pinhole_intrinsics",
     "CV_FROM_GL",
 ]
 
@@ -166,3 +167,12 @@ def quat_to_matrix(q):
 def matrix_to_quat(R):
     """Scalar-first quaternion ``(w, x, y, z)`` (MuJoCo order) of a rotation matrix (3, 3)."""
     return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat(scalar_first=True)
+
+
+def pinhole_intrinsics(width, height, fovy_deg):
+    """Pinhole K (3, 3) of a ``width`` x ``height`` px camera with vertical field of view
+    ``fovy_deg`` (degrees), as MuJoCo renders it: square pixels, f = (H/2) / tan(fovy/2) px, the
+    principal point at the image centre ((W-1)/2, (H-1)/2); OpenCV convention. The one home of
+    this formula: the simulator's cameras and the modules' synthetic scenes use it."""
+    f = 0.5 * height / np.tan(np.radians(fovy_deg) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])

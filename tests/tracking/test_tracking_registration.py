@@ -6,9 +6,10 @@ import pytest
 from polar_sim.geometry import make_pose, se3_exp, so3_exp
 from polar_sim.tracking.icp import weighted_icp
 from polar_sim.tracking.model import ShapeModel
-from polar_sim.tracking.synthetic import intrinsics, make_object, render, sample_model
+from polar_sim.geometry import pinhole_intrinsics
+from polar_sim.tracking.synthetic import make_object, render, sample_model
 
-K = intrinsics(640, 480)
+K = pinhole_intrinsics(640, 480, 45.0)
 SHAPE = (480, 640)
 
 
