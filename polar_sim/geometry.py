@@ -31,6 +31,7 @@ __all__ = [
     "quat_to_matrix",
     "matrix_to_quat",
     "pinhole_intrinsics",
+    "diameter",
     "CV_FROM_GL",
 ]
 
@@ -176,3 +177,21 @@ def pinhole_intrinsics(width, height, fovy_deg):
     this formula: the simulator's cameras and the modules' synthetic scenes use it."""
     f = 0.5 * height / np.tan(np.radians(fovy_deg) / 2)
     return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def diameter(points):
+    """Largest distance between two of the points (n, 3) (or (n, 2)), in their unit: exact,
+    searched over the convex hull's vertices (all points when the set is flat or degenerate).
+    The one home of an object's diameter (ADD thresholds, tracking gates, scene metadata)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) > P.shape[1] + 1:
+        try:
+            P = P[ConvexHull(P).vertices]
+        except QhullError:  # flat or degenerate point sets: every point is a candidate
+            pass
+    best = 0.0
+    for i in range(0, len(P), 1024):  # blocks of rows keep the pairwise table small
+        best = max(best, float(np.linalg.norm(P[i : i + 1024, None] - P[None], axis=2).max()))
+    return best

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from polar_sim import geometry
+
 __all__ = ["OBJECTS", "DEFAULT_OBJECTS", "PARTS", "ObjectInfo", "object_names", "object_info", "load_mesh", "make_mesh",
            "write_assets", "asset_dir", "asset_path", "diameter", "ATLAS_TILES"]
 
@@ -426,10 +428,8 @@ def load_mesh(name) -> trimesh.Trimesh:
 
 
 def diameter(mesh) -> float:
-    """Largest distance (m) between two vertices of a mesh (over its convex hull)."""
-    from scipy.spatial.distance import pdist
-
-    return float(pdist(mesh.convex_hull.vertices).max())
+    """Largest distance (m) between two vertices of a mesh (:func:`polar_sim.geometry.diameter`)."""
+    return geometry.diameter(mesh.vertices)
 
 
 if __name__ == "__main__":
