@@ -32,6 +32,7 @@ __all__ = [
     "matrix_to_quat",
     "pinhole_intrinsics",
     "diameter",
+    "rigid_alignment",
     "CV_FROM_GL",
 ]
 
@@ -195,3 +196,23 @@ def diameter(points):
     for i in range(0, len(P), 1024):  # blocks of rows keep the pairwise table small
         best = max(best, float(np.linalg.norm(P[i : i + 1024, None] - P[None], axis=2).max()))
     return best
+
+
+def rigid_alignment(P, Q, *, with_scale=False):
+    """Least-squares alignment of paired points: (R (d, d), t (d,), s) minimising
+    ``sum |s R p_i + t - q_i|^2`` over P, Q (n, d), d = 2 or 3 (s = 1 unless ``with_scale``).
+
+    The SVD solution of Arun et al. (1987) with Umeyama's (1991) reflection fix and scale. The one
+    home of rigid alignment: registration's Kabsch step and the trajectory metrics' alignment use it.
+    """
+    P, Q = np.asarray(P, dtype=np.float64), np.asarray(Q, dtype=np.float64)
+    dim = P.shape[1]
+    pc, qc = P.mean(axis=0), Q.mean(axis=0)
+    xp = P - pc
+    U, S, Vt = np.linalg.svd(xp.T @ (Q - qc))
+    D = np.eye(dim)
+    D[-1, -1] = np.sign(np.linalg.det(Vt.T @ U.T))
+    R = Vt.T @ D @ U.T
+    var = float((xp**2).sum())
+    s = float(np.trace(np.diag(S) @ D) / var) if with_scale and var > 0 else 1.0
+    return R, qc - s * R @ pc, s
