@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import mujoco
 
+from polar_sim.sim.meta import check_meta
 from polar_sim._validation import as_float, as_int, check_choice
 from polar_sim.fileio import check_source
 
@@ -213,5 +214,5 @@ def load_scene(scene, seed=0, **options):
         raise ValueError(f"{scene}: unknown scene option(s) {unknown}; valid: {sorted(valid)}")
     options = _check_generic_options(options)
     spec = _base_spec(SCENES[scene].file).copy()
-    meta = SCENES[scene].load_builder()(spec, seed, **options)
+    meta = check_meta(scene, SCENES[scene].load_builder()(spec, seed, **options))
     return spec, meta
