@@ -17,7 +17,7 @@ import numpy as np
 from polar_sim._validation import as_float, as_int
 from polar_sim.geometry import CV_FROM_GL, make_pose
 from polar_sim.sim.render import OffscreenRenderer
-from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
+from polar_sim.sim.actors.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
 
 __all__ = [
     "CameraFrame", "LidarScan", "LidarScan3D", "LidarSpec", "RangeNoise", "DepthNoise",

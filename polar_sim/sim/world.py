@@ -10,7 +10,7 @@ import numpy as np
 from polar_sim._validation import as_bool, as_float, as_float_array, as_int, as_positive_float, as_rng
 from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat, pinhole_intrinsics
 from polar_sim.sim import truth as _truth
-from polar_sim.sim.robots import RoverController
+from polar_sim.sim.actors.robots import RoverController
 from polar_sim.sim.scenes import load_scene
 from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, RangeNoise, camera_pose, parse_lidars
 

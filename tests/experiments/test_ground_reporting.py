@@ -207,7 +207,7 @@ def test_route_experiments_declare_max_frames(name):
 # The route axis accepts the split's quick route and every registered route, and refuses a typo
 # before any trial runs (nothing is written).
 def test_route_choices(tmp_path):
-    from polar_sim.sim.rover_sequences import SPLITS
+    from polar_sim.sim.recorders.rover_sequences import SPLITS
 
     routes = G.route_choices()
     assert routes[0] == "quick" and set(routes[1:]) == set(SPLITS["dev"]) | set(SPLITS["test"])

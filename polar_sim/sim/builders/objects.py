@@ -7,7 +7,7 @@ cube; the centre of the drill's battery; the middle of the bracket's foot), so a
 standing upright on a table at height ``h`` has its body at ``z = h``. The meshes ship as OBJ files in ``scenes/assets/objects/`` (with texture coordinates
 into a 2x2 texture atlas, see :data:`ATLAS_TILES`); regenerate them with
 
-    python -m polar_sim.sim.objects
+    python -m polar_sim.sim.builders.objects
 
 (generation needs ``manifold3d`` for the boolean unions; loading does not). MuJoCo renders and
 ray-casts the true mesh, but collides a mesh through its convex hull, so every object also lists
@@ -417,7 +417,7 @@ def load_mesh(name) -> trimesh.Trimesh:
     p = asset_path(name)
     if not p.is_file():
         raise FileNotFoundError(f"object: mesh file {str(p)!r} is missing; regenerate it with "
-                                "`python -m polar_sim.sim.objects`")
+                                "`python -m polar_sim.sim.builders.objects`")
     V, F = [], []
     for line in p.read_text().splitlines():
         if line.startswith("v "):
