@@ -40,7 +40,8 @@ STENCIL_KEYS = ["goal", "sdf", "sdf_grad", "twist"]
 
 _COMMON = {"train_pose_source": "truth", "env_kwargs": {}, "eval_every": 0, "eval_episodes": 20}
 _DAGGER = {"expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
-           "activation": "tanh", "epochs": 20, "batch_size": 256, "lr": 1e-3, "obs_keys": STENCIL_KEYS}
+           "activation": "tanh", "epochs": 20, "batch_size": 256, "lr": 1e-3, "obs_keys": STENCIL_KEYS,
+           "known_var": None}
 _PPO = {"steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "obs_keys": STENCIL_KEYS, "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
@@ -64,6 +65,8 @@ _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 
 def _check_value(key, value, default):
+    if key == "known_var":
+        return None if value is None else as_float(value, key, minimum=0.0, maximum=1e6, exclusive_minimum=True)
     if key in _CHOICES:
         return check_choice(value, _CHOICES[key], key)
     if isinstance(default, bool):
@@ -116,6 +119,8 @@ def check_recipe(name, params=None, env_id=None):
         out[k] = _check_value(k, v, RECIPES[name][k])
     if out.get("obs_mode") == "grid" and name in ("sac", "tqc"):
         raise ValueError(f"obs_mode: recipe {name!r} trains on the stencil only")
+    if out.get("known_var") is not None and "sdf_var" not in out["obs_keys"]:
+        raise ValueError(f"known_var: masking unknown space needs 'sdf_var' among the obs_keys, got {out['obs_keys']}")
     if name == "dagger_ppo" and out["finetune_steps"] < out["n_envs"] * out["n_steps"]:
         raise ValueError(f"finetune_steps: expected at least n_envs * n_steps = {out['n_envs'] * out['n_steps']}")
     return out

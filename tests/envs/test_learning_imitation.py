@@ -7,6 +7,7 @@ import torch
 from stable_baselines3 import PPO
 
 import polar_sim.envs  # noqa: F401
+from polar_sim.envs.features import FAR, stencil_vector
 from polar_sim.envs.imitation import DAggerConfig, _mlp, make_expert, rollout, to_policy
 from polar_sim.envs.learning import FeatureObservation, export_mlp, load_mlp_into
 from polar_sim.envs.mlp_policy import MLPPolicy
@@ -111,6 +112,28 @@ def test_mlp_policy_file_round_trip_and_bad_input(tmp_path):
         MLPPolicy(w, b, **kw, activation="sigmoid")
     with pytest.raises(ValueError, match="twist"):
         p({"goal": obs["goal"]})
+
+
+# Masking unknown space: a point with variance >= known_var reads sdf FAR and gradient 0, known
+# distances are capped at FAR, sdf_var becomes the 0/1 known mask; other keys pass unchanged.
+def test_stencil_vector_masks_unknown_space_exactly(tmp_path):
+    obs = {"goal": np.float32([3, -4]), "sdf": np.float32([0.2, -0.7, 2.5, 0.9]),
+           "sdf_grad": np.float32([1, 0, 0, 1, -1, 0, 0.6, 0.8]), "sdf_var": np.float32([0.01, 1.01, 0.2, 1e6])}
+    keys = ["goal", "sdf", "sdf_grad", "sdf_var"]
+    np.testing.assert_array_equal(stencil_vector(obs, keys), np.concatenate([obs[k] for k in keys]))
+    want = [3, -4, 0.2, FAR, FAR, FAR, 1, 0, 0, 0, -1, 0, 0, 0, 1, 0, 1, 0]
+    np.testing.assert_allclose(stencil_vector(obs, keys, known_var=0.5), want, rtol=0, atol=1e-7)
+    kw = dict(obs_keys=keys, obs_shapes={"goal": (2,), "sdf": (4,), "sdf_grad": (8,), "sdf_var": (4,)},
+              mean=np.zeros(18), std=np.ones(18))
+    p = MLPPolicy([np.eye(18)[:2]], [np.zeros(2)], **kw, known_var=0.5)
+    q = MLPPolicy.load(p.save(tmp_path / "masked.npz"))
+    assert q.known_var == 0.5
+    np.testing.assert_allclose(q.features(obs), want, rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="known_var"):
+        MLPPolicy([np.eye(2)], [np.zeros(2)], obs_keys=["goal"], obs_shapes={"goal": (2,)}, mean=np.zeros(2),
+                  std=np.ones(2), known_var=0.5)
+    with pytest.raises(ValueError, match="known_var"):
+        DAggerConfig(known_var=0.5)
 
 
 # FeatureObservation concatenates the keys in order and normalises exactly.
