@@ -36,7 +36,9 @@ __all__ = [
     "as_int",
     "as_bool",
     "as_rng",
+    "as_image_size",
     "check_choice",
+    "check_options",
     "check_same_length",
     "check_updated",
 ]
@@ -255,6 +257,30 @@ def as_rng(seed, name="seed"):
             raise ValueError(f"{name}: expected a seed >= 0, got {seed}")
         return np.random.default_rng(int(seed))
     raise TypeError(f"{name}: expected None, an int or a numpy.random.Generator, got {type(seed).__name__}")
+
+
+def as_image_size(x, name, *, maximum=8192):
+    """Return an image size ``(width, height)`` in pixels as a tuple of two ints in
+    ``1..maximum``. Anything else (one number, three numbers, 0, floats, strings, booleans) raises
+    ``TypeError``/``ValueError`` naming ``name`` and the limit."""
+    if isinstance(x, (str, bytes)) or not hasattr(x, "__len__") or len(x) != 2:
+        raise TypeError(f"{name}: expected (width, height) in pixels, got {_short(x)}")
+    return tuple(as_int(v, name, minimum=1, maximum=maximum) for v in x)
+
+
+def check_options(options, allowed, name="options"):
+    """Return ``reset(options=...)`` as a dict: None or a dict whose keys are among ``allowed``
+    (a tuple of names; empty when the environment takes none). Unknown keys raise ``ValueError``
+    naming them and listing the allowed ones; anything but a dict raises ``TypeError``."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise TypeError(f"{name}: expected None or a dict, got {type(options).__name__} {_short(options)}")
+    unknown = sorted(map(repr, set(options) - set(allowed)))
+    if unknown:
+        takes = f"it takes {sorted(allowed)}" if allowed else "this environment takes none"
+        raise ValueError(f"{name}: unknown option(s) {', '.join(unknown)}; {takes}")
+    return dict(options)
 
 
 def check_choice(value, choices, name):

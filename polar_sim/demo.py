@@ -197,11 +197,11 @@ def demo_tracking(out: Path, progress: Progress):
 
 
 #: The environment of the demo's closed-loop part and the episode's seed.
-ENV_ID, ENV_SEED = "polar_sim/GPISNav-v1", 1
+ENV_ID, ENV_SEED = "polar_sim/GPISNav-v2", 1
 
 
 def demo_env(out: Path, progress: Progress):
-    """One GPISNav-v1 episode: the SDF navigator drives to the goal on the online map, localised on
+    """One GPISNav-v2 episode (the kinematic rover): the SDF navigator drives to the goal on the online map, localised on
     that map (ICP-G) from noisy lidar and wheel odometry."""
     import gymnasium as gym
 

@@ -114,8 +114,8 @@ def test_a_failing_part_is_reported(tmp_path, capsys):
     assert "[bad] FAILED: RuntimeError: boom" in out and "[frames] seven frames" in out
 
 
-# The demo's environment is the current GPISNav (v1): making it raises no DeprecationWarning
-# (gymnasium's "out of date" nudge is for the v0 ids, the GPS+compass variants).
+# The demo's environment is the current GPISNav (v2): making it raises no DeprecationWarning
+# (gymnasium's "out of date" nudge is for the older versions: v0 GPS+compass, v1 wheel physics).
 def test_demo_env_is_current():
     import warnings
 
@@ -124,7 +124,7 @@ def test_demo_env_is_current():
     import polar_sim.envs  # noqa: F401
     from polar_sim.demo import ENV_ID
 
-    assert ENV_ID == "polar_sim/GPISNav-v1"
+    assert ENV_ID == "polar_sim/GPISNav-v2"
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gym.make(ENV_ID, render_mode="rgb_array").close()

@@ -8,43 +8,25 @@ is filled from surface points and cleared by free-space disks, then planned on o
 
 from __future__ import annotations
 
-import heapq
-
 import numba
 import numpy as np
 from scipy import ndimage
+from skimage.graph import MCP_Geometric
 
 __all__ = ["GeodesicDistance", "ObstacleMemory", "cost_to_go"]
 
 
-@numba.njit(cache=True, nogil=True)
-def cost_to_go(cost, gi, gj):
-    """Dijkstra on an 8-connected grid from cell (gi, gj).
+def cost_to_go(cost, gi, gj, until=None):
+    """Least cost (H, W) from cell (gi, gj) over an 8-connected grid (``skimage.graph``'s
+    ``MCP_Geometric``, Dijkstra's algorithm).
 
     ``cost`` (H, W) is the traversal cost per cell length (inf = blocked); an edge costs the mean
-    of its two cells times its length (1 or sqrt 2, in cells). Returns (H, W) costs, inf where
-    unreachable.
+    of its two cells times its length (1 or sqrt 2, in cells). Unreachable cells are inf. With
+    ``until`` = (i, j) the search stops once that cell's cost is final: every cell cheaper than it
+    is then final too, and the cells not yet reached are inf.
     """
-    H, W = cost.shape
-    dist = np.full((H, W), np.inf)
-    dist[gi, gj] = 0.0
-    heap = [(0.0, gi, gj)]
-    while len(heap):
-        d, i, j = heapq.heappop(heap)
-        if d > dist[i, j]:
-            continue
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                if di == 0 and dj == 0:
-                    continue
-                ni, nj = i + di, j + dj
-                if ni < 0 or nj < 0 or ni >= H or nj >= W or not np.isfinite(cost[ni, nj]):
-                    continue
-                step = 1.4142135623730951 if di != 0 and dj != 0 else 1.0
-                nd = d + 0.5 * (cost[i, j] + cost[ni, nj]) * step
-                if nd < dist[ni, nj]:
-                    dist[ni, nj] = nd
-                    heapq.heappush(heap, (nd, ni, nj))
+    mcp = MCP_Geometric(np.asarray(cost, dtype=np.float64), fully_connected=True)
+    dist, _ = mcp.find_costs([(int(gi), int(gj))], ends=None if until is None else [tuple(int(v) for v in until)])
     return dist
 
 
@@ -137,30 +119,41 @@ class GeodesicDistance:
         gi, gj = self._cell(goal)
         cost[gi, gj] = 1.0
         self.dist = cost_to_go(cost, gi, gj) * self.res
-        # For points off the reachable cells (a robot brushing a wall stands in the inflation):
-        # the nearest reachable cell.
-        reach = np.isfinite(self.dist)
-        _, (self._ni, self._nj) = ndimage.distance_transform_edt(~reach, return_indices=True)
+        self._nearest = None  # (rows, cols) of the nearest reachable cell, made when first needed
 
     def _cell(self, xy):
-        j, i = np.floor((np.asarray(xy, float) - self.origin) / self.res).astype(int)
+        j, i = np.floor((np.asarray(xy, float)[:2] - self.origin) / self.res).astype(int)
         return int(np.clip(i, 0, self.shape[0] - 1)), int(np.clip(j, 0, self.shape[1] - 1))
 
     def __call__(self, xy):
         """Distance (m) from the world point ``xy`` (2,): the least, over the reachable cells of
         its 3x3 neighbourhood, of the cell's path length plus the straight line to its centre
-        (continuous in ``xy``, so its decrease is a smooth progress signal)."""
-        xy = np.asarray(xy, float)
+        (continuous in ``xy``, so its decrease is a smooth progress signal). A point with no
+        reachable cell around it (a robot brushing a wall stands in the inflation) goes by the
+        nearest reachable cell."""
+        x, y = float(xy[0]), float(xy[1])
+        best = _geodesic_at(x, y, self.origin[0], self.origin[1], self.res, self.dist)
+        if np.isfinite(best):
+            return best
+        if self._nearest is None:
+            _, self._nearest = ndimage.distance_transform_edt(~np.isfinite(self.dist), return_indices=True)
         i, j = self._cell(xy)
-        best = np.inf
-        for a in range(max(i - 1, 0), min(i + 2, self.shape[0])):
-            for b in range(max(j - 1, 0), min(j + 2, self.shape[1])):
-                d = self.dist[a, b]
-                if np.isfinite(d):
-                    c = self.origin + self.res * (np.array([b, a]) + 0.5)
-                    best = min(best, d + float(np.hypot(*(xy - c))))
-        if not np.isfinite(best):
-            a, b = self._ni[i, j], self._nj[i, j]
-            c = self.origin + self.res * (np.array([b, a]) + 0.5)
-            best = self.dist[a, b] + float(np.hypot(*(xy - c)))
-        return best
+        a, b = int(self._nearest[0][i, j]), int(self._nearest[1][i, j])
+        ox, oy, res = self.origin[0], self.origin[1], self.res
+        return self.dist[a, b] + np.hypot(x - (ox + res * (b + 0.5)), y - (oy + res * (a + 0.5)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _geodesic_at(x, y, ox, oy, res, dist):
+    """The 3x3-neighbourhood part of :meth:`GeodesicDistance.__call__` at (x, y), m; inf if no
+    cell there is reachable (numba's ``hypot`` is numpy's)."""
+    H, W = dist.shape
+    i = min(max(int(np.floor((y - oy) / res)), 0), H - 1)
+    j = min(max(int(np.floor((x - ox) / res)), 0), W - 1)
+    best = np.inf
+    for a in range(max(i - 1, 0), min(i + 2, H)):
+        for b in range(max(j - 1, 0), min(j + 2, W)):
+            d = dist[a, b]
+            if np.isfinite(d):
+                best = min(best, d + np.hypot(x - (ox + res * (b + 0.5)), y - (oy + res * (a + 0.5))))
+    return best

@@ -7,6 +7,8 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
+from polar_sim._validation import as_float
+from polar_sim.envs import _pose2d
 from polar_sim.envs._gridplan import GeodesicDistance
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.envs.noise import LIDAR_NOISE, ODOMETRY_NOISE, WheelOdometry, as_lidar_noise, as_odometry_noise
@@ -41,18 +43,20 @@ _DEFAULT = "default"  # sentinel: the version's default noise
 
 
 def resolve_tier(tier, rooms, room_size, clutter):
-    """(rooms, room_size, clutter) of ``tier`` (None: the default), each overridden when given."""
+    """(rooms, room_size, clutter) of ``tier`` (None: the default), each overridden when given and
+    checked against the world's limits (:func:`polar_sim.sim.navworld.check_layout`) before
+    anything is built."""
+    from polar_sim.sim.navworld import check_layout
+
     name = DEFAULT_TIER if tier is None else tier
-    if name not in TIERS:
+    if not isinstance(name, str) or name not in TIERS:
         raise ValueError(f"tier: unknown tier {tier!r}; expected one of {', '.join(TIERS)}")
     t = TIERS[name]
     rooms = t["rooms"] if rooms is None else rooms
-    if isinstance(rooms, bool) or not isinstance(rooms, (int, np.integer)) or rooms < 1:
-        raise ValueError(f"rooms: expected an integer >= 1, got {rooms!r}")
     clutter = t["clutter"] if clutter is None else clutter
-    if isinstance(clutter, bool) or not isinstance(clutter, (int, np.integer)) or clutter < 0:
-        raise ValueError(f"clutter: expected an integer >= 0, got {clutter!r}")
-    return int(rooms), _positive(t["room_size"] if room_size is None else room_size, "room_size"), int(clutter)
+    room_size = t["room_size"] if room_size is None else room_size
+    rooms, room_size, clutter, *_ = check_layout(rooms, room_size, clutter)
+    return rooms, room_size, clutter
 
 
 def as_reward_weights(weights, version=1):
@@ -79,16 +83,8 @@ def as_reward_weights(weights, version=1):
 
 
 def _positive(x, name, upper=None):
-    if isinstance(x, bool):
-        raise TypeError(f"{name}: expected a positive number, got {x!r}")
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name}: expected a positive number, got {x!r}") from None
-    if not np.isfinite(v) or v <= 0 or (upper is not None and v > upper):
-        rng = f"in (0, {upper}]" if upper is not None else "> 0"
-        raise ValueError(f"{name}: expected a finite number {rng}, got {x!r}")
-    return v
+    """A finite number in (0, upper] (an int or float; strings and booleans are refused)."""
+    return as_float(x, name, minimum=0.0, exclusive_minimum=True, maximum=upper)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -179,7 +175,8 @@ class LidarNavEnv(PolarMujocoEnv):
     | ``lidar_noise`` | (0.01, 0.01) | (range sigma m, dropout probability), or None; v0: None |
     | ``odometry_noise`` | ``OdometryNoise()`` | wheel odometry noise (:class:`polar_sim.envs.noise.OdometryNoise` or a dict of its fields: 3 % of each step's distance, a 2 % scale error, 3 % of each turn plus 0.01 rad/m, a yaw drift of 0.01 rad/s (1-sigma, drawn per episode)), or None; v0: None |
     | ``reward_weights`` | None | v1: a dict overriding some of :data:`REWARD_V1` (``progress`` per m, ``time`` per step, ``collision``, ``success``, ``proximity`` per step, ``proximity_radius`` m; each finite and >= 0); v0: None only |
-    | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0`` |
+    | ``kinematic`` | None | the rover's motion: False, the wheel physics (MuJoCo, 20 substeps of 5 ms per step, a PI wheel controller; v0, v1); True, the exact unicycle with the commanded ``(v, omega)`` (``World(kinematic="planar")``; contacts still found by MuJoCo, the world built once and given each episode's layout in place, ``World.relayout``; v2); None, the version's |
+    | ``version`` | 1 | set by the registered id: 0 is ``LidarNav-v0``, 2 ``LidarNav-v2`` |
 
     ## Truth in ``info``
     ``robot_pose2d`` (x, y, theta, world), ``goal`` (world, m), ``goal_distance`` (straight line,
@@ -188,6 +185,10 @@ class LidarNavEnv(PolarMujocoEnv):
     world).
 
     ## Version History
+    - v2: v1 with the kinematic rover (``kinematic=True``): each step moves it along the exact
+      unicycle arc of the commanded ``(v, omega)`` instead of simulating its wheels, a collision is
+      still a MuJoCo contact, and the worlds, sensors, noise, reward and observations are v1's.
+      About 3x the steps per CPU-second of v1 (``benchmarks/RESULTS.md``), for learning.
     - v1: lidar noise (1 cm, 1 % dropout) and wheel odometry noise on by default; the goal is
       given once in the start frame (``goal_start``) instead of every step in the true robot
       frame; ``twist`` is the wheel odometry instead of the exact twist; difficulty tiers;
@@ -199,12 +200,15 @@ class LidarNavEnv(PolarMujocoEnv):
 
     def __init__(self, *, render_mode=None, render_size=(480, 480), tier=None, rooms=None, room_size=None,
                  clutter=None, n_beams=270, max_speed=1.0, max_yaw_rate=1.5, lidar_noise=_DEFAULT,
-                 odometry_noise=_DEFAULT, reward_weights=None, version=1, **unknown):
+                 odometry_noise=_DEFAULT, reward_weights=None, kinematic=None, version=1, **unknown):
         check_kwargs(type(self), unknown)
         super().__init__(render_mode=render_mode, render_size=render_size)
-        if version not in (0, 1) or isinstance(version, bool):
-            raise ValueError(f"version: expected 0 or 1, got {version!r}")
+        if version not in (0, 1, 2) or isinstance(version, bool):
+            raise ValueError(f"version: expected 0, 1 or 2, got {version!r}")
         self._version = int(version)
+        if kinematic is not None and not isinstance(kinematic, (bool, np.bool_)):
+            raise TypeError(f"kinematic: expected None (the version's default) or a bool, got {kinematic!r}")
+        self._kinematic = self._version == 2 if kinematic is None else bool(kinematic)
         self._reward_w = as_reward_weights(reward_weights, self._version)
         self._rooms, self._room_size, self._clutter = resolve_tier(tier, rooms, room_size, clutter)
         self._tier = tier
@@ -245,14 +249,21 @@ class LidarNavEnv(PolarMujocoEnv):
         from polar_sim.sim import World
 
         noise = {"lidar": self._lidar_noise} if self._lidar_noise is not None else None
+        # The kinematic rover's world is pooled: built once, then given each episode's layout in
+        # place (World.relayout), which costs a fraction of a compilation and gives the same world.
+        reuse = self._world if (self._kinematic and self._world is not None) else None
         # A few layouts (a few in a thousand on the room tier) have no reachable start/goal pair;
         # such a draw is replaced by the next seed of a sequence keyed on it, so a seeded reset
         # still gives one world, and every valid layout seed keeps its world.
         seq = np.random.SeedSequence(layout_seed)
         for attempt in range(MAX_LAYOUT_ATTEMPTS):
             try:
-                world = World("navworld", seed=layout_seed, rooms=self._rooms, room_size=self._room_size,
-                              clutter=self._clutter, lidar_beams=self._n_beams, noise=noise)
+                if reuse is not None:
+                    world = reuse.relayout(layout_seed)
+                else:
+                    world = World("navworld", seed=layout_seed, rooms=self._rooms, room_size=self._room_size,
+                                  clutter=self._clutter, lidar_beams=self._n_beams, noise=noise,
+                                  kinematic="planar" if self._kinematic else False, pooled=self._kinematic)
             except ValueError as err:
                 if "no reachable start/goal pair" not in str(err) or attempt == MAX_LAYOUT_ATTEMPTS - 1:
                     raise
@@ -266,40 +277,39 @@ class LidarNavEnv(PolarMujocoEnv):
         self._goal = np.asarray(w.meta["goal"], dtype=np.float64)
         x0, _, y0, _ = w.meta["bounds"]
         self._geodesic = GeodesicDistance(w.meta["occupancy"], (x0, y0), w.meta["occupancy_res"], self._goal)
-        self._truth = w.truth()
-        self._pose = self._truth["robot_pose2d"]
+        self._pose = w.robot_pose2d()
         self._start = self._pose.copy()
         self._geo = self._prev_dist = self._geodesic(self._pose[:2])
         self._robot_radius = float(w.meta["robot_radius"])
         self._path_length = 0.0
         self._collision = False
-        self._scan = w.lidar("lidar")
-        if self._version == 1:
+        self._scan = None  # cast when first read (see ``scan``)
+        if self._version >= 1:
             # The odometry noise has its own stream, drawn after the layout: the same seed gives
             # the same world whatever the noise settings.
             self._odometry.reset(np.random.default_rng(int(self.np_random.integers(0, 2**31 - 1))))
         self._odo = np.zeros(3)
         self._odo_twist = np.zeros(2)
         spec = w.lidar_spec("lidar")
-        mount = between2d(self._pose, T_to_pose2d(self._scan.T_world_sensor))
+        mount = between2d(self._pose, w.lidar_pose2d("lidar"))
         goal_start = between2d(self._start, np.array([self._goal[0], self._goal[1], 0.0]))[:2]
-        self.task = NavTask(goal_start, mount, self._scan.angles.copy(), float(spec.min_range),
+        self.task = NavTask(goal_start, mount, spec.angles.copy(), float(spec.min_range),
                             float(spec.max_range), float(w.dt), self.extent)
 
     def _apply_action(self, a):
         v, om = a[0] * self._max_speed, a[1] * self._max_yaw_rate
         prev = self._pose
-        self._world.step((v, om))
-        self._truth = self._world.truth()
-        self._pose = self._truth["robot_pose2d"]
-        self._path_length += float(np.hypot(*(self._pose[:2] - prev[:2])))
-        self._collision = bool(self._truth["robot_collision"])
-        self._geo = self._geodesic(self._pose[:2])  # for the reward and the info alike
-        self._scan = self._world.lidar("lidar")
-        if self._version == 1:
+        w = self._world
+        w.step((v, om))
+        self._pose = w.robot_pose2d()
+        self._path_length += float(np.hypot(self._pose[0] - prev[0], self._pose[1] - prev[1]))
+        self._collision = w.robot_collision()
+        self._geo = self._geodesic(self._pose)  # for the reward and the info alike
+        self._scan = None
+        if self._version >= 1:
             # Wheels measure the distance driven along the heading and the turn (no side slip).
-            inc = between2d(prev, self._pose)
-            dt = self._world.dt
+            inc = _pose2d.between(prev, self._pose)
+            dt = w.dt
             ds, dth = self._odometry.measure(inc[0], inc[2], dt)
             self._odo = np.array([ds * np.cos(dth / 2), ds * np.sin(dth / 2), dth])
             self._odo_twist = np.array([ds / dt, dth / dt])
@@ -309,8 +319,21 @@ class LidarNavEnv(PolarMujocoEnv):
     def scan(self):
         """The last lidar scan (:class:`polar_sim.sim.LidarScan`, ranges in m with ``inf`` = no
         return, noisy as observed). Its ``T_world_sensor`` is the true sensor pose: truth, for
-        oracles and scoring only."""
+        oracles and scoring only.
+
+        The scan of a step is cast when it is first read (a module that reads no scan, such as
+        ``GPISNav`` with ``pose_source="truth", sdf_source="truth"``, casts none); the lidar
+        noise draws from its generator only for scans that are cast, so reading the scan every
+        step, as the observation does, gives the same scans whatever else is read."""
+        if self._scan is None:
+            self._scan = self._world.lidar("lidar")
         return self._scan
+
+    @property
+    def sensor_pose2d(self):
+        """The lidar's true pose (x, y, yaw) in the world now, m and rad (truth: for oracles and
+        scoring only; the same as the scan's ``T_world_sensor``, without casting it)."""
+        return self._world.lidar_pose2d("lidar")
 
     @property
     def odometry(self):
@@ -325,13 +348,18 @@ class LidarNavEnv(PolarMujocoEnv):
     def _twist(self):
         lim = self.observation_space["twist"]
         if self._version == 0:
-            tw = self._truth["robot_twist"]
+            tw = self._world.robot_twist()
             return np.clip(np.array([tw[0], tw[5]], np.float32), lim.low, lim.high)
         return np.clip(self._odo_twist.astype(np.float32), lim.low, lim.high)
 
-    def _get_obs(self):
-        r = np.where(np.isfinite(self._scan.ranges), self._scan.ranges, LIDAR_MAX).astype(np.float32)
-        obs = {"ranges": np.minimum(r, LIDAR_MAX), "twist": self._twist()}
+    def _get_obs(self, ranges=True):
+        """The observation; without the ``ranges`` (and casting no scan) if ``ranges`` is False,
+        for a module environment that reads only the rest."""
+        obs = {"twist": self._twist()}
+        if ranges:
+            scan = self.scan
+            r = np.where(np.isfinite(scan.ranges), scan.ranges, LIDAR_MAX).astype(np.float32)
+            obs["ranges"] = np.minimum(r, LIDAR_MAX)
         if self._version == 0:
             obs["goal"] = between2d(self._pose, np.array([self._goal[0], self._goal[1], 0.0]))[:2].astype(np.float32)
         else:
@@ -344,7 +372,7 @@ class LidarNavEnv(PolarMujocoEnv):
                 "geodesic_distance": self._geo, "collision": self._collision,
                 "path_length": self._path_length,
                 "is_success": bool(d < GOAL_RADIUS and not self._collision), "layout_seed": self._layout_seed}
-        if self._version == 1:
+        if self._version >= 1:
             info["start_pose2d"] = self._start.copy()
         return info
 
@@ -354,7 +382,7 @@ class LidarNavEnv(PolarMujocoEnv):
         terms = {"progress": w["progress"] * (self._prev_dist - self._geo), "time": -w["time"],
                  "collision": -w["collision"] if self._collision else 0.0,
                  "success": w["success"] if (d < GOAL_RADIUS and not self._collision) else 0.0}
-        if self._version == 1:
+        if self._version >= 1:
             # Clearance of the robot's disc from the exact scene SDF (truth, as the rest of the reward).
             clear = float(self._world.sdf(self._pose[None, :2])[0]) - self._robot_radius
             terms["proximity"] = -w["proximity"] * float(np.clip(1.0 - clear / w["proximity_radius"], 0.0, 1.0))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import T_to_pose2d, between2d, compose2d, inv2d
+from polar_sim.envs import _pose2d
 
 __all__ = ["POSE_SOURCES", "SLAM_DEFAULTS", "make_pose_source", "TruthPose", "OdometryPose", "SLAMPose"]
 
@@ -36,15 +36,16 @@ class TruthPose:
         self._origin = origin
         self.status = "truth"
 
-    def update(self, scan, odometry, true_pose2d, source):
-        """(robot pose, sensor pose) in the map frame, for this step's scan."""
-        sensor = T_to_pose2d(scan.T_world_sensor)
+    def update(self, raw, true_pose2d, source):
+        """(robot pose, sensor pose) in the map frame, for this step of the raw environment
+        ``raw`` (a ``LidarNavEnv``: ``scan``, ``odometry``, the true ``sensor_pose2d``)."""
+        sensor = raw.sensor_pose2d
         if self._origin is None:
             return np.asarray(true_pose2d, dtype=np.float64).copy(), sensor
-        return between2d(self._origin, true_pose2d), between2d(self._origin, sensor)
+        return _pose2d.between(self._origin, true_pose2d), _pose2d.between(self._origin, sensor)
 
-    def initial(self, scan, true_pose2d):
-        return self.update(scan, None, true_pose2d, None)
+    def initial(self, raw, true_pose2d):
+        return self.update(raw, true_pose2d, None)
 
 
 class OdometryPose:
@@ -57,12 +58,12 @@ class OdometryPose:
         self.pose = np.zeros(3)
         self.status = "odometry"
 
-    def initial(self, scan, true_pose2d):
-        return self.pose.copy(), compose2d(self.pose, self._mount)
+    def initial(self, raw, true_pose2d):
+        return self.pose.copy(), _pose2d.compose(self.pose, self._mount)
 
-    def update(self, scan, odometry, true_pose2d, source):
-        self.pose = compose2d(self.pose, odometry)
-        return self.pose.copy(), compose2d(self.pose, self._mount)
+    def update(self, raw, true_pose2d, source):
+        self.pose = _pose2d.compose(self.pose, raw.odometry)
+        return self.pose.copy(), _pose2d.compose(self.pose, self._mount)
 
 
 #: ICP-G settings of the slam pose source, over localize()'s own defaults: a registration that
@@ -94,18 +95,19 @@ class SLAMPose(OdometryPose):
         self.status = "start"
         self.failures = 0
 
-    def update(self, scan, odometry, true_pose2d, source):
-        pred = compose2d(self.pose, odometry)
-        sensor_pred = compose2d(pred, self._mount)
+    def update(self, raw, true_pose2d, source):
+        scan = raw.scan
+        pred = _pose2d.compose(self.pose, raw.odometry)
+        sensor_pred = _pose2d.compose(pred, self._mount)
         est, _, info = self._localize(source, (scan.angles, scan.ranges), sensor_pred, sensor_offset=(0.0, 0.0),
                                       **self.params)
         self.status = info["status"]
         if self.status in USABLE:
-            self.pose = compose2d(est, inv2d(self._mount))
+            self.pose = _pose2d.compose(est, _pose2d.inverse(self._mount))
         else:
             self.failures += 1
             self.pose = pred
-        return self.pose.copy(), compose2d(self.pose, self._mount)
+        return self.pose.copy(), _pose2d.compose(self.pose, self._mount)
 
 
 def make_pose_source(name, localize_params=None):

@@ -22,7 +22,8 @@ class ModuleEnv(gym.Env):
     in ``__init__``, set ``observation_space``, and implement ``_module_reset(obs, info)`` and
     ``_module_step(obs, info)`` (feed the module the base's raw observation and truth),
     ``_get_obs(obs)`` and ``_get_info(info)``; ``_render_frame`` may add the module's view to the
-    base's. Action, reward, termination and seeding are the base's: ``reset(seed=s)`` seeds the
+    base's; ``_raw_obs`` may build only the part of the base's observation the module reads (the
+    base's ``step`` and ``reset`` run without building it). Action, reward, termination and seeding are the base's: ``reset(seed=s)`` seeds the
     base with ``s``, so a module environment replays its base bit for bit. ``metadata`` is the
     base's, set on the class (gymnasium reads it there).
     """
@@ -62,20 +63,25 @@ class ModuleEnv(gym.Env):
         return self.base.task
 
     def reset(self, *, seed=None, options=None):
-        from polar_sim.envs.base import check_seed
-
-        seed = check_seed(seed)
+        seed, options = self.base.check_reset(seed, options)  # before any state changes
         super().reset(seed=seed)
-        obs, info = self.base.reset(seed=seed, options=options)
-        self._module_reset(obs, info)
-        return self._get_obs(obs), self._get_info(info)
+        self.base._reset_state(seed, options)
+        raw = self._raw_obs()
+        info = self.base._get_info()
+        self._module_reset(raw, info)
+        return self._get_obs(raw), self._get_info(info)
 
     def step(self, action):
         """One control period of the base, then the module. A rejected action (``ValueError``)
         leaves both as they were."""
-        obs, reward, terminated, truncated, info = self.base.step(action)
-        self._module_step(obs, info)
-        return self._get_obs(obs), reward, terminated, truncated, self._get_info(info)
+        reward, terminated, info = self.base._step_state(action)
+        raw = self._raw_obs()
+        self._module_step(raw, info)
+        return self._get_obs(raw), reward, terminated, False, self._get_info(info)
+
+    def _raw_obs(self):
+        """The base's observation, as far as the module reads it (default: all of it)."""
+        return self.base._get_obs()
 
     def render(self):
         if self.render_mode is None:

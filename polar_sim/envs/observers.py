@@ -10,10 +10,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import compose2d
-
 __all__ = ["SDFStencil", "GPISSource", "TruthSource", "OccupancyEDTSource", "make_sdf_source", "SDF_SOURCES",
            "RoutePath", "VOOdometry", "TrackerPose", "pose7", "grasp_yaw_error"]
+
+
+def robot_to_world(pose2d, points):
+    """Points (n, 2) in the frame of pose (x, y, theta) carried into the world: the position part
+    of :func:`polar_sim.geometry.compose2d`, the same operations, without its stacking."""
+    x, y, th = float(pose2d[0]), float(pose2d[1]), float(pose2d[2])
+    c, s = float(np.cos(th)), float(np.sin(th))
+    px, py = points[:, 0], points[:, 1]
+    out = np.empty((len(points), 2))
+    out[:, 0] = x + c * px - s * py
+    out[:, 1] = y + s * px + c * py
+    return out
 
 
 class SDFStencil:
@@ -23,11 +33,19 @@ class SDFStencil:
     ray-major (all radii of ray 0, then ray 1, ...).
     """
 
+    #: Limits of the stencil: directions, and distances per direction.
+    MAX_RAYS, MAX_RADII = 1024, 64
+
     def __init__(self, n_rays=16, radii=(0.5, 1.0, 2.0, 3.0)):
-        self.n_rays = int(n_rays)
-        self.radii = np.asarray(radii, dtype=np.float64)
-        if self.n_rays < 1 or self.radii.ndim != 1 or len(self.radii) < 1 or np.any(self.radii <= 0):
-            raise ValueError(f"stencil: expected n_rays >= 1 and positive radii, got {n_rays}, {radii}")
+        from polar_sim._validation import as_float_array, as_int
+
+        self.n_rays = as_int(n_rays, "stencil_rays", minimum=1, maximum=self.MAX_RAYS)
+        self.radii = as_float_array(radii, "stencil_radii")
+        if self.radii.ndim != 1 or not 1 <= len(self.radii) <= self.MAX_RADII:
+            raise ValueError(f"stencil_radii: expected 1..{self.MAX_RADII} distances (m), got shape {self.radii.shape}")
+        if not np.isfinite(self.radii).all() or np.any(self.radii <= 0):
+            raise ValueError(f"stencil_radii: expected finite distances > 0 (m), got {self.radii.tolist()}")
+        self.radii = self.radii.copy()
         ang = np.linspace(-np.pi, np.pi, self.n_rays, endpoint=False)
         A, R = np.meshgrid(ang, self.radii, indexing="ij")
         self.points_robot = np.stack([R * np.cos(A), R * np.sin(A)], -1).reshape(-1, 2)
@@ -38,8 +56,7 @@ class SDFStencil:
 
     def world_points(self, pose2d):
         """Stencil points (n, 2) in the world for a robot pose (x, y, theta)."""
-        pts = np.c_[self.points_robot, np.zeros(self.size)]
-        return compose2d(np.asarray(pose2d, float), pts)[:, :2]
+        return robot_to_world(pose2d, self.points_robot)
 
 
 class GPISSource:
@@ -120,18 +137,22 @@ class TruthSource:
         pass
 
     def query(self, points):
-        h = 1e-3
-        f = self.world.sdf
         o = self.origin
         if o is not None:
-            points = compose2d(o, np.c_[points, np.zeros(len(points))])[:, :2]
-        d = f(points)
-        gx = (f(points + [h, 0]) - f(points - [h, 0])) / (2 * h)
-        gy = (f(points + [0, h]) - f(points - [0, h])) / (2 * h)
+            points = robot_to_world(o, points)
+        d, g = self.world.sdf_gradient(points, step=1e-3)
         if o is not None:  # the gradient back in the map frame
-            c, s = np.cos(o[2]), np.sin(o[2])
-            gx, gy = c * gx + s * gy, -s * gx + c * gy
-        return d, np.stack([gx, gy], 1), np.zeros(len(points))
+            c, s = float(np.cos(o[2])), float(np.sin(o[2]))
+            gx, gy = g[:, 0].copy(), g[:, 1].copy()
+            g[:, 0] = c * gx + s * gy
+            g[:, 1] = -s * gx + c * gy
+        return d, g, np.zeros(len(points))
+
+    def query_stencil(self, pose2d, offsets):
+        """:meth:`query` at the points ``offsets`` (n, 2) given in the frame of ``pose2d`` (in the
+        map frame), in one call: the same values as ``query(robot_to_world(pose2d, offsets))``."""
+        d, g = self.world.sdf_stencil(pose2d, offsets, frame=self.origin, step=1e-3)
+        return d, g, np.zeros(len(offsets))
 
 
 SDF_SOURCES = ("gpis", "truth", "occupancy_edt")

@@ -213,7 +213,8 @@ class SDFNavigator(SDFReactive):
             cost[goal_ij[0], goal_ij[1]] = 1.0
             if not np.isfinite(cost[here[0], here[1]]):
                 cost[here[0], here[1]] = 1.0 + mem.clearance_weight
-            dist = cost_to_go(cost, int(goal_ij[0]), int(goal_ij[1]))
+            # Only the cells cheaper than the robot's are walked below: the search can stop there.
+            dist = cost_to_go(cost, int(goal_ij[0]), int(goal_ij[1]), until=here)
             if np.isfinite(dist[here[0], here[1]]):
                 break
         else:

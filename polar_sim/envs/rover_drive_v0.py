@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
-from polar_sim.envs.base import PolarMujocoEnv, check_kwargs, check_seed
+from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.envs.observers import RoutePath
 from polar_sim.geometry import inv_pose
 
@@ -158,16 +158,15 @@ class RoverDriveEnv(PolarMujocoEnv):
         look = {} if self._episode_appearance is None else {"appearance": self._episode_appearance}
         return World(self._scene, seed=layout_seed, camera_fovy=KITTI_FOVY_DEG, **look)
 
-    def reset(self, *, seed=None, options=None):
+    RESET_OPTIONS = ("appearance",)
+
+    def _check_option_values(self, options):
         from polar_sim.sim.rover_appearance import resolve_appearance
 
-        seed = check_seed(seed)
-        if options is not None and not isinstance(options, dict):
-            raise TypeError(f"options: expected None or a dict, got {type(options).__name__}")
-        look = (options or {}).get("appearance", self._appearance)
-        resolve_appearance(look, 0)  # checked before the old world is closed
-        self._episode_appearance = look
-        return super().reset(seed=seed, options=options)
+        resolve_appearance(options.get("appearance", self._appearance), 0)  # before the old world is closed
+
+    def _take_options(self, options):
+        self._episode_appearance = options.get("appearance", self._appearance)
 
     def _reset_scene(self):
         w = self._world
@@ -258,10 +257,7 @@ class RoverDriveEnv(PolarMujocoEnv):
 
 
 def _positive(x, name):
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name}: expected a positive number, got {x!r}") from None
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name}: expected a positive number, got {x!r}")
-    return v
+    """A finite number > 0 (an int or float; strings and booleans are refused)."""
+    from polar_sim._validation import as_positive_float
+
+    return as_positive_float(x, name)

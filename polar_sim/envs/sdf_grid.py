@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import compose2d
-
 __all__ = ["SDFGrid", "VisitedMask", "GRID_SDF_BOUND", "GRID_VAR_MAX"]
 
 GRID_SDF_BOUND = 4.0  # m: the image's distance channel is clipped to +-4 m
 GRID_VAR_MAX = 2.0  # the variance channel is clipped to [0, 2] (the GPIS map's prior is about 1)
+MAX_GRID_SIZE = 256  # cells per side of the grid image
+MAX_GRID_RESOLUTION = 10.0  # m per cell
 
 
 class SDFGrid:
@@ -19,23 +19,26 @@ class SDFGrid:
     row-major."""
 
     def __init__(self, size=32, resolution=0.25):
-        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 4 <= size <= 256:
-            raise ValueError(f"grid_size: expected an integer in 4..256, got {size!r}")
-        try:
-            res = float(resolution)
-        except (TypeError, ValueError):
-            raise TypeError(f"grid_resolution: expected a positive number of metres, got {resolution!r}") from None
-        if isinstance(resolution, bool) or not np.isfinite(res) or res <= 0:
-            raise ValueError(f"grid_resolution: expected a positive number of metres, got {resolution!r}")
-        self.size, self.resolution = int(size), res
-        off = (self.size / 2 - 0.5 - np.arange(self.size)) * res
+        self.size, self.resolution = self.check(size, resolution)
+        off = (self.size / 2 - 0.5 - np.arange(self.size)) * self.resolution
         X, Y = np.meshgrid(off, off, indexing="ij")
         self.points_robot = np.stack([X.ravel(), Y.ravel()], 1)
 
+    @staticmethod
+    def check(size, resolution):
+        """(size, resolution) checked: an integer in 4..:data:`MAX_GRID_SIZE` cells and a number of
+        metres in (0, :data:`MAX_GRID_RESOLUTION`]."""
+        from polar_sim._validation import as_float, as_int
+
+        return (as_int(size, "grid_size", minimum=4, maximum=MAX_GRID_SIZE),
+                as_float(resolution, "grid_resolution", minimum=0.0, exclusive_minimum=True,
+                         maximum=MAX_GRID_RESOLUTION))
+
     def world_points(self, pose2d):
         """Cell centres (size * size, 2) in the map frame for a robot pose (x, y, theta)."""
-        pts = np.c_[self.points_robot, np.zeros(len(self.points_robot))]
-        return compose2d(np.asarray(pose2d, float), pts)[:, :2]
+        from polar_sim.envs.observers import robot_to_world
+
+        return robot_to_world(pose2d, self.points_robot)
 
     def image(self, d, v, visited=None):
         """(C, size, size) float32: distance (m, clipped to +-4), variance (clipped to [0, 2];

@@ -184,10 +184,17 @@ class RoverController:
         self.config = config
         self.kp = kp
         self.ki = ki
-        self._act = np.array([model.actuator(f"wheel_{n}").id for n in ("left", "right")])
-        self.body_id = model.body("rover").id
-        self.qpos_adr = model.jnt_qposadr[model.joint("rover_free").id]
-        self.qvel_adr = int(model.jnt_dofadr[model.joint("rover_free").id])
+        def id_of(obj, name):  # mj_name2id: model.body(name) costs a few hundred microseconds
+            i = mujoco.mj_name2id(model, obj, name)
+            if i < 0:
+                raise KeyError(f"the model has no {name!r}")
+            return i
+
+        self._act = np.array([id_of(mujoco.mjtObj.mjOBJ_ACTUATOR, f"wheel_{n}") for n in ("left", "right")])
+        self.body_id = id_of(mujoco.mjtObj.mjOBJ_BODY, "rover")
+        joint = id_of(mujoco.mjtObj.mjOBJ_JOINT, "rover_free")
+        self.qpos_adr = model.jnt_qposadr[joint]
+        self.qvel_adr = int(model.jnt_dofadr[joint])
         self._lo, self._hi = model.actuator_ctrlrange[self._act].T.tolist()
         self.reset()
 
@@ -195,13 +202,20 @@ class RoverController:
         self._iv = 0.0
         self._iw = 0.0
 
+    def _views(self, data):
+        """(body x axis row of xmat, qvel, ctrl) of ``data``: views into its buffers, made once per
+        MjData (building them costs more than the arithmetic of a substep)."""
+        if getattr(self, "_bound", None) is not data:
+            self._bound = data
+            self._v = (data.xmat[self.body_id], data.qvel, data.ctrl)
+        return self._v
+
     def body_twist(self, data):
         """Forward speed (m/s, along body x) and yaw rate (rad/s, about body z)."""
         # Scalar arithmetic: this runs every physics substep, where numpy's per-call overhead
         # on 3-vectors would cost more than the physics itself.
-        x = data.xmat[self.body_id]  # body x axis in world = first column (entries 0, 3, 6)
+        x, qv, _ = self._views(data)  # body x axis in world = first column (entries 0, 3, 6)
         a = self.qvel_adr
-        qv = data.qvel
         v = x[0] * qv[a] + x[3] * qv[a + 1] + x[6] * qv[a + 2]
         return float(v), float(qv[a + 5])
 
@@ -215,5 +229,6 @@ class RoverController:
         v_c = v + self.kp * ev + self.ki * self._iv
         w_c = omega + self.kp * ew + self.ki * self._iw
         lo, hi = self._lo, self._hi
-        data.ctrl[self._act[0]] = min(hi[0], max(lo[0], (v_c - w_c * c.track / 2) / c.wheel_radius))
-        data.ctrl[self._act[1]] = min(hi[1], max(lo[1], (v_c + w_c * c.track / 2) / c.wheel_radius))
+        ctrl = self._views(data)[2]
+        ctrl[self._act[0]] = min(hi[0], max(lo[0], (v_c - w_c * c.track / 2) / c.wheel_radius))
+        ctrl[self._act[1]] = min(hi[1], max(lo[1], (v_c + w_c * c.track / 2) / c.wheel_radius))

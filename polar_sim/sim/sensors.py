@@ -9,6 +9,7 @@ the beams fan out in the site frame (x forward, y left, z up). Every MJCF camera
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import mujoco
 import numpy as np
@@ -222,51 +223,64 @@ def parse_lidars(model):
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TEXT, i) or ""
         if not name.startswith("sensor:"):
             continue
-        sname = name.split(":", 1)[1]
         where = f"<text name={name!r}>"
         adr, size = model.text_adr[i], model.text_size[i]
         try:
             text = bytes(model.text_data[adr : adr + size]).rstrip(b"\0").decode()
         except UnicodeDecodeError:
             raise ValueError(f"{where}: the declaration is not UTF-8 text") from None
-        kv = _parse_kv(text, where)
-        kind = kv.get("type")
-        if kind not in _LIDAR_KEYS:
-            raise ValueError(f"{where}: unknown sensor type {kind!r}; expected lidar2d or lidar3d")
-        unknown = sorted(set(kv) - set(_LIDAR_KEYS[kind]))
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; {kind} takes {list(_LIDAR_KEYS[kind])}")
-        try:
-            site = kv["site"]
-            model.site(site)
-        except KeyError as exc:
-            raise ValueError(f"{where}: site {kv.get('site')!r} does not exist") from exc
-        lo = _num(kv, "min", 0.0, where, lo=0.0, hi=1e6)
-        hi = _num(kv, "max", 30.0, where, lo=0.0, hi=1e6, lo_open=True)
-        if not lo < hi:
-            raise ValueError(f"{where}: min={lo} must be smaller than max={hi}")
-        if kind == "lidar2d":
-            n = _num(kv, "beams", 1081, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
-            fov = np.radians(_num(kv, "fov_deg", 270.0, where, lo=0.0, hi=360.0, lo_open=True))
-            # A full circle must not repeat its first beam at +180 deg.
-            ang = np.linspace(-fov / 2, fov / 2, n, endpoint=fov < 2 * np.pi - 1e-9)
-            dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(n)], 1)
-            out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, ang)
-        else:
-            rows = _num(kv, "rows", 32, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
-            cols = _num(kv, "cols", 1024, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
-            if rows * cols > MAX_LIDAR_RAYS:
-                raise ValueError(f"{where}: rows x cols = {rows * cols} rays exceeds {MAX_LIDAR_RAYS} (MAX_LIDAR_RAYS)")
-            e0 = _num(kv, "vfov_min_deg", -25.0, where, lo=-90.0, hi=90.0)
-            e1 = _num(kv, "vfov_max_deg", 15.0, where, lo=-90.0, hi=90.0)
-            if e0 > e1:
-                raise ValueError(f"{where}: vfov_min_deg={e0} must not exceed vfov_max_deg={e1}")
-            el = np.radians(np.linspace(e0, e1, rows))
-            az = np.linspace(-np.pi, np.pi, cols, endpoint=False)
-            E, A = np.meshgrid(el, az, indexing="ij")
-            dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
-            out[sname] = LidarSpec(sname, kind, site, lo, hi, dirs, None)
+        spec = _parse_lidar(name, text)
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, spec.site) < 0:
+            raise ValueError(f"{where}: site {spec.site!r} does not exist")
+        out[spec.name] = spec
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _parse_lidar(name, text):
+    """The :class:`LidarSpec` of declaration ``text`` of ``<text name=name>`` (cached: every
+    procedural world declares the same lidars, and a 32 x 1024 3D lidar's directions take
+    milliseconds to build; the arrays are shared read-only)."""
+    sname = name.split(":", 1)[1]
+    where = f"<text name={name!r}>"
+    kv = _parse_kv(text, where)
+    kind = kv.get("type")
+    if kind not in _LIDAR_KEYS:
+        raise ValueError(f"{where}: unknown sensor type {kind!r}; expected lidar2d or lidar3d")
+    unknown = sorted(set(kv) - set(_LIDAR_KEYS[kind]))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; {kind} takes {list(_LIDAR_KEYS[kind])}")
+    if "site" not in kv:
+        raise ValueError(f"{where}: site None does not exist")
+    site = kv["site"]
+    lo = _num(kv, "min", 0.0, where, lo=0.0, hi=1e6)
+    hi = _num(kv, "max", 30.0, where, lo=0.0, hi=1e6, lo_open=True)
+    if not lo < hi:
+        raise ValueError(f"{where}: min={lo} must be smaller than max={hi}")
+    if kind == "lidar2d":
+        n = _num(kv, "beams", 1081, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+        fov = np.radians(_num(kv, "fov_deg", 270.0, where, lo=0.0, hi=360.0, lo_open=True))
+        # A full circle must not repeat its first beam at +180 deg.
+        ang = np.linspace(-fov / 2, fov / 2, n, endpoint=fov < 2 * np.pi - 1e-9)
+        dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(n)], 1)
+    else:
+        rows = _num(kv, "rows", 32, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+        cols = _num(kv, "cols", 1024, where, integer=True, lo=1, hi=MAX_LIDAR_RAYS)
+        if rows * cols > MAX_LIDAR_RAYS:
+            raise ValueError(f"{where}: rows x cols = {rows * cols} rays exceeds {MAX_LIDAR_RAYS} (MAX_LIDAR_RAYS)")
+        e0 = _num(kv, "vfov_min_deg", -25.0, where, lo=-90.0, hi=90.0)
+        e1 = _num(kv, "vfov_max_deg", 15.0, where, lo=-90.0, hi=90.0)
+        if e0 > e1:
+            raise ValueError(f"{where}: vfov_min_deg={e0} must not exceed vfov_max_deg={e1}")
+        el = np.radians(np.linspace(e0, e1, rows))
+        az = np.linspace(-np.pi, np.pi, cols, endpoint=False)
+        E, A = np.meshgrid(el, az, indexing="ij")
+        dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
+        ang = None
+    for a in (dirs, ang):
+        if a is not None:
+            a.flags.writeable = False
+    return LidarSpec(sname, kind, site, lo, hi, dirs, ang)
 
 
 class Lidar:
@@ -274,7 +288,7 @@ class Lidar:
 
     def __init__(self, model, spec: LidarSpec):
         self.spec = spec
-        self._site = model.site(spec.site).id
+        self._site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, spec.site)
         n = len(spec.directions)
         self._geomid = np.zeros(n, np.int32)
         self._dist = np.zeros(n, np.float64)

@@ -140,20 +140,43 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     (:class:`TerrainGrid`), ``start_pose2d``, ``appearance`` (the resolved spec, None by default;
     see :mod:`polar_sim.sim.rover_appearance`).
     """
-    from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
+    from polar_sim.sim.robots import ROVER_PRESETS
 
     look = resolve_appearance(appearance, seed)  # validated before anything is built
+    if rover not in ROVER_PRESETS:
+        raise ValueError(f"rover: unknown preset {rover!r}; expected one of {sorted(ROVER_PRESETS)}")
+    # One generator drives the terrain, the route, the zones' textures and the obstacles, in this order.
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7001]))
     cell, n = 2.0, 111  # 220 m x 220 m terrain
     half = cell * (n - 1) / 2
     heights = _smooth_heights(rng, n, cell, 0.0 if flat else 3.0)
     grid = TerrainGrid(-half, -half, cell, heights)
     route = make_route(rng)
-    n_route = len(route)
+    zones, materials, repeat = _ground_materials(spec, rng, look)
+    zone_of_route = (np.arange(len(route)) * len(zones) // len(route)).astype(int)
+    if look is not None:
+        _apply_sky_and_light(spec, look)
+    _ground_tiles(spec, grid, route, zone_of_route, materials, repeat)
+    _collision_ground(spec, grid, flat)
+    _obstacles(spec, rng, grid, route)
+    cfg, start = _rover_at_start(spec, grid, route, ROVER_PRESETS[rover], camera_height, camera_fovy)
+    return {
+        "route": route,
+        "zones": zones,
+        "zone_of_route": zone_of_route,
+        "terrain": grid,
+        "start_pose2d": np.array(start),
+        "rover_config": cfg,
+        "appearance": look,
+    }
 
-    # Ground zones: contiguous arcs of the route, at least 3 appearances, order seeded. The default
-    # textures are drawn even under another appearance, so the obstacles (drawn next from the same
-    # stream) do not depend on the appearance.
+
+def _ground_materials(spec, rng, look):
+    """The ground zones' textures and materials: at least 3 appearances, order seeded, or the
+    appearance's families. Returns (zones, material names, texture repeat in m per zone).
+
+    The default textures are drawn even under another appearance, so that the obstacles (drawn
+    next from the same stream) do not depend on the appearance."""
     zones = list(rng.permutation(GROUND_TYPES))
     textures = [ground_texture(kind, rng) for kind in zones]
     materials, repeat = [f"ground_{kind}" for kind in zones], [4.0] * len(zones)
@@ -164,18 +187,20 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
                     for k, (z, o) in enumerate(zip(zones, opts))]
         materials = [f"ground_zone{k}" for k in range(len(zones))]
         repeat = [z["scale_m"] for z in look["ground"]]
-    zone_of_route = (np.arange(n_route) * len(zones) // n_route).astype(int)
     for name, img in zip(materials, textures):
         _add_texture(spec, name, img)
         mat = spec.add_material(name=name, specular=0.05, shininess=0.05)
         mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
-    if look is not None:
-        _apply_sky_and_light(spec, look)
+    return zones, materials, repeat
 
-    # Visible ground: tiles of 10x10 cells, each tile in the zone of its nearest route point.
+
+def _ground_tiles(spec, grid, route, zone_of_route, materials, repeat, tile=10):
+    """The visible ground: meshes of ``tile`` x ``tile`` cells, each in the zone of its nearest
+    route point (a contiguous arc of the route)."""
+    from polar_sim.sim.robots import GROUP
+
     verts = grid.vertices()
-    tile = 10
-    tree_pts = route
+    n = grid.heights.shape[0]
     for i0 in range(0, n - 1, tile):
         for j0 in range(0, n - 1, tile):
             i1, j1 = min(i0 + tile, n - 1), min(j0 + tile, n - 1)
@@ -184,8 +209,7 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
             remap = np.full(len(verts), -1)
             remap[used] = np.arange(len(used))
             V = verts[used]
-            centre = V[:, :2].mean(0)
-            k = zone_of_route[np.argmin(np.linalg.norm(tree_pts - centre, axis=1))]
+            k = zone_of_route[np.argmin(np.linalg.norm(route - V[:, :2].mean(0), axis=1))]
             name = f"ground_tile_{i0}_{j0}"
             mesh = spec.add_mesh(name=name)
             # Static visual mesh: its inertia is unused, and a flat tile has no volume.
@@ -198,20 +222,32 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
                                     material=materials[k], contype=0, conaffinity=0,
                                     group=GROUP["ground"])
 
-    # Collision ground: a hidden heightfield (or plane when flat) under the visible meshes.
+
+def _collision_ground(spec, grid, flat):
+    """The collision ground: a hidden plane when flat, else a heightfield, under the visible meshes."""
+    from polar_sim.sim.robots import GROUP
+
+    heights = grid.heights
+    n = heights.shape[0]
+    half = grid.cell * (n - 1) / 2
     if flat:
         spec.worldbody.add_geom(name="ground_collision", type=mujoco.mjtGeom.mjGEOM_PLANE,
                                 size=[half, half, 1.0], group=GROUP["collision"], rgba=[0, 0, 0, 0],
                                 friction=[1.0, 0.01, 0.001])
-    else:
-        zmin, zmax = float(heights.min()), float(heights.max())
-        hf = spec.add_hfield(name="terrain", nrow=n, ncol=n, size=[half, half, zmax - zmin, 1.0])
-        hf.userdata = ((heights - zmin) / (zmax - zmin)).ravel().tolist()
-        spec.worldbody.add_geom(name="ground_collision", type=mujoco.mjtGeom.mjGEOM_HFIELD,
-                                hfieldname="terrain", pos=[0, 0, zmin], group=GROUP["collision"],
-                                rgba=[0, 0, 0, 0], friction=[1.0, 0.01, 0.001])
+        return
+    zmin, zmax = float(heights.min()), float(heights.max())
+    hf = spec.add_hfield(name="terrain", nrow=n, ncol=n, size=[half, half, zmax - zmin, 1.0])
+    hf.userdata = ((heights - zmin) / (zmax - zmin)).ravel().tolist()
+    spec.worldbody.add_geom(name="ground_collision", type=mujoco.mjtGeom.mjGEOM_HFIELD,
+                            hfieldname="terrain", pos=[0, 0, zmin], group=GROUP["collision"],
+                            rgba=[0, 0, 0, 0], friction=[1.0, 0.01, 0.001])
 
-    # Obstacles beside the route: boxes, walls and poles in colours unlike the ground.
+
+def _obstacles(spec, rng, grid, route, n_obst=60):
+    """``n_obst`` obstacles 5.5-10 m beside the route: boxes, walls and poles, in colours unlike
+    the ground, their bases sunk 0.3 m so that no gap shows on slopes."""
+    from polar_sim.sim.robots import GROUP
+
     colours = list(OBSTACLE_COLOURS)
     for c in colours:
         _add_texture(spec, f"obst_{c}", obstacle_texture(OBSTACLE_COLOURS[c], rng))
@@ -220,8 +256,7 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     tangents = np.roll(route, -1, axis=0) - np.roll(route, 1, axis=0)
     tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
     normals = np.stack([-tangents[:, 1], tangents[:, 0]], 1)
-    n_obst = 60
-    idx = np.sort(rng.choice(np.arange(20, n_route - 5), n_obst, replace=False))
+    idx = np.sort(rng.choice(np.arange(20, len(route) - 5), n_obst, replace=False))
     for k, i in enumerate(idx):
         side = rng.choice([-1.0, 1.0])
         kind = rng.choice(["box", "wall", "pole"], p=[0.45, 0.25, 0.3])
@@ -229,7 +264,6 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
         px, py = route[i] + side * off * normals[i]
         yaw = np.arctan2(tangents[i, 1], tangents[i, 0])
         colour = colours[rng.integers(len(colours))]
-        common = dict(material=f"obst_{colour}", group=GROUP["static"])
         if kind == "box":
             sx, sy, sz = rng.uniform(0.5, 1.2, 3)
             yaw += rng.uniform(-0.5, 0.5)
@@ -240,15 +274,17 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
         else:
             sz = rng.uniform(1.2, 2.0)
             size, gtype = [0.15, sz + 0.3, 0], mujoco.mjtGeom.mjGEOM_CYLINDER
-        # Sink the base 0.3 m into the ground so no gap shows on slopes.
         zc = float(grid.height(px, py)) + size[2 if gtype == mujoco.mjtGeom.mjGEOM_BOX else 1] - 0.3
         spec.worldbody.add_geom(name=f"obstacle_{k}_{kind}", type=gtype, size=size,
                                 pos=[px, py, zc], quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)],
-                                **common)
+                                material=f"obst_{colour}", group=GROUP["static"])
 
-    if rover not in ROVER_PRESETS:
-        raise ValueError(f"rover: unknown preset {rover!r}; expected one of {sorted(ROVER_PRESETS)}")
-    cfg = ROVER_PRESETS[rover]
+
+def _rover_at_start(spec, grid, route, cfg, camera_height, camera_fovy):
+    """Add the rover (preset ``cfg``, camera overrides applied) at the route's start, facing
+    along it. Returns (the rover's configuration, the start (x, y, yaw))."""
+    from polar_sim.sim.robots import add_rover
+
     if camera_height is not None:
         cfg = dataclasses.replace(cfg, camera_height=float(camera_height))
     if camera_fovy is not None:
@@ -256,15 +292,7 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     t0 = route[1] - route[-1]
     start = (route[0, 0], route[0, 1], float(np.arctan2(t0[1], t0[0])))
     add_rover(spec, cfg, start, z0=float(grid.height(start[0], start[1])))
-    return {
-        "route": route,
-        "zones": zones,
-        "zone_of_route": zone_of_route,
-        "terrain": grid,
-        "start_pose2d": np.array(start),
-        "rover_config": cfg,
-        "appearance": look,
-    }
+    return cfg, start
 
 
 def _apply_sky_and_light(spec, look):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import mujoco
 import numpy as np
 import trimesh
@@ -11,13 +13,24 @@ from polar_sim.geometry import make_pose, quat_to_matrix
 from polar_sim.sim import sdf as _sdf
 from polar_sim.sim.robots import GROUP
 
-__all__ = ["LABELS", "label_table", "body_pose", "body_twist", "geom_trimesh", "body_trimesh",
+__all__ = ["LABELS", "name_of", "id_of", "label_table", "body_pose", "body_twist", "geom_trimesh", "body_trimesh",
            "SceneSDF", "static_geoms", "subtree"]
 
 #: Per-pixel classes of ``CameraFrame.labels``.
 LABELS = {"none": 0, "ground": 1, "obstacle": 2, "target": 3, "occluder": 4, "robot": 5}
 
 _G = mujoco.mjtGeom
+
+
+def name_of(model, obj, i):
+    """Name of object ``i`` of type ``obj`` (an ``mjtObj``), "" if unnamed (``model.geom(i).name``
+    without building the accessor, which costs a few hundred microseconds per call)."""
+    return mujoco.mj_id2name(model, obj, i) or ""
+
+
+def id_of(model, obj, name):
+    """Id of the object of type ``obj`` named ``name``, -1 if there is none."""
+    return mujoco.mj_name2id(model, obj, name)
 
 
 def subtree(model, root_body):
@@ -31,7 +44,7 @@ def subtree(model, root_body):
 
 
 def _is_ground(model, g):
-    name = model.geom(g).name
+    name = name_of(model, mujoco.mjtObj.mjOBJ_GEOM, g)
     return (model.geom_type[g] in (_G.mjGEOM_PLANE, _G.mjGEOM_HFIELD)
             or model.geom_group[g] == GROUP["ground"]
             or name.startswith(("ground", "terrain", "floor")))
@@ -56,12 +69,11 @@ def label_table(model, target=None):
     if target is not None:
         mark(subtree(model, model.body(target).id), LABELS["target"])
     for b in range(model.nbody):
-        if model.body(b).name.startswith("hand"):
+        if name_of(model, mujoco.mjtObj.mjOBJ_BODY, b).startswith("hand"):
             mark(subtree(model, b), LABELS["occluder"])
-    try:
-        mark(subtree(model, model.body("rover").id), LABELS["robot"])
-    except KeyError:
-        pass
+    rover = id_of(model, mujoco.mjtObj.mjOBJ_BODY, "rover")
+    if rover >= 0:
+        mark(subtree(model, rover), LABELS["robot"])
     return lut
 
 
@@ -130,19 +142,12 @@ def body_trimesh(model, body_id, groups=(GROUP["static"], GROUP["dynamic"], GROU
 def static_geoms(model):
     """Geoms of the static scene: on bodies welded to the world (no joints, not mocap),
     visible (not in the hidden collision group), ground included."""
-    out = []
-    for g in range(model.ngeom):
-        b = model.geom_bodyid[g]
-        root = b
-        static = True
-        while root != 0:
-            if model.body_jntnum[root] > 0 or model.body_mocapid[root] >= 0:
-                static = False
-                break
-            root = model.body_parentid[root]
-        if static and model.geom_group[g] != GROUP["collision"]:
-            out.append(g)
-    return out
+    static = np.ones(model.nbody, bool)
+    for b in range(1, model.nbody):  # parents come before their children
+        static[b] = (model.body_jntnum[b] == 0 and model.body_mocapid[b] < 0
+                     and static[model.body_parentid[b]])
+    keep = static[model.geom_bodyid] & (model.geom_group != GROUP["collision"])
+    return np.flatnonzero(keep).tolist()
 
 
 class SceneSDF:
@@ -158,16 +163,24 @@ class SceneSDF:
     def __init__(self, model, data, terrain=None):
         self._terrain = terrain
         self._terrain_mesh = None
-        self._items = []
-        for g in static_geoms(model):
-            if terrain is not None and _is_ground(model, g) and model.geom_type[g] == _G.mjGEOM_MESH:
-                continue  # represented by the terrain grid
-            R = data.geom_xmat[g].reshape(3, 3).copy()
-            self._items.append((g, int(model.geom_type[g]), model.geom_size[g].copy(), R,
-                                data.geom_xpos[g].copy(), model.geom(g).name))
+        ids = static_geoms(model)
+        if terrain is not None:  # ground meshes are represented by the terrain grid
+            ids = [g for g in ids if not (model.geom_type[g] == _G.mjGEOM_MESH and _is_ground(model, g))]
+        self._ids = np.array(ids, dtype=np.int64)
+        # The static geoms' poses, read once (they do not move).
+        self._type = model.geom_type[self._ids].astype(np.int64)
+        self._size = model.geom_size[self._ids].copy()
+        self._R = data.geom_xmat[self._ids].reshape(-1, 3, 3).copy()
+        self._x = data.geom_xpos[self._ids].copy()
         self._model = model
         self._meshes = {}
         self._sections = {}
+
+    @functools.cached_property
+    def _items(self):
+        """(geom, type, size (3,), R (3, 3), position (3,), name) of every static geom."""
+        return [(int(g), int(t), s, R, x, name_of(self._model, mujoco.mjtObj.mjOBJ_GEOM, int(g)))
+                for g, t, s, R, x in zip(self._ids, self._type, self._size, self._R, self._x)]
 
     # -- 3D ---------------------------------------------------------------------------------
     def __call__(self, points, return_geom=False):
@@ -220,53 +233,34 @@ class SceneSDF:
 
     # -- 2D section -------------------------------------------------------------------------
     def _section_tables(self):
-        """Vertical boxes, vertical cylinders/capsules and spheres as arrays (for one broadcast
-        per shape kind), and the remaining geoms for mesh sectioning."""
+        """Vertical boxes, vertical cylinders/capsules and spheres as arrays (for the compiled
+        section), and the remaining geoms for mesh sectioning; ground and planes left out."""
         if hasattr(self, "_tables"):
             return self._tables
-        boxes, discs, other = [], [], []
-        for g, t, s, R, x, name in self._items:
-            if _is_ground(self._model, g) or t == _G.mjGEOM_PLANE:
-                continue
-            vertical = abs(abs(R[2, 2]) - 1.0) < 1e-9
-            if t == _G.mjGEOM_BOX and vertical:
-                boxes.append((x, R[:2, :2], s))
-            elif t == _G.mjGEOM_SPHERE:
-                discs.append((x, s[0], 0.0, 2))
-            elif t in (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE) and vertical:
-                discs.append((x, s[0], s[1], 0 if t == _G.mjGEOM_CYLINDER else 1))
-            else:
-                other.append((g, R, x))
-        bt = None
-        if boxes:
-            bt = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]), np.array([b[2] for b in boxes]))
+        t, R = self._type, self._R
+        ground = np.array([t_ == _G.mjGEOM_PLANE or _is_ground(self._model, int(g)) for g, t_ in zip(self._ids, t)],
+                          dtype=bool)
+        vertical = np.abs(np.abs(R[:, 2, 2]) - 1.0) < 1e-9
+        box = ~ground & (t == _G.mjGEOM_BOX) & vertical
+        disc = ~ground & ((t == _G.mjGEOM_SPHERE) | (np.isin(t, (_G.mjGEOM_CYLINDER, _G.mjGEOM_CAPSULE)) & vertical))
+        bt = (self._x[box], R[box, :2, :2], self._size[box]) if box.any() else None
         dt = None
-        if discs:
-            dt = (np.array([c[0] for c in discs]), np.array([c[1] for c in discs]),
-                  np.array([c[2] for c in discs]), np.array([c[3] for c in discs]))
+        if disc.any():
+            kind = np.where(t[disc] == _G.mjGEOM_CYLINDER, 0, np.where(t[disc] == _G.mjGEOM_CAPSULE, 1, 2))
+            dt = (self._x[disc], self._size[disc, 0], np.where(kind == 2, 0.0, self._size[disc, 1]), kind)
+        rest = ~ground & ~box & ~disc
+        other = [(int(g), R_, x) for g, R_, x in zip(self._ids[rest], R[rest], self._x[rest])]
         self._tables = (bt, dt, other)
         return self._tables
 
-    def section(self, points2d, z):
-        """Signed distance (n,) within the horizontal plane at height ``z`` of points (n, 2).
-
-        Ground geoms are left out: the section is what a planar lidar at height ``z`` sees.
-        Vertical boxes, cylinders and capsules and all spheres are exact closed forms; any
-        other shape is sectioned as a mesh (exact for meshes, 96-gon for tilted cylinders).
-        """
-        if len(points2d) > 4096:  # bound the (points x shapes) temporaries of scenes with many geoms
-            return np.concatenate([self.section(points2d[i : i + 4096], z) for i in range(0, len(points2d), 4096)])
-        boxes, discs, other = self._section_tables()
-        out = np.full(len(points2d), np.inf)
-        if boxes is not None:
-            c, R2, half = boxes
-            cut = np.abs(z - c[:, 2]) < half[:, 2]
-            if cut.any():
-                # Local coordinates of every point in every cut box: (n, k, 2).
-                rel = points2d[:, None, :] - c[None, cut, :2]
-                q = np.abs(np.einsum("nkj,kji->nki", rel, R2[cut])) - half[None, cut, :2]
-                d = np.linalg.norm(np.maximum(q, 0.0), axis=2) + np.minimum(q.max(axis=2), 0.0)
-                np.minimum(out, d.min(axis=1), out=out)
+    def _cut(self, z):
+        """The rectangles (k, 8) and discs (m, 3) of :func:`polar_sim.sim.sdf.section_boxes_discs`
+        that the plane at height ``z`` cuts (kept while the cut shapes and radii stay the same)."""
+        if getattr(self, "_cut_z", None) == z:
+            return self._cut_tables
+        boxes, discs, _ = self._section_tables()
+        box_cut = np.abs(z - boxes[0][:, 2]) < boxes[2][:, 2] if boxes is not None else np.zeros(0, bool)
+        radius = np.zeros(0)
         if discs is not None:
             c, r, hl, kind = discs
             dz = np.abs(z - c[:, 2])
@@ -280,15 +274,56 @@ class SceneSDF:
             radius[end] = np.sqrt(r[end] ** 2 - (dz[end] - hl[end]) ** 2)
             sph = (kind == 2) & (dz < r)
             radius[sph] = np.sqrt(r[sph] ** 2 - dz[sph] ** 2)
-            cut = radius > 0
-            if cut.any():
-                d = np.linalg.norm(points2d[:, None, :] - c[None, cut, :2], axis=2) - radius[None, cut]
-                np.minimum(out, d.min(axis=1), out=out)
-        for g, R, x in other:
+        key = box_cut.tobytes() + radius.tobytes()
+        if getattr(self, "_cut_key", None) != key:
+            B = np.zeros((0, 8))
+            if box_cut.any():
+                c, R2, half = boxes
+                B = np.ascontiguousarray(np.c_[c[box_cut, :2], R2[box_cut].reshape(-1, 4), half[box_cut, :2]])
+            D = np.zeros((0, 3))
+            if (radius > 0).any():
+                cut = radius > 0
+                D = np.ascontiguousarray(np.c_[discs[0][cut, :2], radius[cut]])
+            self._cut_key, self._cut_tables = key, (B, D)
+        self._cut_z = z
+        return self._cut_tables
+
+    def section(self, points2d, z):
+        """Signed distance (n,) within the horizontal plane at height ``z`` of points (n, 2).
+
+        Ground geoms are left out: the section is what a planar lidar at height ``z`` sees.
+        Vertical boxes, cylinders and capsules and all spheres are exact closed forms (one
+        compiled loop over every point and shape); any other shape is sectioned as a mesh (exact
+        for meshes, 96-gon for tilted cylinders).
+        """
+        points2d = np.ascontiguousarray(points2d, dtype=np.float64)
+        out = _sdf.section_boxes_discs(points2d, *self._cut(z))
+        for g, R, x in self._section_tables()[2]:
             d = self._mesh_section(g, R, x, z, points2d)
             if d is not None:
                 np.minimum(out, d, out=out)
         return out
+
+    def section_stencil(self, offsets, pose, frame, z, step):
+        """:func:`polar_sim.sim.sdf.section_stencil` in the plane at height ``z`` (pose and frame as
+        (x, y, cos, sin) arrays, frame empty for the world; step 0 for no gradient), or None when
+        the scene has shapes other than vertical boxes, discs and spheres (the caller then
+        composes the points and calls :meth:`section` / :meth:`section_gradient`)."""
+        if self._section_tables()[2]:
+            return None
+        return _sdf.section_stencil(offsets, pose, frame, *self._cut(z), float(step))
+
+    def section_gradient(self, points2d, z, step):
+        """Distance (n,) and gradient (n, 2) in the plane at height ``z``: the gradient is the
+        central difference ``(f(p + step e) - f(p - step e)) / (2 step)`` per axis, step in m."""
+        points2d = np.ascontiguousarray(points2d, dtype=np.float64)
+        if not self._section_tables()[2]:
+            return _sdf.section_boxes_discs_gradient(points2d, *self._cut(z), float(step))
+        f = lambda p: self.section(p, z)  # noqa: E731
+        h = float(step)
+        gx = (f(points2d + [h, 0]) - f(points2d - [h, 0])) / (2 * h)
+        gy = (f(points2d + [0, h]) - f(points2d - [0, h])) / (2 * h)
+        return f(points2d), np.stack([gx, gy], 1)
 
     def _mesh_section(self, g, R, x, z, points2d):
         key = (g, round(z, 9))

@@ -270,10 +270,43 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
     the indoor preset's 0.6).
     """
     _check_options(size, yard, clutter, lidar_beams, lidar_range, camera_height)
+    # One generator drives every step below, in this order: the order is the layout's identity.
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7004]))
     Lx, Ly, yard = float(size[0]), float(size[1]), float(yard)
     lay = _Layout()
-    # Outer walls outside the interior [0, Lx] x [0, Ly]; doors in the east wall onto the yard.
+    t = _outer_walls(lay, rng, Lx, Ly)
+    # Zones: racking in the west, a main aisle, partitions in the east.
+    xr = rng.uniform(0.45, 0.6) * Lx
+    xp = xr + rng.uniform(1.8, 2.8)
+    along = "x" if rng.random() < 0.5 else "y"
+    aisles, rows = _rows(lay, rng, (0.0, xr, 0.0, Ly), along)
+    hall, part = (0.0, Lx, 0.0, Ly), (xp, Lx, 0.0, Ly)
+    yard_rect = (Lx + 2 * t, Lx + 2 * t + yard, 0.0, Ly)
+    feats = {"arcs": _arc_walls(lay, rng, part)}
+    feats["thin_walls"], inner_corners = _thin_walls(lay, rng, part)
+    feats["crates"] = _crates(lay, rng, part, yard_rect)
+    feats["pillars"] = _pillars(lay, rng, hall, part)
+    feats["bollards"] = _bollards(lay, rng, yard_rect)
+    feats["clutter"] = _clutter(lay, rng, int(clutter), hall, part, yard_rect)
+    start = _start_pose(lay, rng, part, seed)
+    _add_geoms(spec, lay)
+    cfg = _add_floor_and_rover(spec, start, Lx + yard, Ly, lidar_beams, lidar_range, camera_height)
+    boxes, discs = lay.arrays()
+    regions = {f"aisle_{k}": a for k, a in enumerate(aisles)}
+    regions.update(main_aisle=(xr + 0.2, xp - 0.2, 0.3, Ly - 0.3), partitions=part,
+                   yard=(yard_rect[0] + 0.5, yard_rect[1] - 0.5, 0.5, Ly - 0.5))
+    concave = [(0.0, 0.0), (0.0, Ly), (Lx, 0.0), (Lx, Ly)] + inner_corners  # the hall's and the L returns'
+    return {"rover_config": cfg, "start_pose2d": start, "regions": regions,
+            "bounds": (-2 * t - 0.5, yard_rect[1] + 0.5, -2 * t - 0.5, Ly + 2 * t + 0.5),
+            "hall": hall, "yard": yard_rect, "rows_along": along,
+            "corners": _corners(lay, np.array(concave)),
+            "layout": {"boxes": boxes, "discs": discs, "names": [b[6] for b in lay.boxes] + [d[4] for d in lay.discs]},
+            "features": _features(lay, rows, feats)}
+
+
+def _outer_walls(lay, rng, Lx, Ly):
+    """The outer walls, outside the interior [0, Lx] x [0, Ly], with one or two doors in the east
+    wall onto the yard. Returns the walls' half thickness (m)."""
     t = rng.uniform(0.1, 0.15)
     lay.box(Lx / 2, -t, Lx / 2 + 2 * t, t, 0.0, 1.25, "wall_south", "wall", "wall")
     lay.box(Lx / 2, Ly + t, Lx / 2 + 2 * t, t, 0.0, 1.25, "wall_north", "wall", "wall")
@@ -288,33 +321,35 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
     cuts.append(Ly)
     for k, (a, b) in enumerate(zip(cuts[::2], cuts[1::2])):
         lay.box(Lx + t, (a + b) / 2, t, (b - a) / 2, 0.0, 1.25, f"wall_east_{k}", "wall", "wall")
-    # Zones: racking in the west, a main aisle, partitions in the east.
-    xr = rng.uniform(0.45, 0.6) * Lx
-    xp = xr + rng.uniform(1.8, 2.8)
-    along = "x" if rng.random() < 0.5 else "y"
-    aisles, rows = _rows(lay, rng, (0.0, xr, 0.0, Ly), along)
-    part = (xp, Lx, 0.0, Ly)
-    yard_rect = (Lx + 2 * t, Lx + 2 * t + yard, 0.0, Ly)
-    corners = [(0.0, 0.0), (0.0, Ly), (Lx, 0.0), (Lx, Ly)]  # the hall's concave corners
-    feats = {"thin_walls": [], "arcs": [], "crates": [], "pillars": [], "bollards": []}
-    # Curved walls.
+    return t
+
+
+def _arc_walls(lay, rng, part):
+    """One or two curved thin walls in the partition zone; returns their (cx, cy, r, a0, a1, thickness)."""
+    out = []
     for k in range(int(rng.integers(1, 3))):
         def arc():
             r, sweep, ht = rng.uniform(1.5, 4.0), np.radians(rng.uniform(60, 180)), rng.uniform(0.025, 0.075)
-            cx, cy, a0 = rng.uniform(xp, Lx), rng.uniform(0, Ly), rng.uniform(0, 2 * np.pi)
+            cx, cy, a0 = rng.uniform(part[0], part[1]), rng.uniform(part[2], part[3]), rng.uniform(0, 2 * np.pi)
             arc.params = (cx, cy, r, a0, a0 + sweep, 2 * ht)
             return _arc_boxes(cx, cy, r, a0, sweep, ht), np.zeros((0, 3))
         got = _place(lay, rng, arc, part)
         if got is not None:
             for i, b in enumerate(got[0]):
                 lay.box(*b, 1.25, f"arc_{k}_{i}", "thin_wall", "arc")
-            feats["arcs"].append(arc.params)
-    # Thin walls, half of them with an L return.
+            out.append(arc.params)
+    return out
+
+
+def _thin_walls(lay, rng, part):
+    """Two to four straight thin walls in the partition zone, half of them with an L return.
+    Returns their segments (x0, y0, x1, y1, thickness) and the L returns' inner corners."""
+    segments, inner = [], []
     for k in range(int(rng.integers(2, 5))):
         def thin():
             ht, L = rng.uniform(0.025, 0.075), rng.uniform(2.0, 5.0)
             a = rng.choice([0.0, np.pi / 2]) if rng.random() < 0.6 else rng.uniform(0, np.pi)
-            p0 = np.array([rng.uniform(xp, Lx), rng.uniform(0, Ly)])
+            p0 = np.array([rng.uniform(part[0], part[1]), rng.uniform(part[2], part[3])])
             d = np.array([np.cos(a), np.sin(a)])
             p1 = p0 + L * d
             if rng.random() < 0.5:
@@ -329,10 +364,15 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
         if got is not None:
             for i, b in enumerate(got[0]):
                 lay.box(*b, 1.25, f"thin_wall_{k}_{i}", "thin_wall", "thin_wall")
-            feats["thin_walls"] += [(*p, *q, 2 * h) for p, q, h in thin.segs]
+            segments += [(*p, *q, 2 * h) for p, q, h in thin.segs]
             if thin.inner is not None:
-                corners.append(tuple(thin.inner))
-    # Crates at random yaw, in the partition zone and in the yard.
+                inner.append(tuple(thin.inner))
+    return segments, inner
+
+
+def _crates(lay, rng, part, yard_rect):
+    """Crates at random yaw, in the partition zone and in the yard; returns their (x, y, hx, hy, yaw)."""
+    out = []
     for where, n in ((part, int(rng.integers(4, 9))), (yard_rect, int(rng.integers(1, 4)))):
         for _ in range(n):
             def crate():
@@ -341,35 +381,50 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
                 return b[None], np.zeros((0, 3))
             got = _place(lay, rng, crate, where)
             if got is not None:
-                lay.box(*got[0][0], rng.uniform(0.3, 0.6), f"crate_{len(feats['crates'])}", "crate", "crate")
-                feats["crates"].append(tuple(got[0][0]))
-    # Pillars on a structural grid, wherever they fit; bollards in the yard.
+                lay.box(*got[0][0], rng.uniform(0.3, 0.6), f"crate_{len(out)}", "crate", "crate")
+                out.append(tuple(got[0][0]))
+    return out
+
+
+def _pillars(lay, rng, hall, part):
+    """Pillars on a structural grid wherever they fit, and at least two; returns their (x, y, r)."""
+    out = []
     pitch, pr = rng.uniform(6.0, 9.0), rng.uniform(0.15, 0.3)
     ox, oy = rng.uniform(0, pitch, 2)
-    for x in np.arange(ox, Lx, pitch):
-        for y in np.arange(oy, Ly, pitch):
+    for x in np.arange(ox, hall[1], pitch):
+        for y in np.arange(oy, hall[3], pitch):
             disc = np.array([[x, y, pr]])
-            if _inside(np.zeros((0, 5)), disc, (0, Lx, 0, Ly), 1.0) and _clearance(lay, np.zeros((0, 5)), disc) >= _GAP:
-                lay.disc(x, y, pr, 1.5, f"pillar_{len(feats['pillars'])}", "pillar", "pillar")
-                feats["pillars"].append((x, y, pr))
-    while len(feats["pillars"]) < 2:  # a grid that found no room: free-standing pillars
-        got = _place(lay, rng, lambda: (np.zeros((0, 5)), np.array([[rng.uniform(xp, Lx), rng.uniform(0, Ly), pr]])),
-                     part, tries=500)
+            if _inside(np.zeros((0, 5)), disc, hall, 1.0) and _clearance(lay, np.zeros((0, 5)), disc) >= _GAP:
+                lay.disc(x, y, pr, 1.5, f"pillar_{len(out)}", "pillar", "pillar")
+                out.append((x, y, pr))
+    while len(out) < 2:  # a grid that found no room: free-standing pillars
+        got = _place(lay, rng, lambda: (np.zeros((0, 5)), np.array([[rng.uniform(part[0], part[1]),
+                     rng.uniform(part[2], part[3]), pr]])), part, tries=500)
         if got is None:  # pragma: no cover - the partition zone always has room
             break
-        lay.disc(*got[1][0], 1.5, f"pillar_{len(feats['pillars'])}", "pillar", "pillar")
-        feats["pillars"].append(tuple(got[1][0]))
+        lay.disc(*got[1][0], 1.5, f"pillar_{len(out)}", "pillar", "pillar")
+        out.append(tuple(got[1][0]))
+    return out
+
+
+def _bollards(lay, rng, yard_rect):
+    """Two to four bollards in the yard; returns their (x, y, r)."""
+    out = []
     for _ in range(int(rng.integers(2, 5))):
         got = _place(lay, rng, lambda: (np.zeros((0, 5)), np.array([[rng.uniform(*yard_rect[:2]),
                      rng.uniform(*yard_rect[2:]), rng.uniform(0.08, 0.15)]])), yard_rect)
         if got is not None:
-            lay.disc(*got[1][0], 0.45, f"bollard_{len(feats['bollards'])}", "pillar", "bollard")
-            feats["bollards"].append(tuple(got[1][0]))
-    # Clutter: beside a shelf face or wall (2-10 cm from it), in the open, or in the yard.
+            lay.disc(*got[1][0], 0.45, f"bollard_{len(out)}", "pillar", "bollard")
+            out.append(tuple(got[1][0]))
+    return out
+
+
+def _clutter(lay, rng, n, hall, part, yard_rect):
+    """``n`` small objects, each beside a shelf face or wall (2-10 cm from it), in the open, or in
+    the yard (200 tries each). Returns how many were placed."""
     faces = [b for b in lay.boxes if b[8] in ("shelf", "wall", "thin_wall")]
-    n_clutter = 0
-    hall = (0.0, Lx, 0.0, Ly)
-    for _ in range(int(clutter)):
+    placed = 0
+    for _ in range(n):
         mode = rng.choice(3, p=[0.3, 0.5, 0.2])
         for _attempt in range(200):
             cyl = rng.random() < 0.5
@@ -399,23 +454,31 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
                 continue
             hz = rng.uniform(0.2, 0.5)
             if cyl:
-                lay.disc(x, y, h[0], hz, f"clutter_{n_clutter}", "clutter", "clutter")
+                lay.disc(x, y, h[0], hz, f"clutter_{placed}", "clutter", "clutter")
             else:
-                lay.box(x, y, h[0], h[1], yaw, hz, f"clutter_{n_clutter}", "clutter", "clutter")
-            n_clutter += 1
+                lay.box(x, y, h[0], h[1], yaw, hz, f"clutter_{placed}", "clutter", "clutter")
+            placed += 1
             break
-    # The start: a free spot in the partition zone.
+    return placed
+
+
+def _start_pose(lay, rng, part, seed):
+    """The start (x, y, yaw): a free spot in the partition zone, 1 m inside it."""
     for _ in range(2000):
-        xy = np.array([rng.uniform(xp + 1, Lx - 1), rng.uniform(1, Ly - 1)])
+        xy = np.array([rng.uniform(part[0] + 1, part[1] - 1), rng.uniform(part[2] + 1, part[3] - 1)])
         if lay.sdf(xy[None])[0] >= _GAP:
             break
     else:  # pragma: no cover - the partition zone always has room
         raise ValueError(f"warehouse2d: seed {seed} left no free start; change the options")
-    start = np.array([xy[0], xy[1], rng.uniform(-np.pi, np.pi)])
-    _add_geoms(spec, lay)
+    return np.array([xy[0], xy[1], rng.uniform(-np.pi, np.pi)])
+
+
+def _add_floor_and_rover(spec, start, extent_x, extent_y, lidar_beams, lidar_range, camera_height):
+    """Size the floor to the hall and yard (``extent_x`` x ``extent_y``, m, from the origin), add
+    the indoor rover at ``start`` with its lidar's beams and range; returns the rover's configuration."""
     floor = spec.geom("floor")
-    floor.size = [(Lx + yard) / 2 + 40.0, Ly / 2 + 40.0, 0.5]
-    floor.pos = [(Lx + yard) / 2, Ly / 2, 0.0]
+    floor.size = [extent_x / 2 + 40.0, extent_y / 2 + 40.0, 0.5]
+    floor.pos = [extent_x / 2, extent_y / 2, 0.0]
     cfg = ROVER_PRESETS["indoor"]
     if camera_height is not None:
         cfg = dataclasses.replace(cfg, camera_height=float(camera_height))
@@ -423,23 +486,17 @@ def build_warehouse(spec: mujoco.MjSpec, seed, *, size=(24.0, 18.0), yard=8.0, c
     for txt in spec.texts:
         if txt.name == "sensor:lidar":
             txt.data = txt.data.replace("max=30", f"max={float(lidar_range):g}")
-    boxes, discs = lay.arrays()
-    regions = {f"aisle_{k}": a for k, a in enumerate(aisles)}
-    regions.update(main_aisle=(xr + 0.2, xp - 0.2, 0.3, Ly - 0.3), partitions=part,
-                   yard=(yard_rect[0] + 0.5, yard_rect[1] - 0.5, 0.5, Ly - 0.5))
-    return {"rover_config": cfg, "start_pose2d": start, "regions": regions,
-            "bounds": (-2 * t - 0.5, yard_rect[1] + 0.5, -2 * t - 0.5, Ly + 2 * t + 0.5),
-            "hall": (0.0, Lx, 0.0, Ly), "yard": yard_rect, "rows_along": along,
-            "corners": _corners(lay, np.array(corners)),
-            "layout": {"boxes": boxes, "discs": discs, "names": [b[6] for b in lay.boxes] + [d[4] for d in lay.discs]},
-            "features": {"shelf_rows": np.array(rows, float).reshape(-1, 4),
-                         "racks": sum(1 for b in lay.boxes if b[8] == "upright"),
-                         "thin_walls": np.array(feats["thin_walls"], float).reshape(-1, 5),
-                         "arcs": np.array(feats["arcs"], float).reshape(-1, 6),
-                         "crates": np.array(feats["crates"], float).reshape(-1, 5),
-                         "pillars": np.array(feats["pillars"], float).reshape(-1, 3),
-                         "bollards": np.array(feats["bollards"], float).reshape(-1, 3),
-                         "clutter": n_clutter}}
+    return cfg
+
+
+def _features(lay, rows, feats):
+    """The ``features`` meta entry: each kind of feature as a float array (k, columns)."""
+    def rows_of(key, cols):
+        return np.array(feats[key], float).reshape(-1, cols)
+    return {"shelf_rows": np.array(rows, float).reshape(-1, 4),
+            "racks": sum(1 for b in lay.boxes if b[8] == "upright"),
+            "thin_walls": rows_of("thin_walls", 5), "arcs": rows_of("arcs", 6), "crates": rows_of("crates", 5),
+            "pillars": rows_of("pillars", 3), "bollards": rows_of("bollards", 3), "clutter": feats["clutter"]}
 
 
 def _corners(lay, concave):

@@ -74,3 +74,48 @@ def test_geodesic_goes_round_a_wall():
     legs = np.hypot(*(p - end)) + np.hypot(*(end - [1.5, -2.0]))
     assert legs - 0.2 <= geo(p) <= 1.0824 * legs + 0.2
     assert geo(p) > 2.5 * 3.0                # far more than the 3 m straight line
+
+
+# The geodesic fields of three navworld layouts equal, bit for bit, those of the numba Dijkstra
+# that skimage.graph replaced (recorded with it in data/geodesic_fields.npz, main 969d506).
+def test_geodesic_fields_equal_the_recorded_ones():
+    from pathlib import Path
+
+    from polar_sim.envs._gridplan import GeodesicDistance
+
+    ref = np.load(Path(__file__).parent / "data" / "geodesic_fields.npz")
+    for name in ("room_0", "room_7", "rooms2_3"):
+        g = GeodesicDistance(ref[f"{name}/occupancy"], ref[f"{name}/origin"], float(ref[f"{name}/res"]),
+                             ref[f"{name}/goal"])
+        np.testing.assert_array_equal(g.dist, ref[f"{name}/dist"], err_msg=name)
+
+
+# A search that stops at a cell gives that cell, and every cheaper one, its final cost; the cells
+# it did not reach are inf, never a wrong finite value.
+def test_cost_to_go_until_a_cell_is_exact_up_to_that_cell():
+    rng = np.random.default_rng(3)
+    cost = 1.0 + 3.0 * rng.random((70, 90))
+    cost[rng.random(cost.shape) < 0.25] = np.inf
+    cost[35, 45] = 1.0
+    full = cost_to_go(cost, 35, 45)
+    reach = np.argwhere(np.isfinite(full))
+    for i, j in reach[rng.choice(len(reach), 20, replace=False)]:
+        part = cost_to_go(cost, 35, 45, until=(i, j))
+        assert part[i, j] == full[i, j]
+        cheaper = full < full[i, j]
+        np.testing.assert_array_equal(part[cheaper], full[cheaper])
+        assert np.all((part == full) | np.isinf(part))
+
+
+# A point deep inside an obstacle (no reachable cell around it) is measured from the nearest
+# reachable cell: here the one 3 cells above it, unique, plus the straight line to its centre.
+def test_geodesic_from_inside_an_obstacle_goes_by_the_nearest_reachable_cell():
+    from polar_sim.envs._gridplan import GeodesicDistance
+
+    occ = np.zeros((30, 30), bool)
+    occ[10:19, 10:21] = True
+    geo = GeodesicDistance(occ, (0.0, 0.0), 0.1, (0.25, 0.25))
+    xy = np.array([1.55, 1.25])                      # cell (row 12, column 15)
+    centre = np.array([1.55, 0.95])                  # cell (row 9, column 15)
+    assert geo(xy) == pytest.approx(geo.dist[9, 15] + np.hypot(*(xy - centre)), abs=1e-12)
+    assert geo(centre) == pytest.approx(geo.dist[9, 15], abs=1e-12)

@@ -104,7 +104,8 @@ def test_forward_drive_action_mapping_is_exact():
 
     seen = []
     env = gym.make("polar_sim/GPISNav-Room-v1", pose_source="truth")
-    env.unwrapped.base.step = (lambda step: lambda a: (seen.append(np.array(a)), step(a))[1])(env.unwrapped.base.step)
+    base = env.unwrapped.base
+    base._apply_action = (lambda apply: lambda a: (seen.append(np.array(a)), apply(a))[1])(base._apply_action)
     w = ForwardDriveAction(env, min_drive=0.2)
     w.reset(seed=1000)
     w.step(np.float32([0.0, -0.5]))

@@ -42,6 +42,29 @@ def test_kinematic_unicycle_exact(flat):
         np.testing.assert_allclose(tw, [v, 0, 0, 0, 0, w], atol=1e-9)
 
 
+# kinematic="planar" is the same exact unicycle as kinematic=True on flat ground: the same pose,
+# twist, sensor poses and scans to 1e-12 over turns and straights (its orientation is set in closed
+# form instead of through a rotation matrix); on terrain it is refused.
+def test_planar_kinematic_equals_the_kinematic_mode():
+    a = World("rover_flat", seed=0, kinematic=True)
+    b = World("rover_flat", seed=0, kinematic="planar")
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        v, w = rng.uniform(0, 9), (0.0 if rng.random() < 0.2 else rng.uniform(-0.8, 0.8))
+        a.step((v, w))
+        b.step((v, w))
+        ta, tb = a.truth(), b.truth()
+        np.testing.assert_allclose(tb["robot_pose"], ta["robot_pose"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(tb["robot_twist"], ta["robot_twist"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(tb["lidars"]["lidar"], ta["lidars"]["lidar"], rtol=0, atol=1e-12)
+        assert tb["robot_collision"] == ta["robot_collision"]
+    np.testing.assert_allclose(b.lidar("lidar").ranges, a.lidar("lidar").ranges, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="planar"):
+        World("rover_terrain", seed=0, kinematic="planar")
+    with pytest.raises(TypeError, match="kinematic"):
+        World("rover_flat", seed=0, kinematic="plane")
+
+
 # The wheel controller delivers commanded (v, omega) on flat ground within a few percent.
 def test_wheel_controller_tracks_commands():
     with World("rover_flat", seed=1) as w:
