@@ -6,7 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["FeatureObservation", "STENCIL_KEYS", "FAR", "stencil_vector"]
+__all__ = ["FeatureObservation", "STENCIL_KEYS", "MASKED_KEYS", "KNOWN_VAR", "FAR", "stencil_vector"]
 
 #: The stencil keys a learned GPISNav policy reads by default: ``sdf_var`` and ``pose`` are left
 #: out (the variance's scale differs between map sources, the pose's range between tiers).
@@ -14,6 +14,10 @@ STENCIL_KEYS = ("goal", "sdf", "sdf_grad", "twist")
 #: Map distance (m) beyond which a stencil point tells the experts nothing (``SDFReactive`` drops
 #: points at 1.5 m or more): the masked features clip distances to it and put unknown points at it.
 FAR = 1.5
+#: ``SDFReactive``'s ``max_var``: stencil points with a map variance at or above it are unknown space.
+KNOWN_VAR = 0.5
+#: The keys the imitation recipe reads by default, with ``known_var=KNOWN_VAR`` (the masked stencil).
+MASKED_KEYS = ("goal", "sdf", "sdf_grad", "sdf_var", "twist")
 
 
 def stencil_vector(obs, keys, known_var=None):

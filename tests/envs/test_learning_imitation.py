@@ -83,7 +83,7 @@ def test_mlp_policy_matches_the_torch_net():
     rng = np.random.default_rng(1)
     mean, std = rng.normal(size=n), rng.uniform(0.5, 2.0, n)
     net = _mlp(n, (32, 16), "tanh")
-    pol = to_policy(net, mean, std, DAggerConfig(hidden=(32, 16)), env, ROOM, {}, {})
+    pol = to_policy(net, mean, std, DAggerConfig(hidden=(32, 16), obs_keys=KEYS, known_var=None), env, ROOM, {}, {})
     x = np.concatenate([obs[k].ravel() for k in KEYS]).astype(np.float64)
     z = np.clip((x - mean) / std, -10, 10)
     ref = net(torch.as_tensor(z, dtype=torch.float32)).detach().numpy()
@@ -133,7 +133,7 @@ def test_stencil_vector_masks_unknown_space_exactly(tmp_path):
         MLPPolicy([np.eye(2)], [np.zeros(2)], obs_keys=["goal"], obs_shapes={"goal": (2,)}, mean=np.zeros(2),
                   std=np.ones(2), known_var=0.5)
     with pytest.raises(ValueError, match="known_var"):
-        DAggerConfig(known_var=0.5)
+        DAggerConfig(obs_keys=KEYS, known_var=0.5)
 
 
 # FeatureObservation concatenates the keys in order and normalises exactly.
@@ -160,7 +160,7 @@ def test_imitation_weights_into_ppo_and_back():
     n = 2 + 64 + 128 + 2
     rng = np.random.default_rng(2)
     mean, std = rng.normal(size=n), rng.uniform(0.5, 2.0, n)
-    pol = to_policy(_mlp(n, (16, 16), "tanh"), mean, std, DAggerConfig(hidden=(16, 16)), env, ROOM, {}, {})
+    pol = to_policy(_mlp(n, (16, 16), "tanh"), mean, std, DAggerConfig(hidden=(16, 16), obs_keys=KEYS, known_var=None), env, ROOM, {}, {})
     fenv = FeatureObservation(env, list(KEYS), mean, std)
     model = PPO("MlpPolicy", fenv, device="cpu", seed=0,
                 policy_kwargs={"net_arch": {"pi": [16, 16], "vf": [8]}, "activation_fn": torch.nn.Tanh})
