@@ -41,7 +41,7 @@ STENCIL_KEYS = ["goal", "sdf", "sdf_grad", "twist"]
 MASKED_KEYS = ["goal", "sdf", "sdf_grad", "sdf_var", "twist"]
 
 _COMMON = {"train_pose_source": "truth", "env_kwargs": {}, "eval_every": 0, "eval_episodes": 20}
-_DAGGER = {"expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
+_DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
            "activation": "tanh", "epochs": 100, "batch_size": 256, "lr": 1e-3, "obs_keys": MASKED_KEYS,
            "known_var": 0.5}
 _PPO = {"steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "obs_keys": STENCIL_KEYS, "learning_rate": 3e-4,
