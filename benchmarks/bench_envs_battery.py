@@ -1,13 +1,17 @@
 """Usage: python benchmarks/bench_envs_battery.py N [ENV_ID ...]
 
 Run check_polar_env(env_id, n_bad=N) over polar_sim.envs.ENV_IDS; print pass/fail per check."""
-import sys, time, json
+import sys
+import time
+import json
 from polar_sim.envs import ENV_IDS
 from polar_sim.testing import check_polar_env
-n = int(sys.argv[1]); ids = sys.argv[2:] or list(ENV_IDS)
+n = int(sys.argv[1])
+ids = sys.argv[2:] or list(ENV_IDS)
 summary = {}
 for env_id in ids:
-    t = time.time(); fails = []
+    t = time.time()
+    fails = []
     for check in check_polar_env(env_id, n_bad=n):
         try:
             check()

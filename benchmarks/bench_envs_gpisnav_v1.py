@@ -47,7 +47,7 @@ def episodes(env_id, policy_name, seeds, **kw):
     for s in tqdm(seeds, desc=f"{env_id.split('/')[1]} {policy_name} {kw.get('pose_source', 'slam')}", leave=False):
         obs, info = env.reset(seed=int(s))
         pol.reset()
-        err, failures, done, n = [info["pose_error"]], 0, False, 0
+        err, done, n = [info["pose_error"]], False, 0
         c0 = time.process_time()
         while not done:
             obs, r, term, trunc, info = env.step(pol(obs))
@@ -81,7 +81,6 @@ def throughput(pose_source, steps):
     env = gym.make("polar_sim/GPISNav-v1", pose_source=pose_source)
     pol = SDFReactive()
     obs, _ = env.reset(seed=0)
-    n = 0
     for k in range(20 + steps):
         if k == 20:
             t0, c0 = time.perf_counter(), time.process_time()

@@ -44,11 +44,11 @@ def test_source_checkout_imports_experiments(tmp_path):
     import subprocess
     import sys
 
-    code = ("import sys; sys.path.insert(0, %r); "
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); "
             "import polar_sim, polar_sim.experiments as e, pathlib; "
             "from polar_sim.runner.registry import list_experiments; "
             "print(pathlib.Path(polar_sim.__file__).parent, pathlib.Path(e.__path__[0]).resolve(), "
-            "len(list_experiments()))" % str(ROOT))
+            "len(list_experiments()))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     pkg, path, n = out.stdout.split()

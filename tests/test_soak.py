@@ -6,11 +6,9 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from ci_sizes import size
-from polar_sim.testing.soak import soak
 
 ENV_STEPS = size(20_000, 150)
 GPIS_SCANS = size(10_000, 600)

@@ -73,3 +73,84 @@ def test_state_digest():
     d2 = state_digest(a)
     a.d["k"].append(3)
     assert len({d0, d1, d2, state_digest(a)}) == 4
+
+
+# --- the module contract's checks can fail: a tiny module, sound or with one flaw each ---------------
+class _Sum:
+    """A sound tiny module: ``update(x)`` adds the (3,) array x to a running sum and returns the
+    sum so far (a new array); ``value()`` returns it; ``reset()`` forgets it."""
+
+    def __init__(self, scale=1.0, flaw=None):
+        self.scale, self.flaw = scale, flaw
+
+    def get_params(self, deep=True):
+        return {"scale": self.scale if self.flaw != "params" else 0.0, "flaw": self.flaw}
+
+    def set_params(self, **p):
+        for k, v in p.items():
+            setattr(self, k, v)
+        return self
+
+    def update(self, x):
+        if not hasattr(self, "total_"):
+            self.total_ = np.zeros(3)
+        self.total_ += self.scale * x
+        return x if self.flaw == "alias" else self.total_.copy()
+
+    def value(self):
+        from polar_sim.errors import NotUpdatedError
+
+        if not hasattr(self, "total_"):
+            if self.flaw == "query_before":
+                return np.zeros(3)
+            raise NotUpdatedError("update first")
+        if self.flaw == "impure":
+            self.total_ += 1.0
+        return self.total_.copy()
+
+    def reset(self):
+        if self.flaw != "reset" and hasattr(self, "total_"):
+            del self.total_
+        return self
+
+    def __deepcopy__(self, memo):
+        if self.flaw == "copy":  # a "copy" that shares its state with the original
+            return self
+        new = type(self)(self.scale, self.flaw)
+        if hasattr(self, "total_"):
+            new.total_ = self.total_.copy()
+        return new
+
+
+class _Eager(_Sum):
+    def __init__(self, scale=1.0, flaw=None):
+        super().__init__(scale, flaw)
+        self.total_ = np.zeros(3)  # learned state before any update
+
+
+def _sum_checks(cls, flaw):
+    from polar_sim.testing.checks import ModuleCase, _module_contract_checks
+
+    frames = [(np.array([1.0, 2.0, 3.0]) * k,) for k in range(1, 5)]
+    case = ModuleCase(name=f"dummy-{cls.__name__}-{flaw}", build=cls, params={"scale": 2.0, "flaw": flaw},
+                      frames=lambda: [tuple(a.copy() for a in f) for f in frames], method="update",
+                      query=("value", ()))
+    # "same_output_across_processes" looks the module up by name in a fresh process: the registered
+    # modules run it in tests/test_common.py; a module defined in a test cannot.
+    return {n: fn for n, fn in _module_contract_checks(case.name, lambda: case)
+            if n != "same_output_across_processes"}
+
+
+def test_a_sound_module_passes_every_check():
+    for name, fn in _sum_checks(_Sum, None).items():
+        fn()
+
+
+@pytest.mark.parametrize("cls, flaw, check", [
+    (_Sum, "params", "builds_and_stores_params"), (_Eager, None, "no_learned_state_before_update"),
+    (_Sum, "query_before", "query_before_update_raises"), (_Sum, "impure", "query_is_pure"),
+    (_Sum, "alias", "outputs_do_not_alias_inputs"), (_Sum, "reset", "reset_then_replay"),
+    (_Sum, "copy", "deep_copies")])
+def test_each_module_check_finds_its_flaw(cls, flaw, check):
+    with pytest.raises(AssertionError):
+        _sum_checks(cls, flaw)[check]()

@@ -13,7 +13,7 @@ from polar_sim.envs.localization import POSE_SOURCES, make_pose_source
 from polar_sim.envs.module_env import ModuleEnv
 from polar_sim.envs.observers import SDFStencil, TruthSource, make_sdf_source
 from polar_sim.envs.sdf_grid import GRID_SDF_BOUND, GRID_VAR_MAX, SDFGrid, VisitedMask
-from polar_sim.geometry import between2d, compose2d, inv2d, wrap_angle
+from polar_sim.geometry import compose2d, inv2d
 
 __all__ = ["GPISNavEnv", "stencil_observation", "OBS_MODES", "LOST_DISTANCE", "RENDER_SPAN", "RENDER_SDF_RANGE",
            "RENDER_ZERO_BAND", "RENDER_UNSEEN_VAR", "RENDER_UNSEEN_GREY"]

@@ -12,7 +12,7 @@ from polar_sim.envs import _pose2d
 from polar_sim.envs._gridplan import GeodesicDistance
 from polar_sim.envs.base import PolarMujocoEnv, check_kwargs
 from polar_sim.envs.noise import LIDAR_NOISE, ODOMETRY_NOISE, WheelOdometry, as_lidar_noise, as_odometry_noise
-from polar_sim.geometry import T_to_pose2d, between2d
+from polar_sim.geometry import between2d
 
 __all__ = ["LidarNavEnv", "NavTask", "TIERS", "DEFAULT_TIER", "resolve_tier", "REWARD_V0", "REWARD_V1",
            "as_reward_weights"]

@@ -232,7 +232,7 @@ def grpc_status(host, port, timeout=3.0):
             s.settimeout(max(0.05, deadline - time.monotonic()))
             try:
                 chunk = s.recv(65536)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 return None
             if not chunk:
                 return None

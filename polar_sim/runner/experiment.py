@@ -47,7 +47,8 @@ import dataclasses
 import itertools
 import json
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
+from collections.abc import Callable, Mapping
 
 import numpy as np
 

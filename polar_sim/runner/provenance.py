@@ -76,7 +76,7 @@ def provenance() -> dict:
         "packages": versions,
         "machine": {"platform": platform.platform(), "cpu": _cpu_model(), "cpus": os.cpu_count(),
                     "memory_gib": _memory_gib(), "load_average_1min": load},
-        "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "started": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "env": {k: os.environ[k] for k in ("MUJOCO_GL", "POLAR_SIM_CACHE", "POLAR_SIM_DATA", "RAY_ADDRESS")
                 if k in os.environ},
     }

@@ -305,7 +305,7 @@ def _inner_walls(walls, rng, edges, doors, n, L, door_width):
     half = n * L / 2
     door_pts = []
     for idx, (a, b) in enumerate(edges):
-        (i, j), (i2, j2) = a, b
+        (i, j), (i2, _) = a, b
         if i2 == i + 1:  # wall between columns i and i+1 (vertical, at x = ...)
             x = -half + (i + 1) * L
             y0, y1 = -half + j * L, -half + (j + 1) * L

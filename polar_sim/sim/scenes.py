@@ -15,7 +15,7 @@ import os
 import xml.etree.ElementTree as ET
 from importlib import resources
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import mujoco
 
@@ -97,13 +97,13 @@ def scene_options(name):
     return dict(_scene_options(name))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _scene_options(name):
     sig = inspect.signature(SCENES[name].load_builder())
     return {p.name: p.default for p in sig.parameters.values() if p.kind == p.KEYWORD_ONLY}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _base_spec(file):
     """The parsed base MJCF of a shipped scene, parsed once (procedural scenes are rebuilt every
     episode); callers get a copy (``MjSpec.copy``, ~20x cheaper than parsing the file)."""

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -183,129 +184,163 @@ def _hostile_check(entry, n, isolate):
     return run
 
 
-def _module_contract_checks(name, case_builder):
-    def case():
-        return _cached(("case", name), case_builder)
+class _Subject:
+    """One module under check: its case (built once, cached), fresh instances and fed frames."""
 
-    def fresh(**extra):
-        c = case()
+    def __init__(self, name, case_builder):
+        self.name, self._builder = name, case_builder
+
+    def case(self) -> ModuleCase:
+        return _cached(("case", self.name), self._builder)
+
+    def fresh(self, **extra):
+        c = self.case()
         return c.build(**{**c.params, **extra})
 
-    def feed(m, frames=None):
-        c = case()
+    def feed(self, m, frames=None):
+        c = self.case()
         return [getattr(m, c.method)(*f) for f in (frames if frames is not None else c.frames())]
 
-    def params_stored():
-        c = case()
-        m = fresh()
-        assert hasattr(m, "get_params"), f"{name} has no get_params()"
-        got = m.get_params()
-        for k, v in c.params.items():
-            assert k in got and got[k] == v, f"get_params()[{k!r}] = {got.get(k)!r}, expected {v!r}"
-        if hasattr(m, "set_params"):
-            m.set_params(**c.params)
+    def query(self, m, args=None):
+        q = self.case().query
+        return getattr(m, q[0])(*(q[1] if args is None else args))
 
-    def no_state_before_update():
-        m = fresh()
-        learned = [k for k in vars(m) if k.endswith("_") and not k.startswith("__")]
-        assert not learned, f"learned attributes before the first {case().method}(): {learned}"
 
-    def query_before_update():
-        c = case()
-        if c.query is None:
-            return
-        from polar_sim.errors import NotUpdatedError
+def _learned(m):
+    """The instance's learned attributes (scikit-learn's trailing underscore)."""
+    return [k for k in vars(m) if k.endswith("_") and not k.startswith("__")]
 
-        m = fresh()
-        try:
-            getattr(m, c.query[0])(*c.query[1])
-        except NotUpdatedError:
-            return
-        raise AssertionError(f"{c.query[0]}() before any {c.method}() did not raise NotUpdatedError")
 
-    def query_pure():
-        c = case()
-        if c.query is None:
-            return
-        m = fresh()
-        feed(m)
-        before = state_digest(m, ignore=("_kd_tree", "_kd_idx", "_kd_version"))
-        args = tuple(np.array(a, copy=True) for a in c.query[1])
-        out = getattr(m, c.query[0])(*args)
-        assert state_digest(m, ignore=("_kd_tree", "_kd_idx", "_kd_version")) == before, f"{c.query[0]}() changed the state"
-        for o in _flatten(out):
-            for a in args:
-                assert not np.shares_memory(o, a), f"{c.query[0]}() output shares memory with its input"
+def _check_params_stored(s):
+    c, m = s.case(), s.fresh()
+    assert hasattr(m, "get_params"), f"{s.name} has no get_params()"
+    got = m.get_params()
+    for k, v in c.params.items():
+        assert k in got and got[k] == v, f"get_params()[{k!r}] = {got.get(k)!r}, expected {v!r}"
+    if hasattr(m, "set_params"):
+        m.set_params(**c.params)
 
-    def outputs_do_not_alias_inputs():
-        m = fresh()
-        frames = case().frames()
-        for f in frames:
-            r = getattr(m, case().method)(*f)
-            for o in _flatten(r):
-                for a in f:
-                    if isinstance(a, np.ndarray) and isinstance(o, np.ndarray) and o.size > 1:
-                        assert not np.shares_memory(o, a), f"{case().method}() output shares memory with an input"
 
-    def same_seed_same_output():
-        a, b = fresh(), fresh()
-        ra, rb = feed(a), feed(b)
-        assert _same(ra, rb), "two instances with the same parameters and data gave different outputs"
-        c = case()
-        if c.query is not None:
-            assert _same(getattr(a, c.query[0])(*c.query[1]), getattr(b, c.query[0])(*c.query[1])), "queries differ"
+def _check_no_state_before_update(s):
+    learned = _learned(s.fresh())
+    assert not learned, f"learned attributes before the first {s.case().method}(): {learned}"
 
-    def across_processes():
-        code = (f"from polar_sim.testing.checks import _digest, _module_outputs; "
-                f"print(_digest(_module_outputs({name!r})))")
-        outs = []
-        for _ in range(2):
-            r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
-                               env=dict(os.environ, PYTHONHASHSEED="random"))
-            assert r.returncode == 0, r.stderr[-2000:]
-            outs.append(r.stdout.strip().splitlines()[-1])
-        assert outs[0] == outs[1], "two processes gave different outputs for the same seed and data"
-        assert outs[0] == _digest(_module_outputs(name)), "a subprocess and this process gave different outputs"
 
-    def reset_replay():
-        m = fresh()
-        feed(m)
-        assert hasattr(m, "reset"), f"{name} has no reset()"
-        m.reset()
-        learned = [k for k in vars(m) if k.endswith("_") and not k.startswith("__")]
-        assert not learned, f"reset() kept learned attributes {learned}"
-        assert _same(feed(m), feed(fresh())), "reset() then replay differs from a fresh instance"
+def _check_query_before_update(s):
+    c = s.case()
+    if c.query is None:
+        return
+    from polar_sim.errors import NotUpdatedError
 
-    def copies():
-        m = fresh()
-        ra = feed(m)
-        m2 = copy.deepcopy(m)
-        c = case()
-        if c.query is not None:
-            assert _same(getattr(m, c.query[0])(*c.query[1]), getattr(m2, c.query[0])(*c.query[1]))
-        assert ra is not None
+    try:
+        s.query(s.fresh())
+    except NotUpdatedError:
+        return
+    raise AssertionError(f"{c.query[0]}() before any {c.method}() did not raise NotUpdatedError")
 
-    def saves_without_pickle():
-        c = case()
-        if not c.savable:
-            return
-        m = fresh()
-        feed(m)
-        with tempfile.TemporaryDirectory() as d:
-            p = Path(d) / "m.npz"
-            m.save(p)
-            with np.load(p, allow_pickle=False) as z:
-                for k in z.files:
-                    z[k]
-            m2 = type(m).load(p)
-            assert _same(getattr(m, c.query[0])(*c.query[1]), getattr(m2, c.query[0])(*c.query[1])), "round trip differs"
-            assert [q.name for q in Path(d).iterdir()] == ["m.npz"], "save() left stray files"
 
-    return [("builds_and_stores_params", params_stored), ("no_learned_state_before_update", no_state_before_update),
-            ("query_before_update_raises", query_before_update), ("query_is_pure", query_pure),
-            ("outputs_do_not_alias_inputs", outputs_do_not_alias_inputs),
-            ("same_seed_same_output", same_seed_same_output), ("same_output_across_processes", across_processes),
-            ("reset_then_replay", reset_replay), ("deep_copies", copies), ("saves_without_pickle", saves_without_pickle)]
+def _check_query_pure(s):
+    c = s.case()
+    if c.query is None:
+        return
+    m = s.fresh()
+    s.feed(m)
+    ignore = ("_kd_tree", "_kd_idx", "_kd_version")  # a lazily built search index is a cache, not state
+    before = state_digest(m, ignore=ignore)
+    args = tuple(np.array(a, copy=True) for a in c.query[1])
+    out = s.query(m, args)
+    assert state_digest(m, ignore=ignore) == before, f"{c.query[0]}() changed the state"
+    for o in _flatten(out):
+        for a in args:
+            assert not np.shares_memory(o, a), f"{c.query[0]}() output shares memory with its input"
+
+
+def _check_outputs_do_not_alias_inputs(s):
+    m, method = s.fresh(), s.case().method
+    for f in s.case().frames():
+        for o in _flatten(getattr(m, method)(*f)):
+            for a in f:
+                if isinstance(a, np.ndarray) and isinstance(o, np.ndarray) and o.size > 1:
+                    assert not np.shares_memory(o, a), f"{method}() output shares memory with an input"
+
+
+def _check_same_seed_same_output(s):
+    a, b = s.fresh(), s.fresh()
+    assert _same(s.feed(a), s.feed(b)), "two instances with the same parameters and data gave different outputs"
+    if s.case().query is not None:
+        assert _same(s.query(a), s.query(b)), "queries differ"
+
+
+def _check_across_processes(s):
+    code = (f"from polar_sim.testing.checks import _digest, _module_outputs; "
+            f"print(_digest(_module_outputs({s.name!r})))")
+    outs = []
+    for _ in range(2):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                           env=dict(os.environ, PYTHONHASHSEED="random"), check=False)
+        assert r.returncode == 0, r.stderr[-2000:]
+        outs.append(r.stdout.strip().splitlines()[-1])
+    assert outs[0] == outs[1], "two processes gave different outputs for the same seed and data"
+    assert outs[0] == _digest(_module_outputs(s.name)), "a subprocess and this process gave different outputs"
+
+
+def _check_reset_replay(s):
+    m = s.fresh()
+    s.feed(m)
+    assert hasattr(m, "reset"), f"{s.name} has no reset()"
+    m.reset()
+    learned = _learned(m)
+    assert not learned, f"reset() kept learned attributes {learned}"
+    assert _same(s.feed(m), s.feed(s.fresh())), "reset() then replay differs from a fresh instance"
+
+
+def _check_copies(s):
+    """A deep copy taken mid-sequence is independent and equal: both continue the sequence alike
+    (this holds for modules without a query too), and feeding the copy leaves the original as it was."""
+    frames = s.case().frames()
+    half = max(1, len(frames) // 2)
+    m = s.fresh()
+    s.feed(m, frames[:half])
+    m2 = copy.deepcopy(m)
+    before = state_digest(m)
+    rest2 = s.feed(m2, frames[half:])
+    assert state_digest(m) == before, "feeding the deep copy changed the original"
+    assert _same(s.feed(m, frames[half:]), rest2), "the original and its deep copy continue differently"
+    if s.case().query is not None:
+        assert _same(s.query(m), s.query(m2)), "the original and its deep copy answer differently"
+
+
+def _check_saves_without_pickle(s):
+    c = s.case()
+    if not c.savable:
+        return
+    m = s.fresh()
+    s.feed(m)
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "m.npz"
+        m.save(p)
+        with np.load(p, allow_pickle=False) as z:
+            for k in z.files:
+                z[k]
+        m2 = type(m).load(p)
+        assert _same(s.query(m), s.query(m2)), "round trip differs"
+        assert [q.name for q in Path(d).iterdir()] == ["m.npz"], "save() left stray files"
+
+
+#: The contract every module class is held to, in order: (check name, check(subject)).
+_MODULE_CHECKS = [("builds_and_stores_params", _check_params_stored),
+                  ("no_learned_state_before_update", _check_no_state_before_update),
+                  ("query_before_update_raises", _check_query_before_update), ("query_is_pure", _check_query_pure),
+                  ("outputs_do_not_alias_inputs", _check_outputs_do_not_alias_inputs),
+                  ("same_seed_same_output", _check_same_seed_same_output),
+                  ("same_output_across_processes", _check_across_processes),
+                  ("reset_then_replay", _check_reset_replay), ("deep_copies", _check_copies),
+                  ("saves_without_pickle", _check_saves_without_pickle)]
+
+
+def _module_contract_checks(name, case_builder):
+    subject = _Subject(name, case_builder)
+    return [(cname, functools.partial(fn, subject)) for cname, fn in _MODULE_CHECKS]
 
 
 def _module_outputs(name):

@@ -6,7 +6,7 @@ declare entry points without importing the runner (and the runner find them with
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 __all__ = ["EntryPoint", "Graceful"]
 
