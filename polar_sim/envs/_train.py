@@ -147,7 +147,10 @@ def _ppo(env_id, p, seed, curve, progress):
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, {"action": action, "keys": keys}),
                         norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=p["gamma"])
     model = make_model(recipe, venv, seed=seed)
-    ckpt = (lambda n: _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n))
+
+    def ckpt(n):
+        _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n)
+
     model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt))
     policy = _mlp_of(model, venv, p, keys, recipe, env_id)
     venv.close()
