@@ -33,9 +33,10 @@ def _source_tag():
     """Hash of the sources a candidate set depends on (the ground module, the route recorder, this
     file), part of its cache key, so a stale set is never replayed."""
     import polar_sim
+    from polar_sim.sim.recorders import rover_sequences
 
     root = Path(polar_sim.__file__).parent
-    files = sorted((root / "ground").glob("*.py")) + [root / "sim" / "rover_sequences.py", Path(__file__)]
+    files = sorted((root / "ground").glob("*.py")) + [Path(rover_sequences.__file__), Path(__file__)]
     h = hashlib.sha256()
     for f in files:
         h.update(f.read_bytes())

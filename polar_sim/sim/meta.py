@@ -40,6 +40,7 @@ class Office2DMeta(RoverMeta):
     rooms: dict                #: room name -> (x0, x1, y0, y1)
     doors: np.ndarray          #: (k, 2) door centres
     bounds: tuple              #: (x0, x1, y0, y1) of the floor
+    tiles: NotRequired[int]    #: copies of the floor along each axis (with the ``tiles`` option > 1)
 
 
 class Warehouse2DMeta(RoverMeta):
@@ -77,6 +78,7 @@ class TabletopMeta(TypedDict):
     script_name: str           #: its name
     colours: dict              #: object name -> its colour name
     table_z: float             #: the table top's height
+    appearance: NotRequired[dict]  #: the resolved appearance spec (with the ``appearance`` option)
 
 
 class ObjectOrbitMeta(TypedDict):

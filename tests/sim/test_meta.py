@@ -13,12 +13,14 @@ def test_every_shipped_scene_declares_its_meta():
 
 
 # load_scene runs check_meta; the keys a scene declares optional appear only with their option.
-@pytest.mark.parametrize("scene, options", [(s, {}) for s in list_scenes()] + [("navworld", {"pooled": True})])
-def test_meta_follows_the_declaration(scene, options):
+@pytest.mark.parametrize("scene, options, optional", [(s, {}, set()) for s in list_scenes()] + [
+    ("navworld", {"pooled": True}, {"pooled", "max_round_radius"}), ("office2d", {"tiles": 2}, {"tiles"}),
+    ("tabletop", {"appearance": "random"}, {"appearance"}), ("rover_flat", {"appearance": "random"}, set())])
+def test_meta_follows_the_declaration(scene, options, optional):
     _, meta = load_scene(scene, 1, **options)
     decl = SCENE_META[scene]
     assert decl.__required_keys__ <= set(meta) <= decl.__required_keys__ | decl.__optional_keys__
-    assert ("pooled" in meta) == bool(options.get("pooled"))
+    assert set(meta) - decl.__required_keys__ == optional
 
 
 def test_check_meta_names_the_broken_key():
