@@ -24,7 +24,7 @@ import _gpis_common as C  # noqa: E402
 
 from polar_sim.gpis import _surface  # noqa: E402
 from polar_sim.metrics.maps import ObservedArea, polyline_points, surface_scores_2d  # noqa: E402
-from polar_sim.sim.drives2d import recorded_drives  # noqa: E402
+from polar_sim.sim.recorders.drives2d import recorded_drives  # noqa: E402
 
 KEYS = ("hausdorff_wellseen_m", "hausdorff_m", "surface_rmse_m", "p99_true_to_est_m")
 

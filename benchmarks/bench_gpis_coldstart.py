@@ -1,11 +1,13 @@
-"""GPIS cold start and near-surface query time (issue 14, items 5 and 7).
+"""GPIS cold start and near-surface query time (issue 14, items 5 and 7; issue 35 item 4).
 
-    python benchmarks/bench_gpis_coldstart.py            # 1 cold + 2 warm runs, query timing
+    polar-sim compile                                    # first: the compiled kernels
+    python benchmarks/bench_gpis_coldstart.py            # cold with them, cold and warm JIT, query
     python benchmarks/bench_gpis_coldstart.py --no-cold  # query timing only
 
 Cold: a fresh interpreter with NUMBA_CACHE_DIR pointing at a new, empty temporary folder (so
-every numba kernel compiles), timed from just before the process is started to the end of its
-first ``GPISMap2D.update`` (one 270-beam scan of the room scene in tests/gpis/scenes.py), then
+every numba kernel it needs compiles), with the kernels ``polar-sim compile`` built (found in
+``POLAR_SIM_NATIVE_DIR`` or the default folder) and without them (``POLAR_SIM_NATIVE=0``, JIT
+only), timed from just before the process is started to the end of its first ``GPISMap2D.update`` (one 270-beam scan of the room scene in tests/gpis/scenes.py), then
 to the end of its first ``query`` (1,000 points). Warm: the same with the cache that the cold run
 filled. Query: a map of 60 room scans; 1,000 points within 5 cm of the map's samples (seeded),
 median wall and thread-CPU time of 30 calls after 3 untimed ones. The machine is shared: wall
@@ -56,8 +58,10 @@ print(t_imp, *first_update_query(), time.time())
 """
 
 
-def one_start(cache):
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache),
+def one_start(cache, native=True):
+    """One fresh interpreter; ``native``: it may use the kernels ``polar-sim compile`` built
+    (``POLAR_SIM_NATIVE_DIR`` or the default folder), else numba's JIT only."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "POLAR_SIM_NATIVE": "1" if native else "0",
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     w0 = time.time()
     p = subprocess.run([sys.executable, "-c", _CHILD, str(ROOT / "benchmarks")], capture_output=True,
@@ -102,10 +106,12 @@ def main(argv=None):
     out = {}
     if not args.no_cold:
         with tempfile.TemporaryDirectory() as td:
-            out["cold"] = one_start(Path(td) / "numba")
-            print("cold:", out["cold"], flush=True)
-            out["warm"] = [one_start(Path(td) / "numba") for _ in range(2)]
-            print("warm:", out["warm"], flush=True)
+            out["cold_compiled"] = one_start(Path(td) / "numba1")
+            print("cold, compiled kernels (polar-sim compile):", out["cold_compiled"], flush=True)
+            out["cold_jit"] = one_start(Path(td) / "numba2", native=False)
+            print("cold, JIT only:", out["cold_jit"], flush=True)
+            out["warm_jit"] = [one_start(Path(td) / "numba2", native=False) for _ in range(2)]
+            print("warm, JIT only (the cache the cold run filled):", out["warm_jit"], flush=True)
     out["query"] = query_time()
     print("query 1000 near-surface points:", out["query"], flush=True)
     if args.json:

@@ -106,9 +106,9 @@ def time_condition(seq, kw, repeat):
 
 
 def run_route(name, frames, conditions):
-    """Score conditions on a cached simulator route (``polar_sim.sim.rover_sequences``; 621x188, already
+    """Score conditions on a cached simulator route (``polar_sim.sim.recorders.rover_sequences``; 621x188, already
     reduced, so ``downsample=1``). Returns report lines."""
-    from polar_sim.sim.rover_sequences import load_route  # imports mujoco: benchmark only
+    from polar_sim.sim.recorders.rover_sequences import load_route  # imports mujoco: benchmark only
 
     rec = load_route(name, max_frames=frames, progress=False)
     K, h = np.array(rec.meta["K"]), rec.meta["camera_height"]

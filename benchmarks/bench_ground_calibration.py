@@ -64,7 +64,7 @@ def sweep_route(name, frames):
     from polar_sim.ground.calibration import PlattCalibrator
     from polar_sim.metrics.calibration import reliability_counts
     from polar_sim.metrics.ground import class_prob_sums, classifier_iou
-    from polar_sim.sim.rover_sequences import SPLITS, load_route, route_truth, route_zones
+    from polar_sim.sim.recorders.rover_sequences import SPLITS, load_route, route_truth, route_zones
 
     if name not in SPLITS["dev"]:
         raise ValueError(f"routes: {name!r} is not a dev route (the sweep never loads test routes)")

@@ -25,7 +25,7 @@ import numpy as np
 BUILD = {
     "recording": r"""
 import sys, numpy as np
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders.recording import Recording
 rng = np.random.default_rng(int(sys.argv[2]))
 obj = Recording(meta={"gen": int(sys.argv[2])})
 for i in range(40):
@@ -41,7 +41,7 @@ for k in range(20 + int(sys.argv[2])):
 """,
 }
 LOOP = 'print("ready", flush=True)\nwhile True:\n    obj.save(sys.argv[1])\n'
-LOAD = {"recording": "from polar_sim.sim.recording import Recording as C\nC.load(sys.argv[1])\n",
+LOAD = {"recording": "from polar_sim.sim.recorders.recording import Recording as C\nC.load(sys.argv[1])\n",
         "gpis": "from polar_sim.gpis import GPISMap2D as C\nC.load(sys.argv[1])\n"}
 
 

@@ -7,7 +7,7 @@
 
 ``--sequences`` (a split name, "dev" or "test", or a comma list of sequence names; parts joined by
 "+" run side by side in one process, each split at its own seed) times the tracker
-on the cached 640x480 recordings of :mod:`polar_sim.sim.tabletop_sequences` (recorded first if
+on the cached 640x480 recordings of :mod:`polar_sim.sim.recorders.tabletop_sequences` (recorded first if
 missing, not timed) and asks where the cost comes from: per sequence the CPU time per frame, the
 object's image size (amodal pixels) and the ROI; pooled over all frames, a linear fit of CPU time on
 the object's pixels and the Spearman correlations with the object's and the ROI's pixels, and the
@@ -144,7 +144,7 @@ def _model(obj, how):
     blocks' body, post and small block), which leaves a large part sparse (issue 13 item 4)."""
     import trimesh
 
-    from polar_sim.sim import objects
+    from polar_sim.sim.builders import objects
 
     mesh = objects.load_mesh(obj)
     if how == "uniform":
@@ -161,7 +161,7 @@ def _model(obj, how):
 
 def _part_recall(obj, f, T, K, mask):
     """Recall of the mask on each atlas part of the object's visible pixels (blocks: body, post, block)."""
-    from polar_sim.sim import objects
+    from polar_sim.sim.builders import objects
 
     v, u = np.nonzero(f["mask_visible"])
     z = f["depth_clean"][v, u]
@@ -178,7 +178,7 @@ def sequences(names, seed, variants, repeats, max_frames=None, model="uniform"):
     With ``model="parts"`` also the mask's recall per part of the object (item 4)."""
     from scipy.stats import spearmanr
 
-    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
+    from polar_sim.sim.recorders.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
 
     runs = []   # (name, seed, split): splits joined by "+" run side by side, each at its own seed
     for part in names.split("+"):

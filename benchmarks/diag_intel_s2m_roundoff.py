@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
 
 from polar_sim.datasets import load_intel_lab
 from polar_sim.runner.gpis_methods import call_factory, scan_to_map_odometry

@@ -1,6 +1,6 @@
 """README picture of every rover ground appearance family (issue 13, item 1).
 
-One row per family of ``polar_sim.sim.rover_appearance.FAMILIES`` and one for the default look: the
+One row per family of ``polar_sim.sim.builders.rover_appearance.FAMILIES`` and one for the default look: the
 front camera of ``rover_flat`` (seed 10,003), KITTI-like (1242x376 rendered, reduced 2x to 621x188
 as the routes are recorded), after the same 2 s drive from the start. Left: the family with its
 default options (``{"ground": {"family": f}}``, a plain gradient sky and the default sun). Right: a
@@ -16,7 +16,6 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import cv2  # noqa: E402
-import numpy as np  # noqa: E402
 
 SCENE, SEED, STEPS, ACTION = "rover_flat", 10_003, 20, (6.0, 0.0)
 
@@ -24,7 +23,7 @@ SCENE, SEED, STEPS, ACTION = "rover_flat", 10_003, 20, (6.0, 0.0)
 def frame(look):
     """The 621x188 front-camera image of the scene under ``look`` after the short drive."""
     from polar_sim.sim import World
-    from polar_sim.sim.rover_sequences import KITTI_FOVY_DEG
+    from polar_sim.sim.recorders.rover_sequences import KITTI_FOVY_DEG
 
     with World(SCENE, seed=SEED, camera_fovy=KITTI_FOVY_DEG, appearance=look) as w:
         for _ in range(STEPS):
@@ -38,8 +37,8 @@ def main(out):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from polar_sim.sim.rover_appearance import FAMILIES
-    from polar_sim.sim.rover_sequences import DEV_FAMILIES, TEST_ONLY_FAMILIES
+    from polar_sim.sim.builders.rover_appearance import FAMILIES
+    from polar_sim.sim.recorders.rover_sequences import DEV_FAMILIES, TEST_ONLY_FAMILIES
 
     rows = [("default look (appearance=None)", "asphalt / gravel / grass / dirt zones; dev (issue-5 routes)", None, None)]
     for f, (desc, _, _) in FAMILIES.items():

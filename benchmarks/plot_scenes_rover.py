@@ -35,8 +35,8 @@ def appearance_sheet(out, seed=10_003):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from polar_sim.sim.rover_appearance import FAMILIES, SKIES
-    from polar_sim.sim.rover_sequences import KITTI_FOVY_DEG
+    from polar_sim.sim.builders.rover_appearance import FAMILIES, SKIES
+    from polar_sim.sim.recorders.rover_sequences import KITTI_FOVY_DEG
 
     looks = [("default (appearance=None)", None)] + [(f, f) for f in FAMILIES] + [("random", "random")]
     looks += [(f"sky: {k}", {"sky": {"kind": k}}) for k in SKIES]

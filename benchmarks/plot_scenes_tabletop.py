@@ -95,7 +95,7 @@ def appearance_pictures(out_dir):
     import matplotlib.pyplot as plt
 
     from polar_sim.sim import World
-    from polar_sim.sim.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
+    from polar_sim.sim.builders.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
 
     fams = list(DEV_FAMILIES) + list(TEST_FAMILIES) + ["random"]
     fig, axes = plt.subplots(len(fams), len(APPEARANCE_SCENES), figsize=(4.2 * len(APPEARANCE_SCENES), 3.3 * len(fams)))
@@ -125,7 +125,7 @@ def appearance_pictures(out_dir):
 
 def sequence_stats(width=320, height=240, only=None, split="dev"):
     """Per sequence of a split: occlusion range, frames in contact / held, peak speeds, displacement."""
-    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, list_sequences, sequence_spec, sequence_world
+    from polar_sim.sim.recorders.tabletop_sequences import SPLIT_SEEDS, list_sequences, sequence_spec, sequence_world
     from polar_sim.sim.truth import LABELS
 
     rows = []

@@ -1,6 +1,6 @@
 """Glue shared by the GPIS-chapter experiments (not an experiment itself: the leading underscore keeps
 it out of ``polar-sim list``). The library does the work: recorded drives and orbits come from
-``polar_sim.sim.drives2d`` / ``polar_sim.sim.orbits``, scores from ``polar_sim.metrics.maps``,
+``polar_sim.sim.recorders.drives2d`` / ``polar_sim.sim.recorders.orbits``, scores from ``polar_sim.metrics.maps``,
 methods from the plug-in registry (``polar_sim.runner.methods``), pictures from
 ``polar_sim.runner.pictures2d``."""
 
@@ -60,7 +60,7 @@ def orbit_trial(method, seed, *, n_frames, n_eval, **options):
     comparison of ``ObjectTruth.compare_mesh``)."""
     from polar_sim.metrics.maps import object_map_scores
     from polar_sim.sim import World
-    from polar_sim.sim.orbits import ObjectTruth, recorded_orbit
+    from polar_sim.sim.recorders.orbits import ObjectTruth, recorded_orbit
 
     w = World("object_orbit", seed=seed, **options)
     orb = recorded_orbit(w, n_frames, seed)
@@ -96,7 +96,7 @@ def surface_points(m, spacing=0.01):
 
 def truth_world(scene, seed):
     """The scene without sensor noise, for its exact SDF and corners (no MuJoCo import here)."""
-    from polar_sim.sim.drives2d import lidar_world
+    from polar_sim.sim.recorders.drives2d import lidar_world
 
     return lidar_world(scene, seed, noise=False)
 

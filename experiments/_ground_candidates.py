@@ -2,7 +2,7 @@
 underscore keeps it out of the registry). One online w6 pass of ``GroundVO`` per route collects, per
 frame, the RANSAC candidates, their learned P(ground) and their true ground label; every condition of
 ``ground_success`` and ``ground_scale`` re-fits RANSAC on exactly these (derived arrays cached through
-``polar_sim.sim.sequences.cached_arrays``).
+``polar_sim.sim.recorders.sequences.cached_arrays``).
 """
 
 from __future__ import annotations
@@ -33,9 +33,10 @@ def _source_tag():
     """Hash of the sources a candidate set depends on (the ground module, the route recorder, this
     file), part of its cache key, so a stale set is never replayed."""
     import polar_sim
+    from polar_sim.sim.recorders import rover_sequences
 
     root = Path(polar_sim.__file__).parent
-    files = sorted((root / "ground").glob("*.py")) + [root / "sim" / "rover_sequences.py", Path(__file__)]
+    files = sorted((root / "ground").glob("*.py")) + [Path(rover_sequences.__file__), Path(__file__)]
     h = hashlib.sha256()
     for f in files:
         h.update(f.read_bytes())
@@ -49,7 +50,7 @@ def _route_frames(name, frames):
     from polar_sim.ground import DenseConfig, GroundVO
     from polar_sim.ground.replay import replay
     from polar_sim.metrics.ground import labels_at
-    from polar_sim.sim.rover_sequences import load_route, route_truth
+    from polar_sim.sim.recorders.rover_sequences import load_route, route_truth
 
     rec = load_route(name, max_frames=frames)
     tr = route_truth(rec)
@@ -102,7 +103,7 @@ def candidate_set(routes, frames=None, n_pick=None):
     u, v, dbar, prob, label, speed_cd, speed, h), cached as derived arrays (kind
     ``"ground_candidates"``, keyed by the routes, length, frames per route and the sources' hash) and
     memoised per process, so every trial of the RANSAC experiments shares one pass."""
-    from polar_sim.sim import sequences
+    from polar_sim.sim.recorders import sequences
 
     key = {"routes": list(routes), "frames": int(frames or 0), "n_pick": int(n_pick or 0), "code": _source_tag()}
     mk = repr(sorted(key.items()))

@@ -1,6 +1,6 @@
 """Shared declarations of the ground-chapter experiments (not an experiment: the underscore keeps it
 out of the registry). The work is in the library: routes are recordings from the one cache
-(``polar_sim.sim.rover_sequences.load_route``), VOs are ``vo`` plug-ins
+(``polar_sim.sim.recorders.rover_sequences.load_route``), VOs are ``vo`` plug-ins
 (``polar_sim.runner.methods``) replayed by ``polar_sim.ground.replay``, integration is
 ``polar_sim.ground.integration``, scores are ``polar_sim.metrics``. What stays here is the protocol:
 the route lists per split and the size-dependent protocol values (``ROUTE_PARAMS``,
@@ -44,8 +44,8 @@ def single_thread():
 
 def route_choices():
     """The values the ``route`` axis accepts: ``"quick"`` (the split's quick route) and every dev and
-    test route (``polar_sim.sim.rover_sequences.SPLITS``)."""
-    from polar_sim.sim.rover_sequences import SPLITS
+    test route (``polar_sim.sim.recorders.rover_sequences.SPLITS``)."""
+    from polar_sim.sim.recorders.rover_sequences import SPLITS
 
     return ["quick", *SPLITS["dev"], *SPLITS["test"]]
 
@@ -65,7 +65,7 @@ def max_frames(ctx):
 
 def load(params, ctx):
     """The trial's recording (its first ``max_frames`` frames, a run param) and its truth."""
-    from polar_sim.sim.rover_sequences import load_route, route_truth
+    from polar_sim.sim.recorders.rover_sequences import load_route, route_truth
 
     rec = load_route(route_of(params, ctx), max_frames=max_frames(ctx))
     return rec, route_truth(rec)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from polar_sim import metrics
-from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
+from polar_sim.sim.recorders.tabletop_sequences import SPLIT_SEEDS, cached_sequence, list_sequences
 
 from polar_sim.experiments._tracking_tables import summarize_run
 
@@ -64,7 +64,7 @@ def model(obj, n=N_MODEL):
     """(n, 3) points and outward normals on object ``obj``'s mesh, object frame (seed 0)."""
     import trimesh
 
-    from polar_sim.sim import objects
+    from polar_sim.sim.builders import objects
 
     mesh = objects.load_mesh(obj)
     P, face = trimesh.sample.sample_surface(mesh, n, seed=0)
@@ -74,7 +74,7 @@ def model(obj, n=N_MODEL):
 def cut_of(name, params):
     """(first frame, end frame, width, height) tracked for sequence ``name`` under the run's
     ``params`` (:data:`PARAMS`)."""
-    from polar_sim.sim.tabletop_sequences import sequence_spec
+    from polar_sim.sim.recorders.tabletop_sequences import sequence_spec
 
     span = params["span"]
     if span not in ("all", "ci"):
@@ -112,7 +112,7 @@ def track(name, seed, method, *, params, on_frame=None, stop=None, tracker_kw=No
     """Run tracker ``method`` over the cut of sequence ``name`` (``params``: :data:`PARAMS`) and
     score every frame: (arrays, meta)."""
     from polar_sim.runner.methods import get_method
-    from polar_sim.sim import sequences
+    from polar_sim.sim.recorders import sequences
 
     rec, start, end = recording(name, seed, params)
     end = end if stop is None else min(end, int(stop))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim import metrics
-from polar_sim.sim.tabletop_sequences import list_sequences
+from polar_sim.sim.recorders.tabletop_sequences import list_sequences
 
 #: "Occlusion by touch": the hand touches or holds the target and hides more than 5 % of it.
 TOUCH_OCCLUSION = 0.05

@@ -2,7 +2,7 @@
 never used for tuning, and on object orbits.
 
 2D scenes (``office2d``, ``warehouse2d``): the kinematic rover drives a seeded 60 s route through
-the scene's regions (``polar_sim.sim.drives2d``, up to 1 m/s) with the 2D lidar (1081 beams, 270
+the scene's regions (``polar_sim.sim.recorders.drives2d``, up to 1 m/s) with the 2D lidar (1081 beams, 270
 deg, sigma = 1 cm; a scan every ``every_steps``-th 0.1 s step: 1, i.e. 10 Hz, at full size; 3
 quick); the ``mapper2d`` method (``gpis``: default mode; ``gpis_legacy``: the published
 behaviour; any plug-in) fuses every scan at the true sensor pose. Scored with
@@ -37,7 +37,7 @@ M3D = ["object", "sdf_rmse_m", "sdf_median_abs_m", "chamfer_m", "surface_to_mesh
 
 def _scan2d(scene, method, seed, ctx):
     from polar_sim.metrics.maps import ObservedArea, map_scores_2d
-    from polar_sim.sim.drives2d import recorded_drives, section_corners
+    from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
 
     every = ctx.params["every_steps"]
     d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_steps=every, **C.ROUTE)])

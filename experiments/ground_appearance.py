@@ -34,7 +34,7 @@ def trial(params, seed, ctx):
     from polar_sim.ground.replay import replay
     from polar_sim.metrics.calibration import pooled_reliability, reliability_counts
     from polar_sim.metrics.ground import class_prob_sums, classifier_iou, iou_summary
-    from polar_sim.sim.rover_sequences import settled_frames
+    from polar_sim.sim.recorders.rover_sequences import settled_frames
 
     rec, tr = G.load(params, ctx)
     t, n = tr["t"], len(rec)

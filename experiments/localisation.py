@@ -39,7 +39,7 @@ COLS = ["method", "seeds", "steps", "pos_median_m", "pos_p90_m", "pos_max_m", "h
 
 
 def trial(params, seed, ctx):
-    from polar_sim.sim.drives2d import recorded_drives
+    from polar_sim.sim.recorders.drives2d import recorded_drives
 
     scene, p = params["scene"], ctx.params
     d1, d2 = recorded_drives(scene, seed, [dict(route_seed=seed, n_rooms=5, duration=p["map_s"], every_steps=p["map_every_steps"]),

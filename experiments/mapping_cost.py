@@ -3,7 +3,7 @@
 The world is ``office2d`` tiled n x n (``World("office2d", seed, tiles=n)``: n^2 copies of the 30 m
 floor, each with its own furniture, joined by doors): 1x, 4x, 16x and 64x the office2d area for
 n = 1, 2, 4, 8. The kinematic rover drives the snake through the whole world
-(``polar_sim.sim.drives2d.snake_route``) at up to 1.5 m/s, a lidar scan (1081 beams, sigma 1 cm)
+(``polar_sim.sim.recorders.drives2d.snake_route``) at up to 1.5 m/s, a lidar scan (1081 beams, sigma 1 cm)
 every ``every_m`` metres (0.5; quick: 1.0); the drive is recorded, then the ``mapper2d`` method
 (``gpis``: ``GPISMap2D``, default mode) fuses every scan at the true pose, each ``update`` timed in
 process CPU time (the wall time too, with the load average). Reported: the distribution of update
@@ -31,7 +31,7 @@ COLS = ["method", "tiles", "area_x", "seed", "n_scans", "travelled_m", "cpu_ms_m
 
 
 def trial(params, seed, ctx):
-    from polar_sim.sim.drives2d import recorded_drives, snake_route
+    from polar_sim.sim.recorders.drives2d import recorded_drives, snake_route
 
     n = int(params["tiles"])
     steps = int(1.3 * len(snake_route(n)) * 0.1 / (1.5 * 0.1)) + 200      # enough control steps for the snake

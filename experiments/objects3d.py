@@ -1,14 +1,14 @@
 """objects3d: GPISMap3D reconstructions of single objects from RGB-D orbits.
 
-For each object of ``polar_sim.sim.objects`` (mug, box, can, bottle, drill, bracket, cube), the
+For each object of ``polar_sim.sim.builders.objects`` (mug, box, can, bottle, drill, bracket, cube), the
 ``object_orbit`` scene (the object welded on a stand, an RGB-D camera circling it at 0.8 m,
 elevation 30 +- 12 deg) renders ``n_frames`` frames over one turn (40; quick: 20), masked to the
 object with the exact labels (as the published BigBird demo masks its depth) with Kinect-like
-``DepthNoise`` (``polar_sim.sim.orbits.recorded_orbit``); the ``mapper3d`` method (``gpis``:
+``DepthNoise`` (``polar_sim.sim.recorders.orbits.recorded_orbit``); the ``mapper3d`` method (``gpis``:
 ``GPISMap3D()``, default mode) fuses every frame at the true camera pose.
 
 Scored against the true mesh (``polar_sim.metrics.object_map_scores`` on
-``polar_sim.sim.orbits.ObjectTruth``): Chamfer distance between ``surface()`` (marching cubes) and
+``polar_sim.sim.recorders.orbits.ObjectTruth``): Chamfer distance between ``surface()`` (marching cubes) and
 the mesh on the observed part (both directed means and their average); the normal error (the map's
 gradient at each reconstructed vertex against the true face normal at its nearest mesh point); the
 SDF RMSE within 1 cm of the observed surface (at ``n_eval`` points: 4000; quick: 2000). Pictures:
@@ -56,8 +56,8 @@ def checks(table, ctx):
 
 
 def _object_names():
-    """The objects ``object_orbit`` can hold (the catalogue of ``polar_sim.sim.objects``)."""
-    from polar_sim.sim.objects import object_names
+    """The objects ``object_orbit`` can hold (the catalogue of ``polar_sim.sim.builders.objects``)."""
+    from polar_sim.sim.builders.objects import object_names
 
     return object_names()
 

@@ -35,7 +35,7 @@ COLS = ["surface_rmse_m", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_
 
 def trial(params, seed, ctx):
     from polar_sim.metrics.maps import ObservedArea, map_scores_2d
-    from polar_sim.sim.drives2d import recorded_drives, section_corners
+    from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
 
     scene, spacing = params["scene"], float(params["spacing_m"])
     d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_m=spacing, **C.ROUTE)])

@@ -271,6 +271,19 @@ def _cmd_eval(args):
     return 0
 
 
+def _cmd_compile(args):
+    import time
+
+    from polar_sim.gpis.build_native import build
+
+    t0 = time.perf_counter()
+    path, skipped = build(args.out)
+    print(f"compiled the GPIS kernels in {time.perf_counter() - t0:.0f} s: {path}")
+    if skipped:
+        print(f"left to numba's JIT: {', '.join(skipped)}")
+    return 0
+
+
 def _cmd_train(args):
     import json
 
@@ -428,6 +441,11 @@ def build_parser():
     s.add_argument("--env-kwargs", default=None, help='JSON, e.g. \'{"sdf_source": "truth"}\'')
     s.add_argument("--out", default=None, help="output folder (default polar_sim_out/eval/ENV)")
     s.set_defaults(func=_cmd_eval)
+
+    s = sub.add_parser("compile", help="compile the GPIS kernels ahead of time (once after install: "
+                                       "first runs then start in seconds; needs a C compiler)")
+    s.add_argument("--out", default=None, help="folder (default $POLAR_SIM_NATIVE_DIR or ~/.cache/polar_sim/native)")
+    s.set_defaults(func=_cmd_compile)
 
     s = sub.add_parser("train", help="train a learning recipe on a GPISNav tier (needs torch, stable-baselines3)")
     s.add_argument("recipe", help="dagger, dagger_ppo, ppo, recurrent_ppo, sac or tqc (docs/guide/learning.md)")

@@ -119,7 +119,7 @@ def demo_ground(out: Path, progress: Progress):
     from polar_sim.ground import GroundVO
     from polar_sim.metrics.ground import classifier_iou
     from polar_sim.sim.pictures import save_figure
-    from polar_sim.sim.rover_sequences import record_route
+    from polar_sim.sim.recorders.rover_sequences import record_route
 
     progress.stage("ground: recording route flat_00", 80, "frame")
     rec = record_route("flat_00", max_frames=80, progress=progress.to)
@@ -157,9 +157,9 @@ def demo_tracking(out: Path, progress: Progress):
 
     from polar_sim import metrics
     from polar_sim.demo_pictures import tracking_figure
-    from polar_sim.sim import objects
+    from polar_sim.sim.builders import objects
     from polar_sim.sim.pictures import save_figure
-    from polar_sim.sim.tabletop_sequences import record_sequence
+    from polar_sim.sim.recorders.tabletop_sequences import record_sequence
     from polar_sim.tracking import ObjectTracker
 
     # The palm reaches the mug at about frame 100: start 20 frames before it (the physics and

@@ -30,6 +30,9 @@ __all__ = [
     "between2d",
     "quat_to_matrix",
     "matrix_to_quat",
+    "pinhole_intrinsics",
+    "diameter",
+    "rigid_alignment",
     "CV_FROM_GL",
 ]
 
@@ -166,3 +169,50 @@ def quat_to_matrix(q):
 def matrix_to_quat(R):
     """Scalar-first quaternion ``(w, x, y, z)`` (MuJoCo order) of a rotation matrix (3, 3)."""
     return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat(scalar_first=True)
+
+
+def pinhole_intrinsics(width, height, fovy_deg):
+    """Pinhole K (3, 3) of a ``width`` x ``height`` px camera with vertical field of view
+    ``fovy_deg`` (degrees), as MuJoCo renders it: square pixels, f = (H/2) / tan(fovy/2) px, the
+    principal point at the image centre ((W-1)/2, (H-1)/2); OpenCV convention. The one home of
+    this formula: the simulator's cameras and the modules' synthetic scenes use it."""
+    f = 0.5 * height / np.tan(np.radians(fovy_deg) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def diameter(points):
+    """Largest distance between two of the points (n, 3) (or (n, 2)), in their unit: exact,
+    searched over the convex hull's vertices (all points when the set is flat or degenerate).
+    The one home of an object's diameter (ADD thresholds, tracking gates, scene metadata)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) > P.shape[1] + 1:
+        try:
+            P = P[ConvexHull(P).vertices]
+        except QhullError:  # flat or degenerate point sets: every point is a candidate
+            pass
+    best = 0.0
+    for i in range(0, len(P), 1024):  # blocks of rows keep the pairwise table small
+        best = max(best, float(np.linalg.norm(P[i : i + 1024, None] - P[None], axis=2).max()))
+    return best
+
+
+def rigid_alignment(P, Q, *, with_scale=False):
+    """Least-squares alignment of paired points: (R (d, d), t (d,), s) minimising
+    ``sum |s R p_i + t - q_i|^2`` over P, Q (n, d), d = 2 or 3 (s = 1 unless ``with_scale``).
+
+    The SVD solution of Arun et al. (1987) with Umeyama's (1991) reflection fix and scale. The one
+    home of rigid alignment: registration's Kabsch step and the trajectory metrics' alignment use it.
+    """
+    P, Q = np.asarray(P, dtype=np.float64), np.asarray(Q, dtype=np.float64)
+    dim = P.shape[1]
+    pc, qc = P.mean(axis=0), Q.mean(axis=0)
+    xp = P - pc
+    U, S, Vt = np.linalg.svd(xp.T @ (Q - qc))
+    D = np.eye(dim)
+    D[-1, -1] = np.sign(np.linalg.det(Vt.T @ U.T))
+    R = Vt.T @ D @ U.T
+    var = float((xp**2).sum())
+    s = float(np.trace(np.diag(S) @ D) / var) if with_scale and var > 0 else 1.0
+    return R, qc - s * R @ pc, s

@@ -18,7 +18,7 @@ WRITERS = {
     # a 12 MB recording, re-saved in a loop
     "recording": r"""
 import sys, numpy as np
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders.recording import Recording
 rng = np.random.default_rng(int(sys.argv[2]))
 obj = Recording(meta={"gen": int(sys.argv[2])})
 for i in range(40):
@@ -47,7 +47,7 @@ def _strays(folder):
 
 def _load(kind, path):
     if kind == "recording":
-        from polar_sim.sim.recording import Recording
+        from polar_sim.sim.recorders.recording import Recording
 
         rec = Recording.load(path)
         assert len(rec) == 40 and rec.meta["gen"] in (0, 1, 2)

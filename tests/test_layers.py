@@ -131,7 +131,7 @@ print('ok')
 # The modules import (and so run on real logs) with mujoco and gymnasium absent.
 @pytest.mark.parametrize("module", ["polar_sim.gpis", "polar_sim.ground", "polar_sim.tracking", "polar_sim.baselines",
                                     "polar_sim.metrics", "polar_sim.geometry", "polar_sim.gpis.localize",
-                                    "polar_sim.sim.recording"])
+                                    "polar_sim.sim.recorders.recording"])
 def test_modules_import_without_mujoco_or_gymnasium(module):
     r = subprocess.run([sys.executable, "-c", _BLOCK, module], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-3000:]

@@ -12,7 +12,7 @@ import termios
 import pytest
 
 SCRIPT = r"""
-from polar_sim.sim.tabletop_sequences import record_sequence
+from polar_sim.sim.recorders.tabletop_sequences import record_sequence
 rec = record_sequence("mug_touch", seed=0, n_frames=3, width=64, height=48)
 print("frames", len(rec))
 """

@@ -210,6 +210,27 @@ class DiscreteSDF2D(_DiscreteSDF):
         check_updated(grid, "log_odds_")
         return cls(**params).fit(grid.occupied_mask(), grid.origin_, grid.cell_size, free=grid.free_mask())
 
+    @classmethod
+    def from_values(cls, values, origin, cell_size, **params):
+        """A field given by its values at the cell centres, (nx, ny) metres at
+        ``origin + (index + 0.5) * cell_size`` (for example an exact SDF sampled on a grid: the
+        dissertation's ground-truth discrete SDF), queried like the EDT; inside = negative."""
+        sdf = cls(**params)
+        as_positive_float(sdf.outside_variance, "outside_variance")
+        vals = as_float_array(values, "values")
+        if vals.ndim != 2 or min(vals.shape) < 2 or not np.isfinite(vals).all():
+            raise ValueError(f"values: expected a finite (nx >= 2, ny >= 2) array, got shape {vals.shape}")
+        origin = as_float_array(origin, "origin")
+        if origin.shape != (2,) or not np.isfinite(origin).all():
+            raise ValueError(f"origin: expected 2 finite numbers, got {origin!r}")
+        cs = as_positive_float(cell_size, "cell_size")
+        sdf.sdf_ = vals.copy()
+        sdf.grad_ = np.stack(np.gradient(sdf.sdf_, cs), axis=-1)
+        sdf.inside_ = sdf.sdf_ < 0
+        sdf.origin_ = origin.copy()
+        sdf.cell_size_ = cs
+        return sdf
+
 
 class DiscreteSDF3D(_DiscreteSDF):
     """Signed EDT of a 3D voxel occupancy with trilinear distance and gradient queries.

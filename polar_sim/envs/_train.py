@@ -72,7 +72,8 @@ def _dagger(env_id, p, seed, curve, progress, clock=None):
     clock = clock or _Clock()
     cfg = DAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
                        hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
-                       batch_size=p["batch_size"], lr=p["lr"], obs_keys=tuple(p["obs_keys"]), seed=seed)
+                       batch_size=p["batch_size"], lr=p["lr"], obs_keys=tuple(p["obs_keys"]), seed=seed,
+                       known_var=p["known_var"])
 
     def after_round(k, policy, row):
         if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
@@ -109,8 +110,8 @@ def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
                         env_kwargs=_train_env_kwargs(p), wrapper_class=wrapper, wrapper_kwargs=wrapper_kwargs)
 
 
-def _feature_wrapper(env, action, keys, mean=None, std=None):
-    return FeatureObservation(wrap_action(env, action), keys, mean, std)
+def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None):
+    return FeatureObservation(wrap_action(env, action), keys, mean, std, known_var=known_var)
 
 
 def _ppo_kwargs(p, hidden, log_std_init, activation="tanh"):
@@ -121,7 +122,7 @@ def _ppo_kwargs(p, hidden, log_std_init, activation="tanh"):
     return kw
 
 
-def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None):
+def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None, known_var=None):
     """The numpy policy of a PPO MlpPolicy on FeatureObservation (normalised by ``venv`` if
     ``mean`` is None)."""
     if mean is None:
@@ -132,7 +133,7 @@ def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None):
     space = venv.unwrapped.envs[0].unwrapped.observation_space
     shapes = {k: space[k].shape for k in keys}
     return export_mlp(model, mean, std, keys=keys, obs_shapes=shapes, recipe=recipe, clip=clip, env_id=env_id,
-                      env_kwargs=dict(p["env_kwargs"]))
+                      env_kwargs=dict(p["env_kwargs"]), known_var=known_var)
 
 
 def _ppo(env_id, p, seed, curve, progress):
@@ -146,7 +147,10 @@ def _ppo(env_id, p, seed, curve, progress):
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, {"action": action, "keys": keys}),
                         norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=p["gamma"])
     model = make_model(recipe, venv, seed=seed)
-    ckpt = (lambda n: _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n))
+
+    def ckpt(n):
+        _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n)
+
     model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt))
     policy = _mlp_of(model, venv, p, keys, recipe, env_id)
     venv.close()
@@ -159,13 +163,13 @@ def _dagger_ppo(env_id, p, seed, curve, progress):
     keys = imitation.obs_keys
     recipe = {"name": "dagger_ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
               "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"], p["activation"]), "action": None}
-    wk = {"action": None, "keys": keys, "mean": imitation.mean, "std": imitation.std}
+    wk = {"action": None, "keys": keys, "mean": imitation.mean, "std": imitation.std, "known_var": imitation.known_var}
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=False, norm_reward=True,
                         gamma=p["gamma"])
     model = load_mlp_into(make_model(recipe, venv, seed=seed), imitation)
 
     def export():
-        return _mlp_of(model, venv, p, keys, recipe, env_id, imitation.mean, imitation.std)
+        return _mlp_of(model, venv, p, keys, recipe, env_id, imitation.mean, imitation.std, imitation.known_var)
 
     actor = list(model.policy.mlp_extractor.policy_net.parameters()) + list(model.policy.action_net.parameters()) \
         + [model.policy.log_std]

@@ -9,7 +9,7 @@ __all__ = ["AppearanceRandomization"]
 
 
 class AppearanceRandomization(gym.Wrapper):
-    """Draw a new appearance (:mod:`polar_sim.sim.rover_appearance`) for every episode of
+    """Draw a new appearance (:mod:`polar_sim.sim.builders.rover_appearance`) for every episode of
     ``polar_sim/RoverDrive-v0`` or ``polar_sim/GroundVO-v0``.
 
     Each ``reset`` draws an appearance seed from the wrapper's generator (seeded by ``reset(seed=...)``,
@@ -32,7 +32,7 @@ class AppearanceRandomization(gym.Wrapper):
 
     def __init__(self, env, families=None):
         super().__init__(env)
-        from polar_sim.sim.rover_appearance import FAMILIES
+        from polar_sim.sim.builders.rover_appearance import FAMILIES
 
         if families is not None:
             families = [families] if isinstance(families, str) else list(families)
@@ -48,7 +48,7 @@ class AppearanceRandomization(gym.Wrapper):
         self._look = None
 
     def reset(self, *, seed=None, options=None):
-        from polar_sim.sim.rover_appearance import resolve_appearance, sample_appearance
+        from polar_sim.sim.builders.rover_appearance import resolve_appearance, sample_appearance
 
         from polar_sim.envs.base import check_seed
 

@@ -25,7 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from polar_sim._validation import as_float, as_int, check_choice
-from polar_sim.envs.features import STENCIL_KEYS
+from polar_sim.envs.features import KNOWN_VAR, MASKED_KEYS, stencil_vector
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
 
@@ -39,7 +39,7 @@ TRAIN_SEEDS = (0, 1000)
 
 @dataclasses.dataclass(frozen=True)
 class DAggerConfig:
-    """The DAgger recipe's parameters (defaults chosen on dev worlds, seeds 1000-1049).
+    """The DAgger recipe's parameters (defaults chosen on dev worlds, seeds 1000-1029; docs/guide/learning.md).
 
     Attributes
     ----------
@@ -53,16 +53,21 @@ class DAggerConfig:
         Hidden layer widths of the MLP.
     activation : {"tanh", "relu"}
     epochs : int
-        Passes over the aggregated data after each round (the net is warm-started).
+        Passes over the aggregated data after each round (the net is warm-started). 20 left the
+        net underfitted (training loss 0.029 against 0.0064 with 100 after behaviour cloning).
     batch_size : int
     lr : float
         Adam's learning rate.
     obs_keys : tuple of str
-        Observation keys the learner reads. ``sdf_var`` and ``pose`` are left out by default:
-        the variance's scale differs between map sources and the pose's range between tiers, so
-        a learner keyed on them does not transfer (see docs/guide/learning.md).
+        Observation keys the learner reads. ``pose`` is left out (its range differs between
+        tiers); ``sdf_var`` is read only as the known mask of ``known_var`` (the raw variance's
+        scale differs between map sources, see docs/guide/learning.md).
     seed : int
         Seeds torch, the mixture's coin and the first training world (``TRAIN_SEEDS``).
+    known_var : float or None, default=KNOWN_VAR
+        Mask the stencil's unknown space (map variance >= ``known_var``) before the learner sees
+        it, as the experts do (None: the raw stencil) (:func:`polar_sim.envs.features.stencil_vector`); needs ``sdf_var``
+        in ``obs_keys``.
     """
 
     rounds: int = 4
@@ -70,11 +75,12 @@ class DAggerConfig:
     beta_decay: float = 0.5
     hidden: tuple = (256, 256)
     activation: str = "tanh"
-    epochs: int = 20
+    epochs: int = 100
     batch_size: int = 256
     lr: float = 1e-3
-    obs_keys: tuple = STENCIL_KEYS
+    obs_keys: tuple = MASKED_KEYS
     seed: int = 0
+    known_var: float | None = KNOWN_VAR
 
     def __post_init__(self):
         as_int(self.rounds, "rounds", minimum=1, maximum=100)
@@ -92,6 +98,11 @@ class DAggerConfig:
                 or not all(isinstance(k, str) for k in self.obs_keys):
             raise ValueError(f"obs_keys: expected a non-empty tuple of observation keys, got {self.obs_keys!r}")
         as_int(self.seed, "seed", minimum=0)
+        if self.known_var is not None:
+            as_float(self.known_var, "known_var", minimum=0.0, maximum=1e6, exclusive_minimum=True)
+            if "sdf_var" not in self.obs_keys:
+                raise ValueError(f"known_var: masking unknown space needs 'sdf_var' among the obs_keys, got "
+                                 f"{tuple(self.obs_keys)}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
         object.__setattr__(self, "obs_keys", tuple(self.obs_keys))
 
@@ -106,15 +117,12 @@ def make_expert(name, env):
     return EXPERTS[name](stencil_rays=stencil.n_rays, stencil_radii=tuple(stencil.radii))
 
 
-def _features(obs, keys):
-    return np.concatenate([np.asarray(obs[k], np.float32).reshape(-1) for k in keys])
-
-
-def rollout(env, expert, learner, *, beta, steps, rng, seeds, keys, bar=None):
+def rollout(env, expert, learner, *, beta, steps, rng, seeds, keys, known_var=None, bar=None):
     """Run ``steps`` env steps, each executing the expert's action with probability ``beta`` and
     ``learner``'s otherwise (``learner`` None: always the expert), and return the visited
     features (steps, n), the expert's actions there (steps, 2) and the finished episodes'
-    outcomes ``{"episodes", "success", "collision"}``. ``seeds`` yields episode seeds."""
+    outcomes ``{"episodes", "success", "collision"}``. ``seeds`` yields episode seeds; ``keys`` and
+    ``known_var`` make the features (:func:`polar_sim.envs.features.stencil_vector`)."""
     X, Y = [], []
     out = {"episodes": 0, "success": 0, "collision": 0}
     obs, _ = env.reset(seed=next(seeds))
@@ -123,7 +131,7 @@ def rollout(env, expert, learner, *, beta, steps, rng, seeds, keys, bar=None):
         learner.reset()
     for _ in range(steps):
         a_exp = np.asarray(expert(obs), np.float32)
-        X.append(_features(obs, keys))
+        X.append(stencil_vector(obs, keys, known_var))
         Y.append(a_exp)
         use_expert = learner is None or rng.random() < beta
         a = a_exp if use_expert else learner(obs)
@@ -177,7 +185,7 @@ def to_policy(net, mean, std, config, env, env_id, env_kwargs, recipe):
                      obs_keys=config.obs_keys,
                      obs_shapes={k: env.observation_space[k].shape for k in config.obs_keys},
                      mean=mean, std=std, activation=config.activation, action=None, env_id=env_id,
-                     env_kwargs=env_kwargs, recipe=recipe)
+                     env_kwargs=env_kwargs, recipe=recipe, known_var=config.known_var)
 
 
 def train_dagger(env_id, *, expert="reactive", config=DAggerConfig(), env_kwargs=None, policy_env_kwargs=None,
@@ -235,7 +243,7 @@ def train_dagger(env_id, *, expert="reactive", config=DAggerConfig(), env_kwargs
             for k in range(config.rounds):
                 beta = 1.0 if k == 0 else config.beta_decay ** k
                 x, y, out = rollout(env, ex, policy, beta=beta, steps=config.steps_per_round, rng=rng,
-                                    seeds=seeds, keys=config.obs_keys, bar=bar)
+                                    seeds=seeds, keys=config.obs_keys, known_var=config.known_var, bar=bar)
                 X = x if X is None else np.concatenate([X, x])
                 Y = y if Y is None else np.concatenate([Y, y])
                 if net is None:  # the normalisation of the expert's own data, fixed from then on

@@ -250,9 +250,10 @@ def _actor_linears(model):
     return pi + [model.policy.action_net]
 
 
-def export_mlp(model, mean, std, *, keys, obs_shapes, recipe, clip=10.0, env_id=None, env_kwargs=None):
+def export_mlp(model, mean, std, *, keys, obs_shapes, recipe, clip=10.0, env_id=None, env_kwargs=None,
+               known_var=None):
     """The numpy :class:`MLPPolicy` of a PPO ``MlpPolicy`` trained on :class:`FeatureObservation`
-    (``keys``) normalised by ``mean``/``std``; its deterministic action is the same."""
+    (``keys``, ``known_var``) normalised by ``mean``/``std``; its deterministic action is the same."""
     act = model.policy.mlp_extractor.policy_net
     acts = {type(m) for m in act if not isinstance(m, nn.Linear)}
     activation = "relu" if acts == {nn.ReLU} else "tanh"
@@ -261,7 +262,8 @@ def export_mlp(model, mean, std, *, keys, obs_shapes, recipe, clip=10.0, env_id=
     lin = _actor_linears(model)
     return MLPPolicy([m.weight.detach().numpy() for m in lin], [m.bias.detach().numpy() for m in lin],
                      obs_keys=keys, obs_shapes=obs_shapes, mean=mean, std=std, clip=clip, activation=activation,
-                     action=recipe.get("action"), env_id=env_id, env_kwargs=env_kwargs, recipe=recipe)
+                     action=recipe.get("action"), env_id=env_id, env_kwargs=env_kwargs, recipe=recipe,
+                     known_var=known_var)
 
 
 def load_mlp_into(model, policy):

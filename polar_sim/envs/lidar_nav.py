@@ -44,9 +44,9 @@ _DEFAULT = "default"  # sentinel: the version's default noise
 
 def resolve_tier(tier, rooms, room_size, clutter):
     """(rooms, room_size, clutter) of ``tier`` (None: the default), each overridden when given and
-    checked against the world's limits (:func:`polar_sim.sim.navworld.check_layout`) before
+    checked against the world's limits (:func:`polar_sim.sim.builders.navworld.check_layout`) before
     anything is built."""
-    from polar_sim.sim.navworld import check_layout
+    from polar_sim.sim.builders.navworld import check_layout
 
     name = DEFAULT_TIER if tier is None else tier
     if not isinstance(name, str) or name not in TIERS:

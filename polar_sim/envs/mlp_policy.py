@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from polar_sim.envs.action_maps import check_action, env_action
+from polar_sim.envs.features import stencil_vector
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
 __all__ = ["MLPPolicy", "ACTIVATIONS"]
@@ -40,10 +41,13 @@ class MLPPolicy:
         The ``gym.make`` arguments it acts with (e.g. ``{"obs_mode": "stencil"}``).
     recipe : dict, optional
         How it was trained (recipe name and parameters, splits, steps); informational.
+    known_var : float, optional
+        Mask the stencil's unknown space before normalising
+        (:func:`polar_sim.envs.features.stencil_vector`); ``obs_keys`` must then hold ``sdf_var``.
     """
 
     def __init__(self, weights, biases, *, obs_keys, obs_shapes, mean, std, clip=10.0, activation="tanh",
-                 action=None, env_id=None, env_kwargs=None, recipe=None):
+                 action=None, env_id=None, env_kwargs=None, recipe=None, known_var=None):
         self.weights = [np.asarray(w, np.float64) for w in weights]
         self.biases = [np.asarray(b, np.float64) for b in biases]
         self.obs_keys = list(obs_keys)
@@ -56,9 +60,13 @@ class MLPPolicy:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.recipe = dict(recipe or {})
+        self.known_var = None if known_var is None else float(known_var)
         self._check()
 
     def _check(self):
+        if self.known_var is not None and (not self.known_var > 0 or "sdf_var" not in self.obs_keys):
+            raise ValueError(f"known_var: expected None, or a variance > 0 with 'sdf_var' among the obs_keys; got "
+                             f"{self.known_var!r} with {self.obs_keys}")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation: expected one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
         n = sum(int(np.prod(s)) for s in self.obs_shapes.values())
@@ -82,7 +90,7 @@ class MLPPolicy:
     def features(self, obs):
         """The normalised feature vector (n_features,) of one observation dict."""
         try:
-            x = np.concatenate([np.asarray(obs[k], np.float64).reshape(-1) for k in self.obs_keys])
+            x = stencil_vector(obs, self.obs_keys, self.known_var)
         except KeyError as exc:
             raise ValueError(f"obs: the policy reads {self.obs_keys}; {exc} is missing") from None
         if x.shape != self.mean.shape:
@@ -114,7 +122,8 @@ class MLPPolicy:
         """Write the policy to ``path`` (.npz, :mod:`polar_sim.envs.policy_file`)."""
         meta = {"kind": "mlp", "obs_keys": self.obs_keys, "obs_shapes": self.obs_shapes, "clip": self.clip,
                 "activation": self.activation, "action": self.action, "env_id": self.env_id,
-                "env_kwargs": self.env_kwargs, "recipe": self.recipe, "layers": len(self.weights)}
+                "env_kwargs": self.env_kwargs, "recipe": self.recipe, "layers": len(self.weights),
+                "known_var": self.known_var}
         arrays = {"obs_mean": self.mean, "obs_std": self.std}
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             arrays[f"layer{i}/W"], arrays[f"layer{i}/b"] = w, b
@@ -133,7 +142,7 @@ class MLPPolicy:
                          obs_keys=meta["obs_keys"], obs_shapes=meta["obs_shapes"], mean=arrays["obs_mean"],
                          std=arrays["obs_std"], clip=meta["clip"], activation=meta["activation"],
                          action=meta["action"], env_id=meta["env_id"], env_kwargs=meta["env_kwargs"],
-                         recipe=meta["recipe"])
+                         recipe=meta["recipe"], known_var=meta.get("known_var"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{name}: the policy file lacks or garbles {exc}") from None
         if env is not None:

@@ -83,6 +83,10 @@ class GPISSource:
             return np.zeros(len(points)), np.zeros((len(points), 2)), np.full(len(points), np.inf)
         return self.map.query(points)
 
+    def _register_native(self, *args):
+        """ICP-G in the map's compiled loop (``register_sdf`` looks for it); None before data."""
+        return self.map._register_native(*args)
+
 
 class OccupancyEDTSource:
     """A log-odds occupancy grid and the signed EDT of it (the grid baseline) as an SDF source."""

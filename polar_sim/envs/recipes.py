@@ -33,14 +33,17 @@ from polar_sim._validation import as_bool, as_float, as_int, check_choice
 
 __all__ = ["RECIPES", "check_recipe", "train", "LEARNING_ENV_IDS", "DEV_SEED"]
 
-#: The env ids a recipe trains on (the GPISNav-v1 tiers).
-LEARNING_ENV_IDS = ("polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1")
+#: The env ids a recipe trains on: the GPISNav tiers, v2 (the kinematic rover, faster) and v1.
+LEARNING_ENV_IDS = ("polar_sim/GPISNav-Room-v2", "polar_sim/GPISNav-Rooms2-v2", "polar_sim/GPISNav-v2",
+                    "polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1")
 DEV_SEED = 1000
 STENCIL_KEYS = ["goal", "sdf", "sdf_grad", "twist"]
+MASKED_KEYS = ["goal", "sdf", "sdf_grad", "sdf_var", "twist"]
 
 _COMMON = {"train_pose_source": "truth", "env_kwargs": {}, "eval_every": 0, "eval_episodes": 20}
-_DAGGER = {"expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
-           "activation": "tanh", "epochs": 20, "batch_size": 256, "lr": 1e-3, "obs_keys": STENCIL_KEYS}
+_DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
+           "activation": "tanh", "epochs": 100, "batch_size": 256, "lr": 1e-3, "obs_keys": MASKED_KEYS,
+           "known_var": 0.5}
 _PPO = {"steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "obs_keys": STENCIL_KEYS, "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
@@ -64,6 +67,8 @@ _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 
 def _check_value(key, value, default):
+    if key == "known_var":
+        return None if value is None else as_float(value, key, minimum=0.0, maximum=1e6, exclusive_minimum=True)
     if key in _CHOICES:
         return check_choice(value, _CHOICES[key], key)
     if isinstance(default, bool):
@@ -116,6 +121,8 @@ def check_recipe(name, params=None, env_id=None):
         out[k] = _check_value(k, v, RECIPES[name][k])
     if out.get("obs_mode") == "grid" and name in ("sac", "tqc"):
         raise ValueError(f"obs_mode: recipe {name!r} trains on the stencil only")
+    if out.get("known_var") is not None and "sdf_var" not in out["obs_keys"]:
+        raise ValueError(f"known_var: masking unknown space needs 'sdf_var' among the obs_keys, got {out['obs_keys']}")
     if name == "dagger_ppo" and out["finetune_steps"] < out["n_envs"] * out["n_steps"]:
         raise ValueError(f"finetune_steps: expected at least n_envs * n_steps = {out['n_envs'] * out['n_steps']}")
     return out

@@ -100,7 +100,7 @@ class RoverDriveEnv(PolarMujocoEnv):
     | ``max_accel`` | 3.0 | m/s^2 toward the speed set-point; None: no limit |
     | ``max_cross_track`` | 6.0 | m from the route beyond which the episode ends |
     | ``camera_size`` | (621, 188) | image width, height in pixels (the vertical field of view is fixed) |
-    | ``appearance`` | None | the scene's ``appearance`` option (:mod:`polar_sim.sim.rover_appearance`); ``reset(options={"appearance": ...})`` overrides it for one episode (``AppearanceRandomization`` draws one per episode) |
+    | ``appearance`` | None | the scene's ``appearance`` option (:mod:`polar_sim.sim.builders.rover_appearance`); ``reset(options={"appearance": ...})`` overrides it for one episode (``AppearanceRandomization`` draws one per episode) |
     | ``supersample`` | True | render at twice the size (1242x376) and reduce 2x by a Gaussian pyramid level, as KITTI's reduced images and the route recordings are made; False renders at ``camera_size`` directly: 1.7x faster steps, an aliased image and a less robust VO |
 
     ## Truth in ``info``
@@ -137,7 +137,7 @@ class RoverDriveEnv(PolarMujocoEnv):
             raise ValueError(f"camera_size: expected (width, height) in 32..1280 px, got {camera_size!r}")
         self._camera_size = size
         self._supersample = bool(supersample)
-        from polar_sim.sim.rover_appearance import resolve_appearance
+        from polar_sim.sim.builders.rover_appearance import resolve_appearance
 
         resolve_appearance(appearance, 0)  # a bad appearance raises now, not at the first reset
         self._appearance = self._episode_appearance = appearance
@@ -152,7 +152,7 @@ class RoverDriveEnv(PolarMujocoEnv):
     # -- world ----------------------------------------------------------------------------
     def _make_world(self, layout_seed):
         from polar_sim.sim import World
-        from polar_sim.sim.rover_sequences import KITTI_FOVY_DEG
+        from polar_sim.sim.recorders.rover_sequences import KITTI_FOVY_DEG
 
         self._layout_seed = layout_seed
         look = {} if self._episode_appearance is None else {"appearance": self._episode_appearance}
@@ -161,7 +161,7 @@ class RoverDriveEnv(PolarMujocoEnv):
     RESET_OPTIONS = ("appearance",)
 
     def _check_option_values(self, options):
-        from polar_sim.sim.rover_appearance import resolve_appearance
+        from polar_sim.sim.builders.rover_appearance import resolve_appearance
 
         resolve_appearance(options.get("appearance", self._appearance), 0)  # before the old world is closed
 
@@ -215,7 +215,7 @@ class RoverDriveEnv(PolarMujocoEnv):
         self._rgb = self._render_camera()
 
     def _render_camera(self):
-        from polar_sim.sim.rover_sequences import reduce2x
+        from polar_sim.sim.recorders.rover_sequences import reduce2x
 
         width, height = self._camera_size
         k = 2 if self._supersample else 1

@@ -18,7 +18,7 @@ SUCCESS_BONUS = 10.0
 DROP_PENALTY = 10.0
 DROP_HEIGHT = 0.05  # m below the table top at which the object counts as knocked off the table
 YAW_WEIGHT = 0.05  # m per rad of yaw error in the distance to the pre-grasp pose
-PALM_HALF_THICKNESS = 0.012  # m, polar_sim.sim.hand.PALM_HALF[2]
+PALM_HALF_THICKNESS = 0.012  # m, polar_sim.sim.actors.hand.PALM_HALF[2]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,7 +141,7 @@ class TabletopReachEnv(PolarMujocoEnv):
                  success_yaw=10.0, **unknown):
         check_kwargs(type(self), unknown)
         super().__init__(render_mode=render_mode, render_size=render_size)
-        from polar_sim.sim.objects import object_names
+        from polar_sim.sim.builders.objects import object_names
 
         if target is not None and target not in object_names():
             raise ValueError(f"target: unknown object {target!r}; expected one of {', '.join(object_names())} or None")
@@ -184,7 +184,7 @@ class TabletopReachEnv(PolarMujocoEnv):
                      noise=noise)
 
     def _reset_scene(self):
-        from polar_sim.sim.objects import object_info
+        from polar_sim.sim.builders.objects import object_info
 
         w = self._world
         tgt = w.meta["target"]

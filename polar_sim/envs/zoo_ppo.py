@@ -1,4 +1,4 @@
-"""rl-zoo3 hyperparameters for PPO on the GPISNav-v1 tiers (``--conf-file polar_sim.envs.zoo_ppo``).
+"""rl-zoo3 hyperparameters for PPO on the GPISNav tiers (v2 and v1) (``--conf-file polar_sim.envs.zoo_ppo``).
 
 rl-zoo3 reads a Python module given to ``--conf-file`` by its ``hyperparams`` dict, keyed by env
 id, so the file ships inside polar_sim and needs no path::
@@ -19,8 +19,9 @@ from polar_sim.envs.learning import ppo_recipe
 
 __all__ = ["hyperparams"]
 
-_TIME_STEPS = {"polar_sim/GPISNav-Room-v1": 300_000, "polar_sim/GPISNav-Rooms2-v1": 1_000_000,
-               "polar_sim/GPISNav-v1": 1_000_000}
+_TIME_STEPS = {"polar_sim/GPISNav-Room-v2": 300_000, "polar_sim/GPISNav-Rooms2-v2": 1_000_000,
+               "polar_sim/GPISNav-v2": 1_000_000, "polar_sim/GPISNav-Room-v1": 300_000,
+               "polar_sim/GPISNav-Rooms2-v1": 1_000_000, "polar_sim/GPISNav-v1": 1_000_000}
 
 
 def _ppo(env_id):

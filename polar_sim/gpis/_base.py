@@ -9,21 +9,23 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 
 import numpy as np
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
 from polar_sim.params import Parameterised
 from polar_sim.gpis import _io
-from polar_sim.gpis._distance import FreeSpace, blend_gp, far_field, far_weights
-from polar_sim.gpis._kernels import (apply_new, apply_reeval, candidates, dirty_slots,
-                                     gather_training, query_gp)
+from polar_sim.gpis import _icp, _kernels  # noqa: F401  (their kernels, called through K)
+from polar_sim.gpis._distance import FreeSpace, far_field, far_weights
+from polar_sim.gpis._native import K
+from polar_sim.gpis._query import PARALLEL_POINTS, query_gp
 from polar_sim.gpis._localgp import NOGRAD_VALUE_NOISE, GPStore, _var_consts
 from polar_sim.gpis._tree import Tree
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS"]
+__all__ = ["GPISMapBase", "FAR_COORD", "MAX_CLUSTER_CELLS", "MAX_FREE_CELLS", "MAX_QUERY_POINTS"]
 
 #: Query points with a coordinate beyond this (metres) get the prior (see ``query``).
 FAR_COORD = 1e100
@@ -31,8 +33,42 @@ FAR_COORD = 1e100
 #: (both cover only the data, clipped to the map's reach): ``update`` refuses a scan beyond them.
 MAX_CLUSTER_CELLS = 1 << 27
 MAX_FREE_CELLS = 1 << 29
+#: Points per ``query`` call: the answers take 8 * (dim + 2) bytes a point (2.7 GB at the limit in
+#: 3D) and the kernels as much again; query larger sets in parts.
+MAX_QUERY_POINTS = 1 << 26
 
 _STATE = ("tree_", "gps_", "n_updates_")
+
+
+def _grown(lo, hi, goff, gshape, frac, keep_inside):
+    """The extent [lo, hi) (lists of floats, one per axis) a grid at [goff, goff + gshape) grows
+    to for data over [lo, hi): unchanged when the data lies inside (``keep_inside``: the grid's
+    own extent then), else padded by 1/frac of its span on each side that grows
+    (``FreeSpace._cover``, ``Tree._cover``)."""
+    glo = [float(g) for g in goff]
+    ghi = [g + float(n) for g, n in zip(glo, gshape)]
+    if keep_inside and all(a >= g for a, g in zip(lo, glo)) and all(b <= g for b, g in zip(hi, ghi)):
+        return glo, ghi
+    pad = [_floor((b - a) / frac) for a, b in zip(glo, ghi)]
+    if keep_inside:
+        return ([min(a, g - (p if a < g else 0.0)) for a, g, p in zip(lo, glo, pad)],
+                [max(b, g + (p if b > g else 0.0)) for b, g, p in zip(hi, ghi, pad)])
+    return ([min(a, g - p if a < g else g) for a, g, p in zip(lo, glo, pad)],
+            [max(b, g + p if b > g else g) for b, g, p in zip(hi, ghi, pad)])
+
+
+def _floor(x):
+    return float(math.floor(x))
+
+
+def _clip(x, a, b):
+    return min(max(x, a), b)
+
+
+def _refuse_over(n, limit, name, what, const, advice):
+    if n > limit:
+        raise ValueError(f"{name}: this scan would grow the {what.format(n=n)}, over the limit "
+                         f"of {limit} cells ({const}); {advice}")
 
 
 class GPISMapBase(Parameterised):
@@ -122,54 +158,38 @@ class GPISMapBase(Parameterised):
         cluster grid or the free-space grid past their limits, before any state changes.
 
         Both grids cover only what the data needs, clipped to the map's reach (the tree cannot
-        hold samples beyond it), so this triggers only for fine grids over large extents."""
+        hold samples beyond it), so this triggers only for fine grids over large extents. (The
+        clipped extremes are the extremes clipped: the arithmetic runs on the bounding boxes.)"""
         p = self._checked_params()
-        d = self.dim
         name = getattr(scan, "pose_name", "pose")
-        reach = self._reach(p)
         have = hasattr(self, "tree_")
-        # free-space grid (FreeSpace.mark / _cover)
-        res = self._free_res()
         hits = getattr(scan, "free_hits", scan.hits)
-        pts = np.vstack([hits, np.asarray(scan.origin_sensor, float)[None]])
-        lim = np.floor(reach / res) + 2.0
-        lo = np.clip(np.floor(pts.min(0) / res) - 1, -lim, lim)
-        hi = np.clip(np.floor(pts.max(0) / res) + 2, -lim, lim)
-        if (hi > lo).all():
+        o = [float(x) for x in scan.origin_sensor]
+        lo_h, hi_h = (hits.min(0).tolist(), hits.max(0).tolist()) if len(hits) else (o, o)
+        res = self._free_res()
+        lim = _floor(self._reach(p) / res) + 2.0
+        lo = [_clip(_floor(min(a, b) / res) - 1, -lim, lim) for a, b in zip(lo_h, o)]
+        hi = [_clip(_floor(max(a, b) / res) + 2, -lim, lim) for a, b in zip(hi_h, o)]
+        if all(b > a for a, b in zip(lo, hi)):
             if have and self.free_.grid.size:
-                glo = self.free_.goff.astype(float)
-                ghi = glo + self.free_.gshape
-                if not ((lo >= glo).all() and (hi <= ghi).all()):
-                    pad = np.floor((ghi - glo) / 4)
-                    lo = np.minimum(lo, glo - np.where(lo < glo, pad, 0))
-                    hi = np.maximum(hi, ghi + np.where(hi > ghi, pad, 0))
-                else:
-                    lo, hi = glo, ghi
-            n = float(np.prod(hi - lo))
-            if n > MAX_FREE_CELLS:
-                raise ValueError(f"{name}: this scan would grow the free-space grid to {n:.3g} "
-                                 f"cells of {res:g} m, over the limit of {MAX_FREE_CELLS} cells "
-                                 "(MAX_FREE_CELLS); raise free_res")
-        # cluster grid (Tree.reserve / _cover)
-        w = 2.0 * p["cluster_half"]
-        org = -p["init_half"]
-        rc = self.tree_.root[:d] if have else np.zeros(d)
-        limb = 4.0 * p["max_half"]
-        P = np.clip(scan.hits, rc - limb, rc + limb)
-        if len(P):
-            lo = np.floor((P.min(0) - org) / w) - 2
-            hi = np.floor((P.max(0) - org) / w) + 3
+                lo, hi = _grown(lo, hi, self.free_.goff, self.free_.gshape, 4, keep_inside=True)
+            _refuse_over(math.prod(b - a for a, b in zip(lo, hi)), MAX_FREE_CELLS, name,
+                         f"free-space grid to {{n:.3g}} cells of {res:g} m", "MAX_FREE_CELLS",
+                         "raise free_res")
+        if len(scan.hits):
+            w = 2.0 * p["cluster_half"]
+            org = -p["init_half"]
+            rc = self.tree_.root[:self.dim].tolist() if have else [0.0] * self.dim
+            limb = 4.0 * p["max_half"]
+            if scan.hits is not hits:
+                lo_h, hi_h = scan.hits.min(0).tolist(), scan.hits.max(0).tolist()
+            lo = [_floor((_clip(a, c - limb, c + limb) - org) / w) - 2 for a, c in zip(lo_h, rc)]
+            hi = [_floor((_clip(b, c - limb, c + limb) - org) / w) + 3 for b, c in zip(hi_h, rc)]
             if have and self.tree_.cgrid.size > 1:
-                glo = self.tree_.goff.astype(float)
-                ghi = glo + self.tree_.gshape
-                span = ghi - glo
-                lo = np.minimum(lo, np.where(lo < glo, glo - np.floor(span / 2), glo))
-                hi = np.maximum(hi, np.where(hi > ghi, ghi + np.floor(span / 2), ghi))
-            n = float(np.prod(hi - lo))
-            if n > MAX_CLUSTER_CELLS:
-                raise ValueError(f"{name}: this scan would grow the cluster grid to {n:.3g} "
-                                 f"cells of {w:g} m, over the limit of {MAX_CLUSTER_CELLS} cells "
-                                 "(MAX_CLUSTER_CELLS); raise cluster_half or lower max_half")
+                lo, hi = _grown(lo, hi, self.tree_.goff, self.tree_.gshape, 2, keep_inside=False)
+            _refuse_over(math.prod(b - a for a, b in zip(lo, hi)), MAX_CLUSTER_CELLS, name,
+                         f"cluster grid to {{n:.3g}} cells of {w:g} m", "MAX_CLUSTER_CELLS",
+                         "raise cluster_half or lower max_half")
 
     def _init_state(self):
         p = self._checked_params()
@@ -187,6 +207,7 @@ class GPISMapBase(Parameterised):
         self.free_ = FreeSpace(self.dim, self._free_res(), reach=self._reach(p))
         self.n_updates_ = 0
         self.version_ = 0
+        self._index_samples()
 
     # -- helpers --------------------------------------------------------------------------------
     def _hc(self):
@@ -217,9 +238,9 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         changed = []                      # world positions whose training sets changed
         # stage 2: re-evaluate visible samples
-        cent, ptr, samp = candidates(scan.origin, scan.rmax, tr.geo, tr.cgrid, tr.gshape,
-                                     tr.goff, tr.node_sample, tr.node_internal, tr.level_off,
-                                     self._hc())
+        cent, ptr, samp = K.candidates(np.ascontiguousarray(scan.origin, np.float64), scan.rmax, tr.geo, tr.cgrid, tr.gshape,
+                                     tr.goff, tr.node_internal, tr.level_off, self._hc(),
+                                     tr.slot_head, tr.link, tr.s_node)
         if len(cent):
             vis = self._child_visible(cent, scan)
             sel = np.repeat(vis, np.diff(ptr))
@@ -229,28 +250,20 @@ class GPISMapBase(Parameterised):
         touched = []
         if len(cand):
             action, P, N, sp, sg = self._reeval(cand, scan)
-            snap = (tr.pos_t[cand].copy(), tr.nrm_t[cand].copy(), tr.sp_t[cand].copy(),
-                    tr.sg_t[cand].copy())
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
-            new = apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
-            keep = new >= 0
-            touched.append(tr.pos[new[keep]])
+            new = K.apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
             # which changes the trained GPs must see (all of them in legacy mode)
-            dirty = self._significant(action, new, snap, cand)
-            changed.append(snap[0][dirty])
-            nk = new[dirty & keep]
-            changed.append(tr.pos[nk])
-            self._snapshot(nk)
-            kd = keep & ~dirty             # carry the trained snapshot to the new index
-            for a, b in zip((tr.pos_t, tr.nrm_t, tr.sp_t, tr.sg_t), snap):
-                a[new[kd]] = b[kd]
-            self._snapshot(cand[(action == 1) & dirty])
+            ch, kept = K.reeval_changes(cand, action, new, tr.pos, tr.nrm, tr.sp, tr.sg, tr.pos_t,
+                                      tr.nrm_t, tr.sp_t, tr.sg_t, self._retrain_tol(),
+                                      bool(self._pub("retrain") or self._retrain_tol() <= 0))
+            changed.append(ch)
+            touched.append(kept)
         # stage 3: new samples
         P, ok, bad, N, sp, sg = self._new_samples(scan)
         tr.reserve(P[ok])
         self._sync_slot_arrays()
-        new = apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
+        new = K.apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
         kept = new[new >= 0]
         self._snapshot(kept)
         changed.append(tr.pos[kept])
@@ -262,6 +275,7 @@ class GPISMapBase(Parameterised):
         else:
             self._retrain_dirty(np.concatenate(changed))
         self.free_.mark(scan.origin_sensor, getattr(scan, "free_hits", scan.hits))
+        self._index_samples()
         self.n_updates_ += 1
         self.version_ += 1
 
@@ -269,25 +283,6 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         tr.pos_t[idx], tr.nrm_t[idx] = tr.pos[idx], tr.nrm[idx]
         tr.sp_t[idx], tr.sg_t[idx] = tr.sp[idx], tr.sg[idx]
-
-    def _significant(self, action, new, snap, cand):
-        """Re-evaluated samples whose change the GPs must see (default mode: beyond retrain_tol).
-
-        A sample counts when it left the map, or when its position moved more than
-        ``retrain_tol``, its normal turned by more than 0.05 rad, or a noise changed by more
-        than 2x, since the values the GPs were last trained on.
-        """
-        tr = self.tree_
-        if self._pub("retrain") or self._retrain_tol() <= 0:
-            return action >= 1
-        out = (action >= 2) & (new < 0)                      # dropped or lost
-        i = np.where(new >= 0, new, cand)
-        mv = action >= 1
-        dp = np.linalg.norm(tr.pos[i] - snap[0], axis=1) > self._retrain_tol()
-        dn = np.linalg.norm(tr.nrm[i] - snap[1], axis=1) > 0.05
-        rs = (tr.sp[i] > 2 * snap[2]) | (2 * tr.sp[i] < snap[2])
-        rg = (tr.sg[i] > 2 * snap[3]) | (2 * tr.sg[i] < snap[3])
-        return out | (mv & (dp | dn | rs | rg))
 
     def _cluster_coords(self, pts):
         tr = self.tree_
@@ -318,8 +313,8 @@ class GPISMapBase(Parameterised):
         if len(slots) == 0:
             return
         R = self._TRAIN_R * self._hc()
-        ptr, idx = gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff,
-                                   tr.node_sample, tr.slot_coord, tr.pos, self._train_cap())
+        ptr, idx = K.gather_training(slots, R, tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_head,
+                                   tr.link, tr.s_node, tr.slot_coord, tr.pos, self._train_cap())
         nonempty = np.diff(ptr) > 0
         slots = slots[nonempty]
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
@@ -351,7 +346,7 @@ class GPISMapBase(Parameterised):
             return
         tr, g = self.tree_, self.gps_
         self._sync_slot_arrays()
-        slots = dirty_slots(np.ascontiguousarray(changed, np.float64), self._TRAIN_R * self._hc(),
+        slots = K.dirty_slots(np.ascontiguousarray(changed, np.float64), self._TRAIN_R * self._hc(),
                             self._train_cap(), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.slot_coord,
                             tr.node_sample.shape[0], g.gp_obs, g.gp_m, g.X, g.kinds)
         self._train(slots)
@@ -398,19 +393,21 @@ class GPISMapBase(Parameterised):
         Any finite point is answered. A point with a coordinate beyond ``FAR_COORD`` (1e100 m),
         where squared distances overflow, gets the prior: its distance to the origin (positive,
         finite, overflow-safe), the unit gradient away from the origin and the prior variance
-        ``1 + map_noise``; no NaN.
+        ``1 + map_noise``; no NaN. More than ``MAX_QUERY_POINTS`` (2**26) points in one call raise
+        ``ValueError`` (query them in parts).
         """
         check_updated(self, "tree_")
+        _check_count(points)
         # C order: a strided view would compile every distance kernel a second time (layout A)
         pts = np.ascontiguousarray(as_points(points, self.dim, "points", allow_empty=True))
+        _check_count(pts)
         n = len(pts)
         d = self.dim
         if n == 0:
             return np.zeros(0), np.zeros((0, d)), np.zeros(0)
-        far = np.abs(pts).max(1) > FAR_COORD
-        if far.any():
+        if np.abs(pts).max() > FAR_COORD:
             # squared distances of such points overflow; the map knows nothing there: the prior
-            return self._far_prior(pts, far)
+            return self._far_prior(pts, np.abs(pts).max(1) > FAR_COORD)
         if self._pub("query_mode"):
             out = self._gp_query(pts)
             return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
@@ -453,26 +450,71 @@ class GPISMapBase(Parameterised):
 
     def _faithful(self, pts):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
-        kd, idx = self._kd()
         tr = self.tree_
-        if kd is None:
-            dist, grad, var_far = far_field(pts, None, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
-                                            self._surfel_radius(), self.free_,
-                                            1.0 + float(self.map_noise), gate=self._SIGN_GATE,
-                                            sign_h=self._sign_width())
-            return dist, grad, var_far
+        sptr, sidx = self._sample_index_
+        var_unobs = 1.0 + float(self.map_noise)
+        n, d = pts.shape
+        if len(sidx) == 0:
+            return far_field(pts, None, tr.pos, tr.nrm, tr.sp, tr.sg, self._surfel_radius(),
+                             self.free_, var_unobs)
         near, far = self._blend_band()
-        dist, grad, var, w = far_weights(pts, kd, idx, tr.pos, tr.nrm, tr.sp, tr.sg,
-                                         self._surfel_radius(), self.free_,
-                                         1.0 + float(self.map_noise), near, far,
-                                         gate=self._SIGN_GATE, sign_h=self._sign_width(),
-                                         behind=self._BEHIND)
-        sel = np.flatnonzero(w > 0)
-        if len(sel):
-            out = self._gp_query(pts[sel])
-            blend_gp(sel, out, w, float(self.fbias), 1.0 + float(self.map_noise) - 1e-12, dist,
-                     grad, var, self._T_BLEND if self._VAR_BLEND else 0.0)
+        t_info = self._T_BLEND if self._VAR_BLEND else 0.0
+        k = min(4, len(sidx))
+        if n >= PARALLEL_POINTS:            # the GP part on all cores
+            gi = np.empty((n, k), np.int64)
+            K.knn(pts, k, tr.geo, tr.cgrid, tr.gshape, tr.goff, sptr, sidx, tr.pos, gi)
+            dist, grad, var, w = far_weights(pts, gi, tr.pos, tr.nrm, tr.sp, tr.sg,
+                                             self._surfel_radius(), self.free_, var_unobs, near,
+                                             far, gate=self._SIGN_GATE, sign_h=self._sign_width(),
+                                             behind=self._BEHIND)
+            sel = np.flatnonzero(w > 0)
+            if len(sel):
+                out = self._gp_query(pts[sel])
+                K.blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
+                         t_info)
+            return dist, grad, var
+        dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
+        K.faithful(pts, *self._faithful_args(), dist, grad, var)
         return dist, grad, var
+
+    def _faithful_args(self):
+        """The default query's kernel arguments after the points (``_query.faithful``)."""
+        tr, g, fr = self.tree_, self.gps_, self.free_
+        sptr, sidx = self._sample_index_
+        self._sync_slot_arrays()
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        near, far = self._blend_band()
+        return (min(4, len(sidx)), sptr, sidx, tr.pos, tr.nrm, tr.sp, tr.sg, float(self._SIGN_GATE),
+                bool(np.isfinite(self._SIGN_GATE)), float(self._surfel_radius()), fr.grid, fr.gshape,
+                fr.goff, float(fr.res), 1.0 + float(self.map_noise), float(near), float(far),
+                float(self._sign_width()), float(self._BEHIND), float(W), self._T_BLEND, False,
+                float(self.map_scale), v0, g0, float(self.fbias),
+                self._T_BLEND if self._VAR_BLEND else 0.0, tr.geo, tr.cgrid, tr.gshape, tr.goff,
+                tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
+                g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(g.m_max, 1))
+
+    def _register_native(self, pts, x0, opts):
+        """ICP-G of the base-frame points pts (n, 2) from the pose x0 in compiled code, for
+        :func:`polar_sim.registration.register_sdf` (same algorithm, same bits as its Python
+        loop); None where that loop must run instead: a 3D or published-mode map, one without
+        samples, or poses within reach of ``FAR_COORD``."""
+        if (self.dim != 2 or self._pub("query_mode") or not hasattr(self, "tree_")
+                or len(self._sample_index_[1]) == 0 or len(pts) >= PARALLEL_POINTS
+                or not np.abs(x0).max() + opts.step[0] * opts.max_iterations < 1e90):
+            return None
+        H = np.zeros((3, 3))
+        out = K.register_2d(pts, np.array(x0, np.float64), opts.max_iterations, opts.min_points,
+                          opts.tolerance, opts.kind, opts.scale, opts.sigma2, opts.max_variance,
+                          opts.step[0], opts.step[1], opts.corr[0], opts.corr[1],
+                          *self._faithful_args(), H)
+        return out[:9] + (H if out[11] else None,) + out[9:]
+
+    def _index_samples(self):
+        """Each cluster slot's samples (CSR), for the query's nearest-sample search; rebuilt
+        whenever the tree changed (the end of an update, a load)."""
+        tr = self.tree_
+        self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
     def surface(self, res=None, band=None):
         """Zero level set of :meth:`query` near the observed samples.
@@ -539,3 +581,11 @@ class GPISMapBase(Parameterised):
     def load(cls, path):
         """Read a map written by :meth:`save`; raises ``ValueError`` on a bad file."""
         return _io.load(cls, path)
+
+
+def _check_count(points):
+    """Refuse more than :data:`MAX_QUERY_POINTS` points, before anything of their size is allocated."""
+    n = len(points) if isinstance(points, np.ndarray) and points.ndim >= 1 else None
+    if n is not None and n > MAX_QUERY_POINTS:
+        raise ValueError(f"points: {n} points in one query, more than the limit {MAX_QUERY_POINTS} "
+                         "(MAX_QUERY_POINTS); query them in parts")

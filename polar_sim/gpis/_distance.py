@@ -26,9 +26,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["FreeSpace", "far_field", "far_weights", "blend_gp"]
 
 
+@entry
 @nb.njit(cache=True)
 def _mark(grid, gshape, goff, res, origin, hits, margin):
     dim = origin.shape[0]
@@ -124,7 +127,7 @@ class FreeSpace:
         if not (hi > lo).all():
             return
         self._cover(lo.astype(np.int64), hi.astype(np.int64))
-        _mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
+        K._mark(self.grid, self.gshape, self.goff, self.res, np.ascontiguousarray(origin, np.float64),
               np.ascontiguousarray(hits, np.float64), self.margin)
 
     def observed(self, pts):
@@ -187,6 +190,7 @@ def _imls(pts, i, gi, pos, nrm, sg, gate, h, fallback):
     return num / den if den > np.exp(-9.0) else fallback
 
 
+@entry
 @nb.njit(cache=True)
 def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, dist, grad, var,
              dtrust, sign_h=0.0):
@@ -264,21 +268,132 @@ def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, d
         dtrust[i] = bt
 
 
-def far_field(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, k=4, gate=np.inf, sign_h=0.0):
-    """Surfel distance with sign, its gradient and variance at pts (n, d); see the module docs
-    (``sign_h``: width of the implicit-MLS sign, m; 0 = the closest surfel's side)."""
+@nb.njit(cache=True)
+def _ring_cells(r, c0, lo, hi, a0, a1, cc, out):
+    """Cells (flat grid indices into ``out``) at Chebyshev distance exactly r from c0 inside the
+    grid [lo, hi]; returns their number. Axis 0 is walked with a stride of 2r where the other
+    axes are inside the ring (only its two end cells are on it)."""
+    dim = c0.shape[0]
+    total = 1
+    for k in range(1, dim):
+        a0[k] = max(c0[k] - r, lo[k])
+        a1[k] = min(c0[k] + r, hi[k])
+        if a1[k] < a0[k]:
+            return 0
+        total *= a1[k] - a0[k] + 1
+    n = 0
+    for flat in range(total):
+        f = flat
+        edge = False
+        for k in range(1, dim):
+            span = a1[k] - a0[k] + 1
+            cc[k] = a0[k] + f % span
+            f //= span
+            if abs(cc[k] - c0[k]) == r:
+                edge = True
+        step = 1 if (edge or r == 0) else 2 * r
+        x0 = c0[0] - r
+        while x0 <= c0[0] + r:
+            if lo[0] <= x0 <= hi[0]:
+                cc[0] = x0
+                idx = 0
+                stride = 1
+                for k in range(dim):
+                    idx += (cc[k] - lo[k]) * stride
+                    stride *= hi[k] - lo[k] + 1
+                if n >= out.shape[0]:
+                    return -1
+                out[n] = idx
+                n += 1
+            x0 += step
+    return n
+
+
+@entry
+@nb.njit(cache=True)
+def knn(pts, k, geo, cgrid, gshape, goff, sptr, sidx, pos, out):
+    """Indices (n, k) into ``out`` of the k samples nearest each point (nearest first; ties to
+    the one met first), by a search in rings of cluster cells around the point's cell.
+
+    ``sptr``/``sidx`` list each cluster slot's samples (CSR); ``cgrid`` maps the grid cells
+    (origin ``geo[:d]``, edge ``geo[d]``, shape ``gshape`` from ``goff``) to slots. The search
+    stops once no unsearched cell can hold a nearer sample than the k-th found. A point outside
+    the grid starts from the nearest edge cell. Needs k <= the number of samples.
+    """
+    n, dim = pts.shape
+    w = geo[dim]
+    lo = np.empty(dim, np.int64)
+    hi = np.empty(dim, np.int64)
+    for j in range(dim):
+        lo[j] = goff[j]
+        hi[j] = goff[j] + gshape[j] - 1
+    c0 = np.empty(dim, np.int64)
+    cc = np.empty(dim, np.int64)
+    a0 = np.empty(dim, np.int64)
+    a1 = np.empty(dim, np.int64)
+    bd = np.empty(k)
+    cells = np.empty(64, np.int64)
+    for i in range(n):
+        x = pts[i]
+        rmax = 0
+        for j in range(dim):
+            cf = np.floor((x[j] - geo[j]) / w)
+            c = lo[j] if not cf >= lo[j] else (hi[j] if cf > hi[j] else np.int64(cf))
+            c0[j] = c
+            rmax = max(rmax, c - lo[j], hi[j] - c)
+        found = 0
+        for r in range(rmax + 1):
+            if found == k and r >= 1:
+                lb = np.inf
+                for j in range(dim):
+                    if c0[j] - r >= lo[j]:
+                        lb = min(lb, max(x[j] - (geo[j] + (c0[j] - r + 1) * w), 0.0))
+                    if c0[j] + r <= hi[j]:
+                        lb = min(lb, max(geo[j] + (c0[j] + r) * w - x[j], 0.0))
+                if lb * lb > bd[k - 1]:
+                    break
+            nc = _ring_cells(r, c0, lo, hi, a0, a1, cc, cells)
+            while nc < 0:                       # more cells on this ring than room: grow
+                cells = np.empty(2 * cells.shape[0], np.int64)
+                nc = _ring_cells(r, c0, lo, hi, a0, a1, cc, cells)
+            for t in range(nc):
+                s = cgrid[cells[t]]
+                if s < 0:
+                    continue
+                for u in range(sptr[s], sptr[s + 1]):
+                    q = sidx[u]
+                    d2 = 0.0
+                    for j in range(dim):
+                        e = pos[q, j] - x[j]
+                        d2 += e * e
+                    if found < k:
+                        m = found
+                        found += 1
+                    elif d2 < bd[k - 1]:
+                        m = k - 1
+                    else:
+                        continue
+                    while m > 0 and bd[m - 1] > d2:
+                        bd[m] = bd[m - 1]
+                        out[i, m] = out[i, m - 1]
+                        m -= 1
+                    bd[m] = d2
+                    out[i, m] = q
+
+
+def far_field(pts, gi, pos, nrm, sp, sg, r_s, free, var_unobs, gate=np.inf, sign_h=0.0):
+    """Surfel distance with sign, its gradient and variance at pts (n, d) from each point's
+    nearest samples gi (n, k) (None: the map has none); see the module docs (``sign_h``: width of
+    the implicit-MLS sign, m; 0 = the closest surfel's side)."""
     n, d = pts.shape
-    if kd is None:
+    if gi is None:
         return np.full(n, np.inf), np.zeros((n, d)), np.full(n, var_unobs)
-    k = min(k, len(idx))
-    _, nn = kd.query(pts, k=k)
-    gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
     dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
     # a free cell may straddle the surface: trust it only beyond one cell diagonal
-    _surfels(pts, gi, pos, nrm, sp, sg, float(gate), float(r_s), free.observed(pts),
-             free.res * np.sqrt(d), float(var_unobs), dist, grad, var, np.empty(n), float(sign_h))
+    K._surfels(pts, np.ascontiguousarray(gi, np.int64), pos, nrm, sp, sg, float(gate), float(r_s),
+             free.observed(pts), free.res * np.sqrt(d), float(var_unobs), dist, grad, var,
+             np.empty(n), float(sign_h))
     return dist, grad, var
-
 
 
 @nb.njit(cache=True)
@@ -301,6 +416,7 @@ def _observed(pts, grid, gshape, goff, res, seen):
         seen[i] = inside and grid[flat] > 0
 
 
+@entry
 @nb.njit(cache=True)
 def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, goff, res,
                  cell_diag, var_unobs,
@@ -329,22 +445,20 @@ def _far_weights(pts, gi, pos, nrm, sp, sg, gate, use_trust, r_s, grid, gshape, 
     return nsel
 
 
-def far_weights(pts, kd, idx, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, k=4, gate=np.inf,
+def far_weights(pts, gi, pos, nrm, sp, sg, r_s, free, var_unobs, near, far, gate=np.inf,
                 sign_h=0.0, behind=0.5):
-    """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (kd not None;
-    ``behind`` scales the blend band on the negative side)."""
+    """(dist, grad, var, w): ``far_field`` and the smoothstep weight of the GPIS (``behind``
+    scales the blend band on the negative side)."""
     n, d = pts.shape
-    k = min(k, len(idx))
-    _, nn = kd.query(pts, k=k)
-    gi = np.ascontiguousarray(idx[nn.reshape(n, k)])
     dist, grad, var, w = np.empty(n), np.empty((n, d)), np.empty(n), np.empty(n)
-    _far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
-                 free.grid, free.gshape, free.goff,
-                 float(free.res), free.res * np.sqrt(d), float(var_unobs), float(near),
-                 float(far), dist, grad, var, w, float(sign_h), float(behind))
+    K._far_weights(pts, gi, pos, nrm, sp, sg, float(gate), bool(np.isfinite(gate)), float(r_s),
+                 free.grid, free.gshape, free.goff, float(free.res), free.res * np.sqrt(d),
+                 float(var_unobs), float(near), float(far), dist, grad, var, w, float(sign_h),
+                 float(behind))
     return dist, grad, var, w
 
 
+@entry
 @nb.njit(cache=True)
 def blend_gp(sel, out, w, fbias, has_thr, dist, grad, var, t_info=0.0):
     """Blend the GPIS rows ``out`` (one per selected point) into the surfel answer in place.

@@ -3,11 +3,13 @@ vectorised over all candidates of one update. Works in 2D and 3D."""
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
+
+from polar_sim.gpis._native import K, entry
 
 __all__ = ["normal_noise", "fuse", "RangeNoiseModel"]
 
-_TOL = 0.02          # line-search tolerance on |oc|
 _BETA = 1.0          # between-beam interpolation error of the observation GP, in beam spacings
 _GATE_MIN = 0.05     # m, smallest association gate of the default-mode re-evaluation
 
@@ -41,22 +43,45 @@ class RangeNoiseModel:
         self.kappa, self.c_min, self.beta = float(kappa), float(c_min), float(beta)
 
     def position(self, c):
-        return (self.sigma_r * c) ** 2 + self.floor_p
+        """Position variance (m^2) of a return at incidence cosine c."""
+        return position_var(c, self.sigma_r, self.floor_p)
 
     def normal(self, r, c):
-        return (self.kappa * self.sigma_r * c * c / (np.maximum(r, 1e-3) * self.dtheta)) ** 2
+        """Normal variance (rad^2) of a return at range r and incidence cosine c."""
+        return normal_var(r, c, self.sigma_r, self.dtheta, self.kappa)
 
     def between(self, r, c):
         """Variance (m^2) of a surface point located between beams (re-evaluation): the
         observation GP's range there is an interpolation over the beam spacing r dtheta, and its
         error normal to the surface is ``beta r dtheta sin(incidence)``."""
-        return (self.beta * r * self.dtheta) ** 2 * (1.0 - c * c)
+        return between_var(r, c, self.dtheta, self.beta)
 
     @staticmethod
     def residual(A, r, c):
         """Normal-direction distance (m) of a point whose occupancy test reads |oc| = A at range r
         (2D: oc = tanh(15 r (r^-1/2 - rho_hat)), so the range residual is (2/15) sqrt(r) atanh A)."""
-        return (2.0 / 15.0) * np.sqrt(r) * np.arctanh(np.minimum(A, 0.999)) * c
+        return residual(A, r, c)
+
+
+# the model's formulas, shared by RangeNoiseModel and the kernels
+@nb.njit(cache=True)
+def position_var(c, sigma_r, floor_p):
+    return (sigma_r * c) ** 2 + floor_p
+
+
+@nb.njit(cache=True)
+def normal_var(r, c, sigma_r, dtheta, kappa):
+    return (kappa * sigma_r * c * c / (np.maximum(r, 1e-3) * dtheta)) ** 2
+
+
+@nb.njit(cache=True)
+def between_var(r, c, dtheta, beta):
+    return (beta * r * dtheta) ** 2 * (1.0 - c * c)
+
+
+@nb.njit(cache=True)
+def residual(A, r, c):
+    return (2.0 / 15.0) * np.sqrt(r) * np.arctanh(np.minimum(A, 0.999)) * c
 
 
 def normal_noise(g, obar, s, r_term, smin_p, smin_g, R, model=None):
@@ -65,188 +90,279 @@ def normal_noise(g, obar, s, r_term, smin_p, smin_g, R, model=None):
     ``r_term`` is r^2 in 2D and |s| in 3D (spec §5 step 5). With a :class:`RangeNoiseModel`
     the noises follow it instead (default-mode 2D).
     """
-    g2 = (g * g).sum(1)
-    good = g2 > 1e-6
-    gn = np.sqrt(np.where(good, g2, 1.0))
-    n = g / gn[:, None]
-    if model is None:
-        c = np.maximum(-(s * n).sum(1) / np.linalg.norm(s, axis=1), 0.1)
-        sview = smin_p * (1 - c * c) / (c * c)
-        sp = np.where(good, smin_p * np.clip(r_term, 1.0, 100.0) + sview, 100.0)
-        sg = np.where(good, np.clip(np.abs(obar), smin_g, 1.0), 1.0)
-    else:
-        rs = np.linalg.norm(s, axis=1)
-        c = np.maximum(np.abs((s * n).sum(1)) / rs, model.c_min)
-        sp = np.where(good, model.position(c), 100.0)
-        sg = np.where(good, np.clip(np.abs(obar) + model.normal(rs, c), smin_g, 1.0), 1.0)
-    N = np.where(good[:, None], n @ R.T, g)
+    n = g.shape[0]
+    N, sp, sg = np.empty(g.shape), np.empty(n), np.empty(n)
+    K._normal_noise_rows(np.ascontiguousarray(g, np.float64), np.ascontiguousarray(obar, np.float64),
+                       np.ascontiguousarray(s, np.float64), np.ascontiguousarray(r_term, np.float64),
+                       float(smin_p), float(smin_g), np.ascontiguousarray(R, np.float64),
+                       *model_args(model), N, sp, sg)
     return N, sp, sg
 
 
-def _rotate_toward(N, Np, w, legacy):
-    """Rotate unit normals N toward N' by the fraction w of the angle between them."""
-    d = N.shape[1]
-    if d == 2:
-        th = np.arctan2(N[:, 0] * Np[:, 1] - N[:, 1] * Np[:, 0], (N * Np).sum(1))
-        a = w * th
-        c, s = np.cos(a), np.sin(a)
-        return np.stack([c * N[:, 0] - s * N[:, 1], s * N[:, 0] + c * N[:, 1]], 1)
-    dot = np.clip((N * Np).sum(1), -1.0, 1.0)
-    al = np.arccos(dot)
-    if legacy:
-        # quaternion with the non-normalised axis k = N' x N, applied as the spec's DCM
-        k = np.cross(Np, N)
-        ph = w * al
-        q0 = np.cos(ph / 2)
-        q1, q2, q3 = (k * np.sin(ph / 2)[:, None]).T
-        D = np.empty((len(N), 3, 3))
-        D[:, 0, 0] = q0**2 + q1**2 - q2**2 - q3**2
-        D[:, 0, 1] = 2 * (q1 * q2 + q0 * q3)
-        D[:, 0, 2] = 2 * (q1 * q3 - q0 * q2)
-        D[:, 1, 0] = 2 * (q1 * q2 - q0 * q3)
-        D[:, 1, 1] = q0**2 - q1**2 + q2**2 - q3**2
-        D[:, 1, 2] = 2 * (q2 * q3 + q0 * q1)
-        D[:, 2, 0] = 2 * (q1 * q3 + q0 * q2)
-        D[:, 2, 1] = 2 * (q2 * q3 - q0 * q1)
-        D[:, 2, 2] = q0**2 - q1**2 - q2**2 + q3**2
-        return np.einsum("nij,nj->ni", D, N)
-    # slerp on the unit sphere (unit rotation axis)
-    sa = np.sin(al)
-    small = sa < 1e-9
-    sa = np.where(small, 1.0, sa)
-    out = (np.sin((1 - w) * al)[:, None] * N + np.sin(w * al)[:, None] * Np) / sa[:, None]
-    out = np.where(small[:, None], N, out)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+def model_args(model):
+    """(on, sigma_r, dtheta, floor_p, kappa, c_min) of a :class:`RangeNoiseModel` (or None) for
+    the kernels."""
+    if model is None:
+        return False, 0.0, 1.0, 0.0, 0.0, 0.0
+    return True, model.sigma_r, model.dtheta, model.floor_p, model.kappa, model.c_min
 
 
-def fuse(m, p, n, P, N, sp_old, sg_old, scan, oc_fn, fd_fn, to_world, R, *, oc_skip, rhat_dim,
-         model=None):
-    """Stage 2 for candidates with sensor-frame positions p and normals n (k, d).
+def _beta(model):
+    return _BETA if model is None else model.beta
 
-    Returns (action, P_new, N_new, sp_new, sg_new); see ``apply_reeval`` for the actions.
+
+@entry
+@nb.njit(cache=True)
+def _normal_noise_rows(g, obar, s, r_term, smin_p, smin_g, R, on, sigma_r, dtheta, floor_p, kappa,
+                       c_min, N, sp, sg):
+    for i in range(g.shape[0]):
+        sp[i], sg[i] = normal_noise_one(g[i], obar[i], s[i], r_term[i], smin_p, smin_g, R, on,
+                                        sigma_r, dtheta, floor_p, kappa, c_min, N[i])
+
+
+@nb.njit(cache=True)
+def normal_noise_one(g, obar, s, r_term, smin_p, smin_g, R, on, sigma_r, dtheta, floor_p, kappa,
+                     c_min, nrm):
+    """One sample of :func:`normal_noise`: its world normal into ``nrm`` (the raw gradient when
+    it has none), returns (position noise, gradient noise)."""
+    d = g.shape[0]
+    g2 = 0.0
+    for k in range(d):
+        g2 += g[k] * g[k]
+    good = g2 > 1e-6
+    gn = np.sqrt(g2) if good else 1.0
+    sn = 0.0
+    ss = 0.0
+    for k in range(d):
+        sn += s[k] * (g[k] / gn)
+        ss += s[k] * s[k]
+    rs = np.sqrt(ss)
+    if not on:
+        c = max(-sn / rs, 0.1)
+        sview = smin_p * (1 - c * c) / (c * c)
+        sp = smin_p * min(max(r_term, 1.0), 100.0) + sview
+        sg = min(max(abs(obar), smin_g), 1.0)
+    else:
+        c = max(abs(sn) / rs, c_min)
+        sp = position_var(c, sigma_r, floor_p)
+        sg = min(max(abs(obar) + normal_var(rs, c, sigma_r, dtheta, kappa), smin_g), 1.0)
+    for i in range(d):
+        if good:
+            v = 0.0
+            for k in range(d):
+                v += (g[k] / gn) * R[i, k]
+            nrm[i] = v
+        else:
+            nrm[i] = g[i]
+    return (sp, sg) if good else (100.0, 1.0)
+
+
+def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None):
+    """Stage 2 (spec §6.2) for candidates with sensor-frame positions p and normals n (k, d)
+    and world positions P, normals N and noises ``sp_old``, ``sg_old``.
+
+    ``search(p, n)`` is the line search (:func:`polar_sim.gpis._linesearch.line_search` or the
+    planar scan's kernel) and ``fd_fn(q, gp)`` the finite-difference occupancy; sensor-frame
+    points map to the world as ``R q + t``. Returns (action, P_new, N_new, sp_new, sg_new); see
+    ``apply_reeval`` for the actions.
     """
     k, d = p.shape
-    legacy = m._pub("fusion")
-    dx = float(m.delx)
-    rng = (lambda q: np.linalg.norm(q, axis=1)) if d == 2 else (lambda q: q[:, 2])
     action = np.zeros(k, np.int8)
     Pn, Nn = np.zeros((k, d)), np.zeros((k, d))
     spn, sgn = np.zeros(k), np.zeros(k)
-    oc0, obs0, _ = oc_fn(p, scan.gp)
-    live = obs0.copy()
-    if d == 3:
-        live &= p[:, 2] > 0
-    with np.errstate(invalid="ignore"):
-        live &= ~(oc0 < oc_skip)
-    # line search along the stored normal (spec §6.2 step 3)
-    q = p.copy()
-    delta = np.full(k, dx)
-    A = np.abs(oc0)
-    occ = oc0.copy()
-    rnew = rng(p)
-    run = live & (A > _TOL)
-    found = live & ~run                  # the line search reached |oc| < tol
-    bug3d = legacy and d == 3
-    for _ in range(10):
-        idx = np.nonzero(run)[0]
-        if len(idx) == 0:
-            break
-        step = np.where(occ[idx] < 0, delta[idx], -delta[idx])
-        q[idx] += step[:, None] * n[idx]
-        if not bug3d:
-            rnew[idx] = rng(q[idx])
-        o2, ob2, _ = oc_fn(p[idx] if bug3d else q[idx], scan.gp)
-        conv = ob2 & (np.abs(o2) < _TOL)
-        found[idx[conv]] = True
-        prev = ob2 & ~conv & (occ[idx] < oc_skip)
-        cont = ob2 & ~conv & ~prev
-        c = idx[cont]
-        flip = occ[c] * o2[cont] < 0
-        delta[c] = np.where(flip, delta[c] / 2, 1.1 * delta[c])
-        A[c] = np.abs(o2[cont])
-        occ[c] = o2[cont]
-        run[idx] = cont
-    # finite differences at q (step 4)
+    live, q, A, rnew, found = search(p, n)                        # step 3
     li = np.nonzero(live)[0]
     if len(li) == 0:
         return action, Pn, Nn, spn, sgn
-    ql = q[li]
-    oc, fd_ok, rhat = fd_fn(ql, scan.gp)
-    g = (oc[:, 0::2] - oc[:, 1::2]) / dx
-    obar = oc.mean(1)
-    with np.errstate(invalid="ignore"):
-        vr = rhat.var(axis=1, ddof=1) / dx
-    rn = rnew[li] if not (legacy and d == 3) else ql[:, 2] - dx
-    if legacy and d == 3:
-        rn = np.where(fd_ok, rn, rnew[li])
-    gl = np.linalg.norm(g, axis=1)
-    ok = fd_ok & (gl >= 1e-3)
-    action[li[fd_ok & (gl < 1e-3)]] = 1
-    if model is not None:
-        # the doubled noises meet the same drop gate as fused ones (step 9): a sample the rays
-        # keep passing through (oc saturated, no gradient) leaves the map instead of staying
-        # forever with noises growing as 2^k
-        dbl = li[fd_ok & (gl < 1e-3)]
-        gone = (2 * sp_old[dbl] > 1) & (2 * sg_old[dbl] > 0.61)
-        action[dbl[gone]] = 3
-    j = np.nonzero(ok)[0]
-    if len(j) == 0:
-        return action, Pn, Nn, spn, sgn
-    ii = li[j]
-    np_ = g[j] / gl[j, None]
-    qq = ql[j]
-    smin_p = float(m.min_position_noise)
-    if model is None:
-        c = np.maximum(-(qq * np_).sum(1) / np.linalg.norm(qq, axis=1), 0.1)
-        sview = smin_p * (1 - c * c) / (c * c)
-        sp = smin_p * np.clip(rn[j] ** 2, 1.0, 100.0) + sview + A[ii]
-        sg = np.clip(np.abs(obar[j]) + vr[j], float(m.min_grad_noise), 1.0) + 0.1 * sview
-    else:
-        rq = np.linalg.norm(qq, axis=1)
-        c = np.maximum(np.abs((qq * np_).sum(1)) / rq, model.c_min)
-        sp = model.position(c) + model.residual(A[ii], rq, c) ** 2 + model.between(rq, c)
-        sg = np.clip(np.abs(obar[j]) + model.normal(rq, c), float(m.min_grad_noise), 1.0)
-    Pq = to_world(qq)
-    Nq = np_ @ R.T
-    # fusion (step 8)
-    Po, No, spo, sgo = P[ii], N[ii], sp_old[ii], sg_old[ii]
-    replace = (spo > 0.5) | (sgo > 0.6)
+    oc, fd_ok, rhat = fd_fn(q[li], scan.gp)                        # step 4
+    legacy = bool(m._pub("fusion"))
+    c = np.ascontiguousarray
+    K._fuse_rows(li, q, c(A), c(rnew), found, c(p, np.float64), c(oc, np.float64), fd_ok,
+                 c(rhat, np.float64), P, N, sp_old, sg_old, c(R, np.float64), c(t, np.float64),
+                 float(m.delx), legacy, legacy and d == 3, float(m.min_position_noise),
+                 float(m.min_grad_noise), float(m.map_noise), *model_args(model), _beta(model),
+                 action, Pn, Nn, spn, sgn)
+    return action, Pn, Nn, spn, sgn
+
+
+@entry
+@nb.njit(cache=True)
+def _fuse_rows(li, q, A, rnew, found, p, oc, fd_ok, rhat, P, N, sp_old, sg_old, R, t, dx, legacy,
+               legacy3d, smin_p, smin_g, map_noise, on, sigma_r, dtheta, floor_p, kappa, c_min, beta,
+               action, Pn, Nn, spn, sgn):
+    """Steps 4-9 for the live candidates li, whose line searches ended at q (sensor frame) and
+    whose finite-difference occupancies (oc, fd_ok, rhat; one row per live candidate) were
+    taken there: the re-measured normal and noises, their fusion with the stored sample, and
+    the action (0 leave, 1 double the noises, 2 fused, 3 drop)."""
+    d = q.shape[1]
+    g = np.empty(d)
+    Pq = np.empty(d)
+    Nq = np.empty(d)
+    for r in range(li.shape[0]):
+        i = li[r]
+        gl = 0.0
+        for c in range(d):
+            g[c] = (oc[r, 2 * c] - oc[r, 2 * c + 1]) / dx
+            gl += g[c] * g[c]
+        gl = np.sqrt(gl)
+        if fd_ok[r] and gl < 1e-3:               # no gradient: double the noises (step 4)
+            action[i] = 1
+            # with the range model the doubled noises meet the drop gate of fused ones: a sample
+            # the rays keep passing through leaves the map instead of staying forever with
+            # noises growing as 2^k
+            if on and 2 * sp_old[i] > 1 and 2 * sg_old[i] > 0.61:
+                action[i] = 3
+            continue
+        if not (fd_ok[r] and gl >= 1e-3):
+            continue
+        for c in range(d):
+            g[c] /= gl
+        sp, sg = _measurement(q[i], g, oc[r], rhat[r], A[i], rnew[i], fd_ok[r], dx, legacy3d, smin_p,
+                              smin_g, on, sigma_r, dtheta, floor_p, kappa, c_min, beta)
+        for j in range(d):
+            Pq[j] = 0.0
+            Nq[j] = 0.0
+            for c in range(d):
+                Pq[j] += q[i, c] * R[j, c]
+                Nq[j] += g[c] * R[j, c]
+            Pq[j] += t[j]
+        replace = sp_old[i] > 0.5 or sg_old[i] > 0.6
+        spn[i], sgn[i] = _combine(P[i], N[i], sp_old[i], sg_old[i], Pq, Nq, sp, sg, replace,
+                                  legacy, on, smin_g, map_noise, floor_p, Pn[i], Nn[i])
+        act = 3 if (spn[i] > 1 and sgn[i] > 0.61) else 2              # step 9
+        if on and _not_this_surface(q[i], p[i], g, sp, sp_old[i], replace, found[i]):
+            act = 0
+        action[i] = act
+
+
+@nb.njit(cache=True)
+def _measurement(q, nrm, oc, rhat, A, rnew, fd_ok, dx, legacy3d, smin_p, smin_g, on, sigma_r,
+                 dtheta, floor_p, kappa, c_min, beta):
+    """Position and normal noise of a re-measured sample at q (sensor frame), unit normal nrm:
+    the spec's model (steps 5-7; the published 3D code takes the range of a stencil point), or
+    the range-noise model."""
+    d = q.shape[0]
+    m = oc.shape[0]
+    obar = 0.0
+    for j in range(m):
+        obar += oc[j]
+    obar /= m
+    qn = 0.0
+    rq = 0.0
+    for c in range(d):
+        qn += q[c] * nrm[c]
+        rq += q[c] * q[c]
+    rq = np.sqrt(rq)
+    if on:
+        c = max(abs(qn) / rq, c_min)
+        sp = position_var(c, sigma_r, floor_p) + residual(A, rq, c) ** 2 + between_var(rq, c, dtheta, beta)
+        return sp, min(max(abs(obar) + normal_var(rq, c, sigma_r, dtheta, kappa), smin_g), 1.0)
+    mean = 0.0
+    for j in range(m):
+        mean += rhat[j]
+    mean /= m
+    ss = 0.0
+    for j in range(m):
+        ss += (rhat[j] - mean) * (rhat[j] - mean)
+    vr = ss / (m - 1) / dx
+    rn = q[2] - dx if (legacy3d and fd_ok) else rnew
+    c = max(-qn / rq, 0.1)
+    sview = smin_p * (1 - c * c) / (c * c)
+    sp = smin_p * min(max(rn * rn, 1.0), 100.0) + sview + A
+    return sp, min(max(abs(obar) + vr, smin_g), 1.0) + 0.1 * sview
+
+
+@nb.njit(cache=True)
+def _combine(Po, No, spo, sgo, Pq, Nq, sp, sg, replace, legacy, on, smin_g, map_noise, floor_p,
+             Pf, Nf):
+    """Step 8: the Bayesian fusion of the stored sample (Po, No, spo, sgo) with the new
+    measurement (Pq, Nq, sp, sg) into Pf, Nf; returns the fused (position, gradient) noises.
+    A sample whose old noises fail the gate is replaced."""
+    d = Po.shape[0]
+    if replace:
+        for c in range(d):
+            Pf[c] = Pq[c]
+            Nf[c] = Nq[c]
+        return sp, sg
     Sp = sp + spo
     Sg = sg + sgo
-    Pf = (sp[:, None] * Po + spo[:, None] * Pq) / Sp[:, None]
-    dd = 0.5 * np.linalg.norm(Po - Pf, axis=1)
-    w = sp / Sp if legacy else sgo / Sg
-    Nf = _rotate_toward(No, Nq, w, legacy)
-    if model is None:
-        sgf = np.minimum(1.0, np.maximum(sg * sgo / Sg + dd, float(m.map_noise)))
-        spf = np.maximum(sp * spo / Sp + dd, float(m.map_noise))
-    else:   # variances in m^2 and rad^2: the displacement enters squared, floors of the model
-        sgf = np.minimum(1.0, np.maximum(sg * sgo / Sg, float(m.min_grad_noise)))
-        spf = np.maximum(sp * spo / Sp + dd * dd, model.floor_p)
-    Pf = np.where(replace[:, None], Pq, Pf)
-    Nf = np.where(replace[:, None], Nq, Nf)
-    spf = np.where(replace, sp, spf)
-    sgf = np.where(replace, sg, sgf)
-    drop = (spf > 1) & (sgf > 0.61)
-    act = np.where(drop, 3, 2)
-    if model is not None:
-        # data association: a line search that had to move the sample further than 3 sigma of
-        # the two position noises (and 5 cm) found another surface along the normal (an edge
-        # seen against a farther wall, an occluder): leave the sample as it is rather than
-        # drag it into free space one scan at a time
-        move = np.linalg.norm(qq - p[ii], axis=1)
-        # (the gate is on the measurement noises: the model floor is what the GPs cannot resolve;
-        # a sample about to be replaced counts the new noise only, its own says nothing)
-        far = move > np.maximum(3.0 * np.sqrt(sp + np.where(replace, 0.0, spo)), _GATE_MIN)
-        # nor fuse a search that did not reach the observed surface (it stopped on the step
-        # limit or an unobservable direction): moving such samples a little every scan lets
-        # them creep off edges into free space. Replacing is no exception: a sample with an
-        # untrusted normal searched along it across a range jump lands where the observation
-        # GP interpolates between the near and the far return, in free space (office2d corner
-        # samples 10-18 cm off the surface)
-        act = np.where(far | ~found[ii], 0, act)
-        # nor take a normal that faces away from the sensor (not the surface the scan sees)
-        act = np.where((qq * np_).sum(1) > 0, 0, act)
-    action[ii] = act
-    Pn[ii], Nn[ii], spn[ii], sgn[ii] = Pf, Nf, spf, sgf
-    return action, Pn, Nn, spn, sgn
+    dd = 0.0
+    for c in range(d):
+        Pf[c] = (sp * Po[c] + spo * Pq[c]) / Sp
+        dd += (Po[c] - Pf[c]) * (Po[c] - Pf[c])
+    dd = 0.5 * np.sqrt(dd)
+    _rotate_toward(No, Nq, sp / Sp if legacy else sgo / Sg, legacy, Nf)
+    if on:      # variances in m^2 and rad^2: the displacement enters squared, floors of the model
+        return max(sp * spo / Sp + dd * dd, floor_p), min(1.0, max(sg * sgo / Sg, smin_g))
+    return max(sp * spo / Sp + dd, map_noise), min(1.0, max(sg * sgo / Sg + dd, map_noise))
+
+
+@nb.njit(cache=True)
+def _rotate_toward(N, Np, w, legacy, out):
+    """Rotate the unit normal N toward N' by the fraction w of the angle between them: in 2D by
+    the signed angle; in 3D by slerp, or (published) by the spec's DCM of the quaternion with
+    the non-normalised axis N' x N."""
+    d = N.shape[0]
+    dot = 0.0
+    for c in range(d):
+        dot += N[c] * Np[c]
+    if d == 2:
+        a = w * np.arctan2(N[0] * Np[1] - N[1] * Np[0], dot)
+        ca, sa = np.cos(a), np.sin(a)
+        out[0] = ca * N[0] - sa * N[1]
+        out[1] = sa * N[0] + ca * N[1]
+        return
+    al = np.arccos(min(max(dot, -1.0), 1.0))
+    if legacy:
+        h = np.sin(w * al / 2)
+        q0 = np.cos(w * al / 2)
+        q1 = (Np[1] * N[2] - Np[2] * N[1]) * h
+        q2 = (Np[2] * N[0] - Np[0] * N[2]) * h
+        q3 = (Np[0] * N[1] - Np[1] * N[0]) * h
+        out[0] = ((q0**2 + q1**2 - q2**2 - q3**2) * N[0] + 2 * (q1 * q2 + q0 * q3) * N[1]
+                  + 2 * (q1 * q3 - q0 * q2) * N[2])
+        out[1] = (2 * (q1 * q2 - q0 * q3) * N[0] + (q0**2 - q1**2 + q2**2 - q3**2) * N[1]
+                  + 2 * (q2 * q3 + q0 * q1) * N[2])
+        out[2] = (2 * (q1 * q3 + q0 * q2) * N[0] + 2 * (q2 * q3 - q0 * q1) * N[1]
+                  + (q0**2 - q1**2 - q2**2 + q3**2) * N[2])
+        return
+    s = np.sin(al)
+    if s < 1e-9:
+        for c in range(d):
+            out[c] = N[c]
+        return
+    a, b = np.sin((1 - w) * al), np.sin(w * al)
+    nl = 0.0
+    for c in range(d):
+        out[c] = (a * N[c] + b * Np[c]) / s
+        nl += out[c] * out[c]
+    nl = np.sqrt(nl)
+    for c in range(d):
+        out[c] /= nl
+
+
+@nb.njit(cache=True)
+def _not_this_surface(q, p, nrm, sp, spo, replace, found):
+    """Default mode: the re-measurement is not of this sample, which is left as it is.
+
+    - Data association: a line search that had to move the sample further than 3 sigma of the
+      two position noises (and 5 cm) found another surface along the normal (an edge seen
+      against a farther wall, an occluder); fusing it would drag the sample into free space one
+      scan at a time. (The gate is on the measurement noises: the model floor is what the GPs
+      cannot resolve; a sample about to be replaced counts the new noise only, its own says
+      nothing.)
+    - A search that did not reach the observed surface (it stopped on the step limit or an
+      unobservable direction): moving such samples a little every scan lets them creep off
+      edges into free space. Replacing is no exception: a sample with an untrusted normal
+      searched along it across a range jump lands where the observation GP interpolates
+      between the near and the far return, in free space (office2d corner samples 10-18 cm off
+      the surface).
+    - A normal that faces away from the sensor (not the surface the scan sees).
+    """
+    move = 0.0
+    facing = 0.0
+    for c in range(q.shape[0]):
+        move += (q[c] - p[c]) * (q[c] - p[c])
+        facing += q[c] * nrm[c]
+    far = np.sqrt(move) > max(3.0 * np.sqrt(sp + (0.0 if replace else spo)), _GATE_MIN)
+    return far or not found or facing > 0

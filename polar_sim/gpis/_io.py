@@ -125,4 +125,5 @@ def load(cls, path):
     m.active_ = data["active"].copy()
     m.n_updates_ = int(data["n_updates"])
     m.version_ = 1
+    m._index_samples()
     return m

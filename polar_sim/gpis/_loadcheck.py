@@ -12,6 +12,8 @@ outside an array.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from polar_sim.gpis._checks import MAX_CLUSTER_NODES
@@ -110,9 +112,17 @@ def check_arrays(path, data, m):
     (its tree holds the geometry that the file's parameters imply). Raises ``MapFileError``."""
     c = _Ctx(path, data)
     d = m.dim
-    B = 1 << d
-    fresh = m.tree_
-    # --- tree geometry -------------------------------------------------------------------------
+    geo, gshape, goff, cgrid, counts = _tree_geometry(c, d, m.tree_)
+    tr = _tree_nodes(c, d, counts)
+    srow, live = _tree_samples(c, tr)
+    _tree_slots(c, tr, gshape, goff, cgrid)
+    _samples_in_cells(c, d, geo, tr, srow, live)
+    G = _cluster_gps(c, d, tr.S)
+    _free_space_and_counters(c, data, d, tr.S, G)
+
+
+def _tree_geometry(c, d, fresh):
+    """The tree's geometry against the fresh map's, and the cluster grid's shape and offset."""
     geo = c.get("tree/geo", np.float64, 1)
     if geo.shape[0] != d + 5:
         c.fail("tree/geo", f"has shape {geo.shape}, expected ({d + 5},)")
@@ -133,7 +143,13 @@ def check_arrays(path, data, m):
     if cgrid.shape[0] != ncell:
         c.fail("tree/cgrid", f"has {cgrid.shape[0]} cells, expected {ncell} (tree/gshape)")
     counts = c.get("tree/counts", np.int64, 1, (4,))
-    # --- nodes and slots -----------------------------------------------------------------------
+    return geo, gshape, goff, cgrid, counts
+
+
+def _tree_nodes(c, d, counts):
+    """Node, slot and sample arrays: shapes, dtypes, finiteness, counts, and each cluster a
+    complete 2**d-ary tree whose non-empty nodes hang under split parents."""
+    B = 1 << d
     ns = c.get("tree/node_sample", np.int32, 2)
     S, NN = ns.shape
     L = next((lv for lv in range(_MAX_LEVELS + 1) if (B ** (lv + 1) - 1) // (B - 1) == NN), None)
@@ -185,6 +201,16 @@ def check_arrays(path, data, m):
         nonempty = has[:, 1:] | used_ni[:, 1:]
         if (nonempty & ~used_ni[:, par]).any():
             c.fail("tree/node_internal", "has a non-empty node whose parent is not split")
+    return SimpleNamespace(ns=ns, ni=ni, sc=sc, sfree=sfree, pos=pos, N=N, S=S, s_slot=s_slot, s_node=s_node,
+                           s_free=s_free, n_hw=n_hw, n_free=n_free, k_hw=k_hw, k_free=k_free, has=has,
+                           used_ns=used_ns)
+
+
+def _tree_samples(c, tr):
+    """Each sample stored once, ``s_slot``/``s_node`` pointing back at it, and the free list the
+    unused samples. Returns the stored samples' slots and indices."""
+    N, s_slot, s_node, s_free, n_hw, n_free = tr.N, tr.s_slot, tr.s_node, tr.s_free, tr.n_hw, tr.n_free
+    has, used_ns = tr.has, tr.used_ns
     # samples: each stored once, and s_slot / s_node point back at it
     srow, snode = np.nonzero(has)
     live = used_ns[srow, snode].astype(np.int64)
@@ -200,7 +226,12 @@ def check_arrays(path, data, m):
     c.within("tree/s_free", fs, 0, n_hw, " (free sample indices)")
     if len(np.unique(fs)) != n_free or not dead[fs].all() or len(live) + n_free != n_hw:
         c.fail("tree/s_free", "is not the list of the unused samples")
-    # slots: the grid's slots and the free slots partition [0, k_hw)
+    return srow, live
+
+
+def _tree_slots(c, tr, gshape, goff, cgrid):
+    """The grid's slots and the free slots partition [0, k_hw), and each cluster sits in its cell."""
+    ns, ni, sc, sfree, k_hw, k_free = tr.ns, tr.ni, tr.sc, tr.sfree, tr.k_hw, tr.k_free
     c.within("tree/cgrid", cgrid, -1, k_hw, " (cluster slots)")
     gcell = np.flatnonzero(cgrid >= 0)
     gslot = cgrid[gcell].astype(np.int64)
@@ -219,14 +250,22 @@ def check_arrays(path, data, m):
     strides = np.cumprod(np.concatenate([[1], gshape[:-1]]))
     if len(gslot) and ((rel * strides).sum(1) != gcell).any():
         c.fail("tree/slot_coord", "does not match tree/cgrid")
-    # every stored sample lies in its cluster cell
+
+
+def _samples_in_cells(c, d, geo, tr, srow, live):
+    """Every stored sample lies in its cluster's cell."""
+    sc, pos = tr.sc, tr.pos
     w = float(geo[d])
     lo = geo[:d] + sc[srow] * w
     tol = 1e-6 * w
     p = pos[live]
     if len(live) and ((p < lo - tol) | (p > lo + w + tol)).any():
         c.fail("tree/pos", "puts a sample outside its cluster cell")
-    # --- cluster GPs ---------------------------------------------------------------------------
+
+
+def _cluster_gps(c, d, S):
+    """The cluster GPs: offsets within their buffers, kinds in order, finite values and every
+    Cholesky factor with a positive diagonal. Returns the number of GP slots."""
     gp_m = c.get("gp/gp_m", np.int64, 1)
     G = gp_m.shape[0]
     if G < S:
@@ -268,7 +307,11 @@ def check_arrays(path, data, m):
         diag = gp_tri[lv][gid] + local * (local + 3) // 2
         if not (Lbuf[diag] > 0).all():
             c.fail("gp/Lbuf", "has a Cholesky factor without a positive diagonal")
-    # --- the rest ------------------------------------------------------------------------------
+    return G
+
+
+def _free_space_and_counters(c, data, d, S, G):
+    """The free-space grid, the generation counters, the active clusters and the update count."""
     fg = c.get("free/grid", np.uint8, 1)
     fsh = c.get("free/gshape", np.int64, 1, (d,))
     fof = c.get("free/goff", np.int64, 1, (d,))

@@ -15,6 +15,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+from polar_sim.gpis._numeric import _exp_neg
+
 __all__ = ["GPStore", "train_gp", "predict_gp"]
 
 GRAD_GATE = 0.1001      # sigma_g above this: no gradient observation (spec §8.2)
@@ -91,6 +94,69 @@ def _cholesky(K):
 
 
 @nb.njit(cache=True)
+def _gradient_first(idx, hasg):
+    """``idx`` reordered with the samples that have a gradient observation first (stable), and
+    their mask."""
+    n = idx.shape[0]
+    out = np.empty(n, np.int64)
+    mask = np.zeros(n, np.uint8)
+    k = 0
+    for u in range(n):
+        if hasg[u]:
+            out[k] = idx[u]
+            mask[k] = 1
+            k += 1
+    for u in range(n):
+        if not hasg[u]:
+            out[k] = idx[u]
+            k += 1
+    return out, mask
+
+
+@nb.njit(cache=True)
+def _joint_covariance(pos, idx, ng, a, K):
+    """Lower triangle of the joint covariance of the training samples idx (n,): value
+    observations 0..n-1, then for each component c the gradient observations n + c ng + j of
+    samples j < ng (``_train_one``'s layout). Built row by row from the pairwise distances,
+    differences and exps (one vectorised exp per row)."""
+    n = idx.shape[0]
+    dim = pos.shape[1]
+    a2 = a * a
+    D = np.empty((dim, n, n))             # D[c, u, v] = (x_u - x_v)_c
+    R = np.empty((n, n))
+    E = np.empty((n, n))
+    work = np.empty(n)
+    for u in range(n):
+        for v in range(n):
+            r2 = 0.0
+            for c in range(dim):
+                e = pos[idx[u], c] - pos[idx[v], c]
+                D[c, u, v] = e
+                r2 += e * e
+            R[u, v] = np.sqrt(r2)
+            E[u, v] = -a * R[u, v]
+        _exp_neg(E[u], n, work)
+    for u in range(n):                    # value, value
+        for v in range(u + 1):
+            K[u, v] = (1.0 + a * R[u, v]) * E[u, v]
+    for c in range(dim):
+        for j in range(ng):
+            row = K[n + c * ng + j]
+            for v in range(n):            # gradient c at j, value at v
+                row[v] = -a2 * D[c, j, v] * E[j, v]
+            for c2 in range(c + 1):       # gradient c at j, gradient c2 at i
+                for i in range(ng if c2 < c else j + 1):
+                    r = R[j, i]
+                    inv_r = 1.0 / r if r > 0.0 else 0.0
+                    # the product in the order of the sample listed last (as a symmetric pass)
+                    if j >= i:
+                        t = a * D[c, j, i] * D[c2, j, i] * inv_r
+                    else:
+                        t = a * D[c2, j, i] * D[c, j, i] * inv_r
+                    row[n + c2 * ng + i] = ((1.0 if c == c2 else 0.0) - t) * (a2 * E[j, i])
+
+
+@nb.njit(cache=True)
 def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xout, kout,
                nograd=NOGRAD_VALUE_NOISE, vfloor=0.0):
     """Train one cluster on samples idx; write packed L, alpha, obs positions and kinds
@@ -100,7 +166,10 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
     spec's 2.0), <= 0 their own position noise plus ``-nograd``. ``vfloor`` is added to every
     value noise taken from a sample's position noise (default mode: the GP's model error)."""
     n = idx.shape[0]
-    hasg, m = _obs_layout(idx, nrm, sg, dim)
+    hasg0, m = _obs_layout(idx, nrm, sg, dim)
+    # the samples with a gradient observation first: the gradient observation j of every
+    # component is then that of value observation j, and the query reads them contiguously
+    idx, hasg = _gradient_first(idx, hasg0)
     a = np.sqrt(3.0) / scale
     # observation list: values first, then component 1 of gradient samples, then 2, ...
     y = np.empty(m)
@@ -130,52 +199,9 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
                 else:
                     noise[t] = sg[i]
                 t += 1
-    # observation index of each sample's value and gradient components (-1 = none)
-    col = np.full((n, dim + 1), -1, np.int64)
-    t = 0
-    for u in range(n):
-        col[u, 0] = t
-        t += 1
-    for c in range(dim):
-        for u in range(n):
-            if hasg[u]:
-                col[u, 1 + c] = t
-                t += 1
-    P = np.empty((n, dim))                  # training positions, gathered once
-    for u in range(n):
-        for k in range(dim):
-            P[u, k] = pos[idx[u], k]
-    # lower triangle of the joint covariance; blocks cov(obs_i at x_u, obs_j at x_v)
+    ng = (m - n) // dim        # samples 0..ng-1 carry the gradient observations (gradient first)
     K = np.empty((m, m))
-    a2 = a * a
-    dv = np.empty(dim)
-    for u in range(n):
-        gu = hasg[u]
-        for v in range(u + 1):
-            r2 = 0.0
-            for k in range(dim):
-                dv[k] = P[u, k] - P[v, k]
-                r2 += dv[k] * dv[k]
-            r = np.sqrt(r2)
-            ex = np.exp(-a * r)
-            inv_r = 1.0 / r if r > 0.0 else 0.0
-            K[u, v] = (1.0 + a * r) * ex                     # value, value
-            if hasg[v]:                                      # value at u, gradient at v
-                for j in range(1, dim + 1):
-                    K[col[v, j], u] = a2 * dv[j - 1] * ex
-            if gu:
-                for i in range(1, dim + 1):
-                    pi = col[u, i]
-                    K[pi, v] = -a2 * dv[i - 1] * ex          # gradient at u, value at v
-                    if hasg[v]:
-                        for j in range(1, dim + 1):
-                            qj = col[v, j]
-                            val = (1.0 if i == j else 0.0) - a * dv[i - 1] * dv[j - 1] * inv_r
-                            val *= a2 * ex
-                            if pi >= qj:
-                                K[pi, qj] = val
-                            else:
-                                K[qj, pi] = val
+    _joint_covariance(pos, idx, ng, a, K)
     for p in range(m):
         K[p, p] += noise[p]
     L = _cholesky(K)
@@ -198,6 +224,7 @@ def _train_one(idx, pos, nrm, sp, sg, dim, scale, fbias, quirk_x, Lout, aout, xo
     return m
 
 
+@entry
 @nb.njit(cache=True)
 def _train_many(csr_ptr, csr_idx, obs_off, tri_off, pos, nrm, sp, sg, dim, scale, fbias,
                 quirk_x, Lbuf, abuf, xbuf, kbuf, nograd, vfloor):
@@ -210,6 +237,7 @@ def _train_many(csr_ptr, csr_idx, obs_off, tri_off, pos, nrm, sp, sg, dim, scale
                    xbuf[o0:o1], kbuf[o0:o1], nograd, vfloor)
 
 
+@entry
 @nb.njit(cache=True)
 def _count_obs(csr_ptr, csr_idx, nrm, sg, dim):
     nc = csr_ptr.shape[0] - 1
@@ -347,7 +375,7 @@ class GPStore:
         if len(slots) == 0:
             return
         self.gp_m[slots] = 0
-        m = _count_obs(csr_ptr, csr_idx, tree.nrm, tree.sg, self.dim)
+        m = K._count_obs(csr_ptr, csr_idx, tree.nrm, tree.sg, self.dim)
         tri = m * (m + 1) // 2
         need_o, need_t = int(m.sum()), int(tri.sum())
         live = self.gp_m > 0
@@ -361,7 +389,7 @@ class GPStore:
                 self._grow(4 * (self.n_obs + need_o), 4 * (self.n_tri + need_t))
         obs_off = self.n_obs + np.concatenate([[0], np.cumsum(m)])
         tri_off = self.n_tri + np.concatenate([[0], np.cumsum(tri)])
-        _train_many(csr_ptr, csr_idx, obs_off, tri_off, tree.pos, tree.nrm, tree.sp, tree.sg,
+        K._train_many(csr_ptr, csr_idx, obs_off, tri_off, tree.pos, tree.nrm, tree.sp, tree.sg,
                     self.dim, scale, fbias, quirk_x, self.Lbuf, self.alpha, self.X, self.kinds,
                     float(nograd), float(vfloor))
         self.gp_obs[slots] = obs_off[:-1]

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from polar_sim.gpis._native import K, entry
+
 __all__ = ["ObsGP1D", "ObsGP2D", "UNOBSERVABLE"]
 
 UNOBSERVABLE = 1e6
@@ -30,59 +32,122 @@ class ObsGP1D:
 
     def __init__(self, angles, rho, *, scale=0.5, noise=0.01, group=20, overlap=6, margin=0.0175):
         self.scale, self.noise, self.margin = scale, noise, margin
-        x = angles
-        N = len(x)
-        ng = N // group + 1
-        self.empty = ng == 1
+        N = len(angles)
+        self.empty = N // group + 1 == 1
         if self.empty:
             return
-        ranges, bounds = [], [x[0]]
-        for g in range(ng - 2):
-            i0 = group * g
-            ranges.append((i0, i0 + group + overlap - 1))
-            bounds.append(x[i0 + group + overlap // 2])
-        i1 = group * (ng - 2)
-        h = (N - i1) // 2
-        ranges.append((i1, i1 + h + overlap))
-        bounds.append(x[i1 + h + overlap // 2])
-        ranges.append((i1 + h, N - 1))
-        bounds.append(x[N - 1])
-        self.bounds = np.asarray(bounds)
-        rg = np.asarray(ranges, np.int64)
-        M = int((rg[:, 1] - rg[:, 0]).max()) + 1
-        G = len(ranges)
-        X = np.zeros((G, M))
-        A = np.zeros((G, M))
-        Kinv = np.zeros((G, M, M))
-        _fit_groups(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(rho, np.float64),
-                    rg, float(scale), float(noise), X, A, Kinv)
-        mask = np.arange(M)[None, :] <= (rg[:, 1] - rg[:, 0])[:, None]
-        self.X, self.A, self.Kinv = X, A, Kinv
-        self.nobs = mask.sum(1).astype(np.int64)
+        self.bounds, self.X, self.C, self.sums, self.nobs = K._fit(
+            np.ascontiguousarray(angles, np.float64), np.ascontiguousarray(rho, np.float64),
+            float(scale), float(noise), int(group), int(overlap))
+
+    def args(self):
+        """The GP's arrays and constants, in the order the 1D kernels take them (``bounds``,
+        ``margin``, ``X``, ``C``, ``sums``, ``nobs``, ``scale``, ``noise``; see
+        ``_predict_one``); an empty GP has a single bound and answers nothing."""
+        if self.empty:
+            return (np.zeros(1), float(self.margin), np.zeros((1, 1)), np.zeros(1),
+                    np.zeros((5, 1, 2)), np.zeros(1, np.int64), float(self.scale),
+                    float(self.noise))
+        return (self.bounds, float(self.margin), self.X, self.C, self.sums, self.nobs,
+                float(self.scale), float(self.noise))
 
     def predict(self, phi):
         """(rho_hat, var) at angles phi (any shape)."""
         phi = np.asarray(phi, np.float64)
         shp = phi.shape
         flat = np.ascontiguousarray(phi.ravel())
-        rho = np.full(flat.shape, np.nan)
-        var = np.full(flat.shape, UNOBSERVABLE)
-        if not self.empty:
-            _predict_1d(flat, self.bounds, self.margin, self.X, self.A, self.Kinv, self.nobs,
-                        self.scale, self.noise, rho, var)
+        rho = np.empty(flat.shape)
+        var = np.empty(flat.shape)
+        K._predict_1d(flat, *self.args(), rho, var)
         return rho.reshape(shp), var.reshape(shp)
 
 
 @nb.njit(cache=True)
-def _fit_groups(x, rho, ranges, scale, noise, X, A, Kinv):
-    """OU GP of each group: inverse covariance (via Cholesky) and weights K^-1 rho."""
+def _predict_one(x, b, margin, X, C, sums, nobs, scale, noise):
+    """(rho_hat, var) of the OU GP at angle x; (NaN, UNOBSERVABLE) outside its groups.
+
+    The OU kernel factorises on either side of x: with t = (x - c) / l, an observation at
+    X_j <= x has k_j = e^-t u_j, u_j = e^((X_j - c) / l), and one at X_j > x has k_j = e^t v_j,
+    v_j = e^-((X_j - c) / l). So with a = #{X_j <= x} the mean k.alpha and the quadratic form
+    k' K^-1 k are sums over the split at a, precomputed for every a (``_split_sums``): O(1) per
+    point instead of O(n^2).
+    """
+    G = b.shape[0] - 1
+    if not (G >= 1 and x >= b[0] + margin and x <= b[G] - margin):
+        return np.nan, UNOBSERVABLE
+    g = np.searchsorted(b, x) - 1          # b[g] < x <= b[g + 1]
+    if g < 0 or g >= G or x == b[g + 1]:
+        return np.nan, UNOBSERVABLE
+    a = np.searchsorted(X[g, :nobs[g]], x, side="right")
+    t = (x - C[g]) / scale
+    e = np.exp(t)
+    ei = np.exp(-t)
+    m = ei * sums[0, g, a] + e * sums[1, g, a]
+    q = ei * ei * sums[2, g, a] + 2.0 * sums[3, g, a] + e * e * sums[4, g, a]
+    return m, 1.0 + noise - q
+
+
+@entry
+@nb.njit(cache=True)
+def _predict_1d(phi, b, margin, X, C, sums, nobs, scale, noise, rho, var):
+    for i in range(phi.shape[0]):
+        rho[i], var[i] = _predict_one(phi[i], b, margin, X, C, sums, nobs, scale, noise)
+
+
+@entry
+@nb.njit(cache=True)
+def _fit(x, rho, scale, noise, group, overlap):
+    """Partition the N beams (spec §4.2: groups of ``group`` overlapping by ``overlap``, the
+    last two splitting the remainder) and fit each group's GP; returns (bounds (G + 1,), X,
+    centres, split sums, observations per group)."""
+    N = x.shape[0]
+    ng = N // group + 1
+    G = ng
+    ranges = np.empty((G, 2), np.int64)
+    bounds = np.empty(G + 1)
+    bounds[0] = x[0]
+    for g in range(ng - 2):
+        i0 = group * g
+        ranges[g, 0] = i0
+        ranges[g, 1] = i0 + group + overlap - 1
+        bounds[g + 1] = x[i0 + group + overlap // 2]
+    i1 = group * (ng - 2)
+    h = (N - i1) // 2
+    ranges[ng - 2, 0] = i1
+    ranges[ng - 2, 1] = i1 + h + overlap
+    bounds[ng - 1] = x[i1 + h + overlap // 2]
+    ranges[ng - 1, 0] = i1 + h
+    ranges[ng - 1, 1] = N - 1
+    bounds[ng] = x[N - 1]
+    M = 0
+    nobs = np.empty(G, np.int64)
+    for g in range(G):
+        nobs[g] = ranges[g, 1] - ranges[g, 0] + 1
+        M = max(M, nobs[g])
+    X = np.zeros((G, M))
+    C = np.zeros(G)
+    sums = np.zeros((5, G, M + 1))
+    _fit_groups(x, rho, ranges, scale, noise, X, C, sums)
+    return bounds, X, C, sums, nobs
+
+
+@nb.njit(cache=True)
+def _fit_groups(x, rho, ranges, scale, noise, X, C, sums):
+    """OU GP of each group: its inverse covariance (via Cholesky), the weights K^-1 rho, and
+    the split sums of ``_predict_one`` (``_split_sums``)."""
     for g in range(ranges.shape[0]):
         a = ranges[g, 0]
         n = ranges[g, 1] - a + 1
+        xc = 0.5 * (x[a] + x[a + n - 1])
+        u = np.empty(n)
+        v = np.empty(n)
+        for j in range(n):
+            u[j] = np.exp((x[a + j] - xc) / scale)
+            v[j] = np.exp(-(x[a + j] - xc) / scale)
         L = np.zeros((n, n))
-        for i in range(n):
+        for i in range(n):             # x is sorted: exp(-|x_i - x_j| / l) = v_i u_j for j <= i
             for j in range(i + 1):
-                L[i, j] = np.exp(-abs(x[a + i] - x[a + j]) / scale)
+                L[i, j] = v[i] * u[j]
             L[i, i] += noise
         for j in range(n):                      # in-place Cholesky (lower)
             s = L[j, j]
@@ -101,44 +166,55 @@ def _fit_groups(x, rho, ranges, scale, noise, X, A, Kinv):
                 for k in range(c, i):
                     s -= L[i, k] * Li[k, c]
                 Li[i, c] = s / L[i, i]
+        Kinv = np.empty((n, n))
         for i in range(n):
             X[g, i] = x[a + i]
-            for j in range(n):
+            for j in range(i + 1):         # K^-1 = L^-T L^-1, symmetric
                 s = 0.0
-                for k in range(max(i, j), n):
+                for k in range(i, n):
                     s += Li[k, i] * Li[k, j]
-                Kinv[g, i, j] = s
+                Kinv[i, j] = s
+                Kinv[j, i] = s
+        alpha = np.empty(n)
         for i in range(n):
             s = 0.0
             for j in range(n):
-                s += Kinv[g, i, j] * rho[a + j]
-            A[g, i] = s
+                s += Kinv[i, j] * rho[a + j]
+            alpha[i] = s
+        C[g] = xc
+        _split_sums(u, v, alpha, Kinv, sums[:, g])
 
 
-@nb.njit(cache=True, fastmath=True)
-def _predict_1d(phi, b, margin, X, A, Kinv, nobs, scale, noise, rho, var):
-    G = b.shape[0] - 1
-    k = np.empty(X.shape[1])
-    for i in range(phi.shape[0]):
-        x = phi[i]
-        if not (x >= b[0] + margin and x <= b[G] - margin):
-            continue
-        g = np.searchsorted(b, x) - 1          # b[g] < x <= b[g + 1]
-        if g < 0 or g >= G or x == b[g + 1]:
-            continue
-        n = nobs[g]
-        m = 0.0
-        for j in range(n):
-            k[j] = np.exp(-abs(x - X[g, j]) / scale)
-            m += k[j] * A[g, j]
-        q = 0.0
-        for j in range(n):
-            t = 0.0
-            for l in range(n):
-                t += Kinv[g, j, l] * k[l]
-            q += k[j] * t
-        rho[i] = m
-        var[i] = 1.0 + noise - q
+@nb.njit(cache=True)
+def _split_sums(u, v, alpha, Kinv, out):
+    """For every split a = 0..n of the sorted observations into L = {j < a} and R = {j >= a},
+    with u_j = e^((X_j - c) / l), v_j = e^-((X_j - c) / l): out[0, a] = sum_L u alpha, out[1, a] =
+    sum_R v alpha, out[2, a] = u_L' K^-1 u_L, out[3, a] = u_L' K^-1 v_R, out[4, a] = v_R' K^-1 v_R
+    (each updated from its neighbour: O(n^2) in all)."""
+    n = u.shape[0]
+    pu = np.empty(n)                 # pu[a] = sum_{i < a} K_ai u_i
+    pv = np.empty(n)                 # pv[a] = sum_{j > a} K_aj v_j
+    for a in range(n):
+        s = 0.0
+        for i in range(a):
+            s += Kinv[a, i] * u[i]
+        pu[a] = s
+        s = 0.0
+        for j in range(a + 1, n):
+            s += Kinv[a, j] * v[j]
+        pv[a] = s
+    out[0, 0] = 0.0
+    out[2, 0] = 0.0
+    out[3, 0] = 0.0
+    for a in range(n):               # observation a moves from R to L
+        out[0, a + 1] = out[0, a] + u[a] * alpha[a]
+        out[2, a + 1] = out[2, a] + u[a] * (2.0 * pu[a] + Kinv[a, a] * u[a])
+        out[3, a + 1] = out[3, a] - v[a] * pu[a] + u[a] * pv[a]
+    out[1, n] = 0.0
+    out[4, n] = 0.0
+    for a in range(n - 1, -1, -1):
+        out[1, a] = out[1, a + 1] + v[a] * alpha[a]
+        out[4, a] = out[4, a + 1] + v[a] * (2.0 * pv[a] + Kinv[a, a] * v[a])
 
 
 @nb.njit(cache=True)
@@ -164,6 +240,7 @@ def _chol_inv_tile(xs, noise, scale, out_Kinv, y, out_a):
         out_a[i] = s
 
 
+@entry
 @nb.njit(cache=True)
 def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale, Mmax,
                TI, TX, TA, TK, TN):
@@ -195,6 +272,7 @@ def _fit_tiles(tiles, slots, rows0, rows1, cols0, cols1, v, u, rho, noise, scale
                     TK[s, i, j] = Ki[i, j]
 
 
+@entry
 @nb.njit(cache=True)
 def _predict_tiles(qv, qu, bv, bu, margin, TI, TX, TA, TK, TN, scale, noise, rho_out, var_out):
     nr = bv.shape[0] - 1
@@ -321,12 +399,12 @@ class ObsGP2D:
                 self._grow(max(self.n_fit + len(t), 2 * self.TN.shape[0]))
             slots = np.arange(self.n_fit, self.n_fit + len(t))
             self.n_fit += len(t)
-            _fit_tiles(t, slots, self.rows0, self.rows1, self.cols0, self.cols1, self.v, self.u,
+            K._fit_tiles(t, slots, self.rows0, self.rows1, self.cols0, self.cols1, self.v, self.u,
                        self.rho, self.noise, self.scale, self.M, self.TI, self.TX, self.TA,
                        self.TK, self.TN)
         rho = np.empty(len(qv))
         var = np.empty(len(qv))
-        _predict_tiles(qv, qu, self.bv, self.bu, self.margin, self.TI, self.TX, self.TA, self.TK,
+        K._predict_tiles(qv, qu, self.bv, self.bu, self.margin, self.TI, self.TX, self.TA, self.TK,
                        self.TN,
                        self.scale, self.noise, rho, var)
         return rho, var

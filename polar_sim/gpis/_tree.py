@@ -8,6 +8,11 @@ stored as two rows of ``node_sample`` / ``node_internal``; nodes are numbered le
 A dense grid ``cgrid`` (grown on demand over the bounding box of the clusters) maps cluster
 coordinates to a slot. Samples live in flat arrays with a free list, so slots are reused.
 
+Each cluster's samples are also chained in a doubly linked list (``link[i] = (next, prev)``,
+``slot_head[s]``), kept by insert and remove, so that the kernels visit a cluster's few samples
+without scanning its subtree's nodes; where the order matters they sort them by node. The lists
+are derived state: not saved, rebuilt on load.
+
 Semantics follow the spec: a leaf at or below cluster level holds at most one sample; inserting
 next to a sample closer than ``h_min`` in the same leaf is rejected (the chain-only "IsNotNew"
 test); a max-depth cell never splits; removal collapses parents whose children are all empty
@@ -24,6 +29,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from polar_sim.gpis._native import K, entry
 
 __all__ = ["Tree"]
 
@@ -139,7 +146,7 @@ def _in_root_or_grow(p, root, hmax, dim):
 
 
 @nb.njit(cache=True)
-def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, pos, n_p, nrm,
+def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, slot_head, link, pos, n_p, nrm,
                           face_cos, g_p, sg):
     """True if any sample in the 3^d clusters around cluster cc is closer than hmin to p
     (samples facing away from ``n_p``, normal dot < face_cos, do not count)."""
@@ -159,17 +166,75 @@ def _too_close_neighbours(p, cc, hmin, dim, cgrid, gshape, goff, node_sample, po
         s = cgrid[g]
         if s < 0:
             continue
-        row = node_sample[s]
-        for j in range(row.shape[0]):
-            i = row[j]
-            if i >= 0:
-                d2 = 0.0
-                for k in range(dim):
-                    e = pos[i, k] - p[k]
-                    d2 += e * e
-                if d2 < h2 and not _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
-                    return True
+        i = slot_head[s]
+        while i >= 0:
+            d2 = 0.0
+            for k in range(dim):
+                e = pos[i, k] - p[k]
+                d2 += e * e
+            if d2 < h2 and not _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
+                return True
+            i = link[i, 0]
     return False
+
+
+@nb.njit(cache=True)
+def _link(i, s, link, slot_head):
+    """Put sample i at the head of cluster slot s's list."""
+    h = slot_head[s]
+    link[i, 0] = h
+    link[i, 1] = -1
+    if h >= 0:
+        link[h, 1] = i
+    slot_head[s] = i
+
+
+@nb.njit(cache=True)
+def _unlink(i, s, link, slot_head):
+    """Take sample i out of cluster slot s's list."""
+    nx, pv = link[i, 0], link[i, 1]
+    if pv >= 0:
+        link[pv, 0] = nx
+    else:
+        slot_head[s] = nx
+    if nx >= 0:
+        link[nx, 1] = pv
+    link[i, 0] = -1
+    link[i, 1] = -1
+
+
+@entry
+@nb.njit(cache=True)
+def rebuild_links(node_sample, nslots, link, slot_head):
+    """The cluster lists from the node arrays (each in node order)."""
+    link[:] = -1
+    slot_head[:] = -1
+    for s in range(nslots):
+        for node in range(node_sample.shape[1] - 1, -1, -1):
+            i = node_sample[s, node]
+            if i >= 0:
+                _link(i, s, link, slot_head)
+
+
+@nb.njit(cache=True)
+def slot_members(s, slot_head, link, s_node, buf):
+    """Cluster slot s's samples in node order, into ``buf`` (grown if needed); returns
+    (buf, count)."""
+    n = 0
+    i = slot_head[s]
+    while i >= 0:
+        if n >= buf.shape[0]:
+            b2 = np.empty(2 * buf.shape[0], np.int64)
+            b2[:n] = buf[:n]
+            buf = b2
+        j = n                            # insertion sort by node (the lists are short)
+        while j > 0 and s_node[buf[j - 1]] > s_node[i]:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = i
+        n += 1
+        i = link[i, 0]
+    return buf, n
 
 
 @nb.njit(cache=True)
@@ -186,10 +251,11 @@ def _other_face(n_p, nrm, i, face_cos, dim, g_p, sg):
     return c < face_cos
 
 
+@entry
 @nb.njit(cache=True)
 def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_internal,
-            slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict, n_p, nrm, g_p,
-            sg):
+            slot_coord, slot_free, pos, s_slot, s_node, s_free, counts, strict, link, slot_head, n_p,
+            nrm, g_p, sg):
     """Insert p (normal n_p, gradient noise g_p); return (sample index, cluster slot) or (-1, -1) when rejected.
 
     geo = [origin(d), cluster width w, h_min, h_max, strict spacing, face_cos]. counts = [n_samples_hw, n_free_samples,
@@ -206,7 +272,7 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
         return -1, -1
     face_cos = geo[dim + 4]
     if strict and _too_close_neighbours(p, cc, geo[dim + 3], dim, cgrid, gshape, goff,
-                                        node_sample, pos, n_p, nrm, face_cos, g_p, sg):
+                                        slot_head, link, pos, n_p, nrm, face_cos, g_p, sg):
         return -1, -1
     s = cgrid[g]
     lo = np.empty(dim)
@@ -246,6 +312,7 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
             counts[2] += 1
         node_sample[s, :] = -1
         node_internal[s, :] = 0
+        slot_head[s] = -1
         for k in range(dim):
             slot_coord[s, k] = cc[k]
         cgrid[g] = s
@@ -260,14 +327,17 @@ def _insert(p, geo, root, level_off, L, cgrid, gshape, goff, node_sample, node_i
         pos[i, k] = p[k]
     s_slot[i] = s
     s_node[i] = node
+    _link(i, s, link, slot_head)
     return i, s
 
 
+@entry
 @nb.njit(cache=True)
 def _remove(i, dim, level_off, cgrid, gshape, goff, node_sample, node_internal, slot_coord,
-            slot_free, s_slot, s_node, s_free, counts):
+            slot_free, s_slot, s_node, s_free, counts, link, slot_head):
     """Remove sample i; collapse parents whose children are all empty leaves; free empty clusters."""
     s = s_slot[i]
+    _unlink(i, s, link, slot_head)
     node = np.int64(s_node[i])  # int64 throughout: an int32 first pass compiles _parent twice
     node_sample[s, node] = -1
     s_slot[i] = -1
@@ -343,13 +413,16 @@ class Tree:
         ni = np.zeros((n, self.n_nodes), np.uint8)
         sc = np.zeros((n, d), np.int64)
         sf = np.zeros(n, _I32)
+        sh = np.full(n, -1, _I32)
         if old is not None:
             m = old.shape[0]
             ns[:m] = old
             ni[:m] = self.node_internal
             sc[:m] = self.slot_coord
             sf[:m] = self.slot_free
+            sh[:m] = self.slot_head
         self.node_sample, self.node_internal, self.slot_coord, self.slot_free = ns, ni, sc, sf
+        self.slot_head = sh
 
     def _alloc_samples(self, n):
         d = self.dim
@@ -358,7 +431,7 @@ class Tree:
                     pos_t=np.zeros((n, d)), nrm_t=np.zeros((n, d)), sp_t=np.zeros(n),
                     sg_t=np.zeros(n),
                     s_slot=np.full(n, -1, _I32), s_node=np.full(n, -1, _I32),
-                    s_free=np.zeros(n, _I32))
+                    s_free=np.zeros(n, _I32), link=np.full((n, 2), -1, _I32))
         if old is not None:
             m = old.shape[0]
             for k, a in arrs.items():
@@ -413,21 +486,23 @@ class Tree:
         """Insert one point (d,) with normal n (d,) and gradient noise g; returns (sample index,
         slot) or (-1, -1)."""
         n = np.zeros(self.dim) if n is None else np.asarray(n, np.float64)
-        return _insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
+        return K._insert(p, self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape,
                        self.goff, self.node_sample, self.node_internal, self.slot_coord,
                        self.slot_free, self.pos, self.s_slot, self.s_node, self.s_free,
-                       self.counts, self.strict, n, self.nrm, float(g), self.sg)
+                       self.counts, self.strict, self.link, self.slot_head, n, self.nrm, float(g),
+                       self.sg)
 
     def remove(self, i):
-        _remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
+        K._remove(i, self.dim, self.level_off, self.cgrid, self.gshape, self.goff, self.node_sample,
                 self.node_internal, self.slot_coord, self.slot_free, self.s_slot, self.s_node,
-                self.s_free, self.counts)
+                self.s_free, self.counts, self.link, self.slot_head)
 
     def args(self):
         """The arrays the numba kernels take, in their order."""
         return (self.geo, self.root, self.level_off, self.L, self.cgrid, self.gshape, self.goff,
                 self.node_sample, self.node_internal, self.slot_coord, self.slot_free, self.pos,
-                self.s_slot, self.s_node, self.s_free, self.counts, self.strict)
+                self.s_slot, self.s_node, self.s_free, self.counts, self.strict, self.link,
+                self.slot_head)
 
     def alive(self):
         """Indices of the stored samples, in slot/node order (deterministic)."""
@@ -467,3 +542,6 @@ class Tree:
         self.L = L
         self.level_off = np.array([(B**lv - 1) // (B - 1) for lv in range(L + 2)], np.int64)
         self.n_nodes = int(self.level_off[L + 1])
+        self.link = np.full((self.pos.shape[0], 2), -1, _I32)
+        self.slot_head = np.full(self.node_sample.shape[0], -1, _I32)
+        K.rebuild_links(self.node_sample, int(self.counts[2]), self.link, self.slot_head)

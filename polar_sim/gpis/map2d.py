@@ -9,9 +9,11 @@ import numpy as np
 from polar_sim._validation import as_angles, as_pose2d, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import check_params
-from polar_sim.gpis._fusion import RangeNoiseModel, fuse, normal_noise
+from polar_sim.gpis._fusion import RangeNoiseModel, fuse
+from polar_sim.gpis._linesearch import TOL
 from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
+from polar_sim.gpis._scan2d import line_search, new_samples, occupancy
 
 __all__ = ["GPISMap2D"]
 
@@ -288,14 +290,7 @@ class GPISMap2D(GPISMapBase):
     # -- sensor model ---------------------------------------------------------------------------
     def _oc(self, q, gp):
         """Occupancy test (spec §3) at sensor-frame points q (..., 2): (oc, observable, r_hat)."""
-        phi = np.arctan2(q[..., 1], q[..., 0])
-        r = np.hypot(q[..., 0], q[..., 1])
-        rho_hat, var = gp.predict(phi)
-        obs = var <= self.obs_var_thre
-        with np.errstate(invalid="ignore", divide="ignore"):
-            oc = np.tanh(15.0 * r * (r ** -0.5 - rho_hat))
-            rhat = 1.0 / rho_hat ** 2
-        return oc, obs, rhat
+        return occupancy(gp, q, self.obs_var_thre)
 
     def _fd(self, q, gp):
         """Finite differences at sensor points q (n, 2): oc (n, 4), observable (n,), r_hat (n, 4)."""
@@ -310,40 +305,19 @@ class GPISMap2D(GPISMapBase):
         return (b > scan.lim[0]) & (b < scan.lim[1])
 
     def _new_samples(self, scan):
-        s = scan.sensor_pts
-        _, var = scan.gp.predict(scan.phi)
-        ok = var <= self.obs_var_thre
-        oc, fd_ok, _ = self._fd(s, scan.gp)
-        g = np.stack([oc[:, 0] - oc[:, 1], oc[:, 2] - oc[:, 3]], 1) / self.delx
-        obar = oc.mean(1)
-        n, sp, sg = normal_noise(g, obar, s, scan.r ** 2, self.min_position_noise,
-                                 self.min_grad_noise, scan.R, model=scan.model)
-        P = scan.hits
-        if scan.model is not None:
-            # no usable finite-difference gradient (the observation GP disagrees with this beam,
-            # e.g. a lone beam through a gap): the return is still a surface point with the
-            # range noise along its ray; it gets the normal facing the sensor, untrusted (the GP
-            # takes no gradient from it), so that the surfel field keeps a zero level there
-            # a normal facing away from the sensor cannot belong to the surface the beam hit
-            # (the observation GP smoothed across an edge): it is replaced the same way
-            deg = ((g * g).sum(1) <= 1e-6) | ((g * s).sum(1) > 0)
-            sp[deg] = scan.model.position(1.0)
-            sg[deg] = 1.0
-            # an untrusted finite-difference normal (a beam next to a range discontinuity, where
-            # the observation GP smooths across the edge) is no better than that guess either;
-            # only the surfel field uses it, and a wrong one there puts a zero level in free space
-            deg |= sg > _GRAD_GATE
-            if deg.any():
-                ray = s[deg] / np.linalg.norm(s[deg], axis=1)[:, None]
-                n[deg] = -ray @ scan.R.T
-        bad = ~fd_ok
-        return P, ok, bad, n, sp, sg
+        ok, n, sp, sg, bad = new_samples(scan.gp, scan.sensor_pts, scan.phi, scan.r,
+                                         self.obs_var_thre, self.delx, scan.R,
+                                         self.min_position_noise, self.min_grad_noise,
+                                         scan.model, _GRAD_GATE)
+        return scan.hits, ok, bad, n, sp, sg
 
     def _reeval(self, cand, scan):
         tr = self.tree_
         P, N = tr.pos[cand], tr.nrm[cand]
         p = (P - scan.t) @ scan.R - scan.o
         n = N @ scan.R
-        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
-                    lambda q: q @ scan.R.T + (scan.R @ scan.o + scan.t), scan.R, oc_skip=-0.1,
-                    rhat_dim=2, model=scan.model)
+        def search(p, n):
+            return line_search(scan.gp, p, n, self.obs_var_thre, self.delx, TOL, self._OC_SKIP)
+
+        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, search, self._fd, scan.R,
+                    scan.R @ scan.o + scan.t, model=scan.model)

@@ -10,7 +10,8 @@ from polar_sim._validation import as_depth, as_intrinsics, as_pose, as_ranges
 from polar_sim.gpis._base import GPISMapBase
 from polar_sim.gpis._checks import as_directions, check_params
 from polar_sim.gpis._fusion import fuse, normal_noise
-from polar_sim.gpis._kernels import maybe_new
+from polar_sim.gpis._native import K
+from polar_sim.gpis._linesearch import line_search
 from polar_sim.gpis._obsgp import ObsGP2D
 
 __all__ = ["GPISMap3D"]
@@ -304,7 +305,7 @@ class GPISMap3D(GPISMapBase):
         _, var = scan.gp.predict(*scan.pix)
         ok = var <= self.obs_var_thre
         # finite differences only where an insert can succeed (see maybe_new)
-        ok &= maybe_new(scan.hits, tr.geo, tr.root, tr.level_off, tr.cgrid, tr.gshape, tr.goff,
+        ok &= K.maybe_new(scan.hits, tr.geo, tr.root, tr.level_off, tr.cgrid, tr.gshape, tr.goff,
                         tr.node_sample, tr.node_internal, tr.pos, tr.strict)
         k = len(ok)
         n, sp, sg = np.zeros((k, 3)), np.zeros(k), np.zeros(k)
@@ -326,8 +327,12 @@ class GPISMap3D(GPISMapBase):
         P, N = tr.pos[cand], tr.nrm[cand]
         p = (P - scan.t) @ scan.R
         n = N @ scan.R
-        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, self._oc, self._fd,
-                    lambda q: q @ scan.R.T + scan.t, scan.R, oc_skip=self._OC_SKIP, rhat_dim=3)
+        def search(p, n):
+            return line_search(p, n, lambda q: self._oc(q, scan.gp), self.delx, self._OC_SKIP,
+                               depth=True, reproject_bug=self._pub("fusion"))
+
+        return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, search, self._fd, scan.R,
+                    scan.t)
 
 
 def _axis(a, tol=1e-4):

@@ -17,8 +17,9 @@ import cv2
 import numpy as np
 
 from polar_sim._validation import as_rng
+from polar_sim.geometry import pinhole_intrinsics
 
-__all__ = ["CorridorScene", "unicycle_poses", "arc_lengths", "intrinsics", "make_sequence", "GROUND_KINDS"]
+__all__ = ["CorridorScene", "unicycle_poses", "arc_lengths", "make_sequence", "GROUND_KINDS"]
 
 
 def _periodic_noise(rng, size, sigmas, weights):
@@ -99,11 +100,6 @@ def _sample(pyr, a, b, level):
                   + (tex[j1, i0] * (1 - fx) + tex[j1, i1] * fx) * fy)
     return out
 
-
-def intrinsics(width, height, fovy_deg=60.0):
-    """Pinhole K (3, 3) with vertical field of view ``fovy_deg`` and the centre at ((W-1)/2, (H-1)/2)."""
-    f = (height / 2.0) / np.tan(np.radians(fovy_deg) / 2.0)
-    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
 def unicycle_poses(n, dt, speed, yaw_rate, accel=None):
@@ -298,7 +294,7 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
     ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``.
     """
-    K = intrinsics(width, height, fovy_deg)
+    K = pinhole_intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
     scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground)
     level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)

@@ -469,7 +469,7 @@ def class_report(err, var, classes, *, z=1.959964):
 
 
 def object_map_scores(sdf_est, sdf_true, *, dist, visible, to_surface, vertex_grad, true_normals):
-    """Accuracy of a 3D object map from arrays (see :class:`polar_sim.sim.orbits.ObjectTruth`).
+    """Accuracy of a 3D object map from arrays (see :class:`polar_sim.sim.recorders.orbits.ObjectTruth`).
 
     ``sdf_est``, ``sdf_true`` (k,): the map's and the exact SDF at points within 1 cm of the
     observed surface; ``dist`` (v,): distance of each reconstructed vertex to the true mesh;

@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from polar_sim._validation import as_float_array, as_int, as_points, as_positive_float, check_choice
 from polar_sim.fileio import atomic_write, check_source
+from polar_sim.geometry import rigid_alignment
 
 __all__ = [
     "KITTI_LENGTHS",
@@ -193,18 +194,7 @@ def umeyama(src, dst, *, with_scale=False):
     dst = as_points(dst, 3, "dst")
     if len(src) != len(dst):
         raise ValueError(f"src, dst: expected equal lengths, got {len(src)} and {len(dst)}")
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    xs, xd = src - mu_s, dst - mu_d
-    cov = xd.T @ xs / len(src)
-    U, S, Vt = np.linalg.svd(cov)
-    D = np.eye(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
-        D[2, 2] = -1.0
-    R = U @ D @ Vt
-    var_s = (xs**2).sum() / len(src)
-    s = float(np.trace(np.diag(S) @ D) / var_s) if with_scale and var_s > 0 else 1.0
-    t = mu_d - s * R @ mu_s
-    return R, t, s
+    return rigid_alignment(src, dst, with_scale=with_scale)
 
 
 def ate_errors(gt_poses, est_poses, *, align="se3"):

@@ -14,8 +14,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import cKDTree
 
+from polar_sim.geometry import diameter
 from polar_sim._validation import as_float, as_float_array, as_int, as_intrinsics, as_points, as_pose, as_positive_float
 
 __all__ = [
@@ -96,16 +97,7 @@ def _as_errors(e, name="errors"):
 
 def object_diameter(points):
     """Largest distance between two model points (m, 3), metres (exact, through the convex hull)."""
-    P = as_points(points, 3, "points")
-    if len(P) > 4:
-        try:
-            P = P[ConvexHull(P).vertices]
-        except Exception:  # flat or degenerate point sets
-            pass
-    best = 0.0
-    for i in range(0, len(P), 1024):
-        best = max(best, float(np.linalg.norm(P[i : i + 1024, None] - P[None], axis=2).max()))
-    return best
+    return diameter(as_points(points, 3, "points"))
 
 
 def add(model_points, T_gt, T_est):

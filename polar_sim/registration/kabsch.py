@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.geometry import hat
+from polar_sim.geometry import hat, rigid_alignment
 
 __all__ = ["kabsch", "point_to_point_covariance"]
 
@@ -16,14 +16,10 @@ def kabsch(P, Q):
     with Umeyama's (1991) reflection fix, without scale.
     """
     dim = P.shape[1]
-    pc, qc = P.mean(axis=0), Q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((P - pc).T @ (Q - qc))
-    D = np.eye(dim)
-    D[-1, -1] = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ D @ U.T
+    R, t, _ = rigid_alignment(P, Q)
     T = np.eye(dim + 1)
     T[:dim, :dim] = R
-    T[:dim, dim] = qc - R @ pc
+    T[:dim, dim] = t
     return T
 
 

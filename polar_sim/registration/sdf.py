@@ -26,11 +26,14 @@ a GPIS the per-call overhead dominates, so the extra iterations cost more than t
 from __future__ import annotations
 
 import logging
+import math
+from collections import namedtuple
 
 import numpy as np
 
 from polar_sim._validation import as_float_array, as_int, as_pose, as_pose2d, as_positive_float, check_choice
-from polar_sim.registration.robust import DEFAULT_SCALE, ROBUST_KERNELS, robust_cost, robust_weight
+from polar_sim.registration.gauss_newton import KERNEL_CODES, gauss_newton_step, linearise
+from polar_sim.registration.robust import DEFAULT_SCALE, ROBUST_KERNELS
 from polar_sim.registration.scans import (
     arc_length_subsample,
     as_scan2d,
@@ -41,7 +44,7 @@ from polar_sim.registration.scans import (
     valid_beams,
 )
 from polar_sim.errors import NotUpdatedError
-from polar_sim.geometry import se3_exp, so3_log, wrap_angle
+from polar_sim.geometry import se3_exp, so3_log
 
 __all__ = ["register_sdf"]
 
@@ -71,8 +74,15 @@ def _query(map, q, dim):
     return d, g, v
 
 
+def _wrap(a):
+    """``geometry.wrap_angle`` of one float (Python's % is numpy's remainder)."""
+    return (float(a) + math.pi) % (2.0 * math.pi) - math.pi
+
+
 class _Problem2D:
-    dof = 2
+    """Pose (x, y, theta) of the base; the rotation acts about the base position."""
+
+    dof = 3
 
     def __init__(self, pose):
         self.x = pose.copy()
@@ -80,25 +90,25 @@ class _Problem2D:
     def world(self, p):
         return transform2d(self.x, p)
 
-    def jacobian(self, q, n):
-        # Parameters (x, y, theta) of the base; the rotation acts about the base position.
-        lever = q - self.x[:2]
-        return np.column_stack([n[:, 0], n[:, 1], n[:, 1] * lever[:, 0] - n[:, 0] * lever[:, 1]])
+    def centre(self):
+        return self.x[:2]
 
     @staticmethod
     def split(delta):
-        return np.linalg.norm(delta[:2]), abs(delta[2])
+        return math.hypot(delta[0], delta[1]), abs(delta[2])
 
     def apply(self, delta):
         self.x = self.x + delta
-        self.x[2] = wrap_angle(self.x[2])
+        self.x[2] = _wrap(self.x[2])
 
     def correction(self, x0):
-        return np.linalg.norm(self.x[:2] - x0[:2]), abs(wrap_angle(self.x[2] - x0[2]))
+        return math.hypot(self.x[0] - x0[0], self.x[1] - x0[1]), abs(_wrap(self.x[2] - x0[2]))
 
 
 class _Problem3D:
-    dof = 3
+    """Sensor pose (4x4); a twist (omega, v) rotates about the sensor position, then translates."""
+
+    dof = 6
 
     def __init__(self, T):
         self.x = T.copy()
@@ -106,9 +116,8 @@ class _Problem3D:
     def world(self, p):
         return p @ self.x[:3, :3].T + self.x[:3, 3]
 
-    def jacobian(self, q, n):
-        # Twist (omega, v): rotation about the sensor position, then a world translation.
-        return np.column_stack([np.cross(q - self.x[:3, 3], n), n])
+    def centre(self):
+        return self.x[:3, 3]
 
     @staticmethod
     def split(delta):
@@ -123,6 +132,11 @@ class _Problem3D:
 
     def correction(self, x0):
         return np.linalg.norm(self.x[:3, 3] - x0[:3, 3]), np.linalg.norm(so3_log(x0[:3, :3].T @ self.x[:3, :3]))
+
+
+#: register_sdf's settings after their checks (see its docstring for each).
+_Settings = namedtuple("_Settings", "max_iterations min_points tolerance kind scale sigma2 max_variance "
+                                    "step corr")
 
 
 def register_sdf(
@@ -205,115 +219,194 @@ def register_sdf(
         A non-finite or malformed ``initial_pose``, a malformed ``scan``, bad parameters, or a map
         without data (one whose ``query`` raises ``NotUpdatedError``).
     """
-    # ---- inputs
-    pose_arr = as_float_array(initial_pose, "initial_pose")
-    if pose_arr.shape == (3,):
-        problem = _Problem2D(as_pose2d(pose_arr, "initial_pose"))
-        dim = 2
-    elif pose_arr.shape == (4, 4):
-        problem = _Problem3D(as_pose(pose_arr, "initial_pose"))
-        dim = 3
-    else:
-        raise ValueError(f"initial_pose: expected (x, y, theta) or a 4x4 pose, got shape {pose_arr.shape}")
+    problem = _problem(initial_pose)
+    dim = 2 if isinstance(problem, _Problem2D) else 3
     if not callable(getattr(map, "query", None)):
         raise TypeError(f"map: expected an object with query(points) -> (sdf, grad, var), got {type(map).__name__}")
-    max_iterations = as_int(max_iterations, "max_iterations", minimum=1)
-    min_points = as_int(min_points, "min_points", minimum=dim + 1)
-    tolerance = as_positive_float(tolerance, "tolerance")
-    check_choice(robust, ROBUST_KERNELS, "robust")
-    scale = DEFAULT_SCALE[robust] if robust_scale is None else as_positive_float(robust_scale, "robust_scale")
-    sigma = as_positive_float(sigma, "sigma")
-    max_variance = as_positive_float(max_variance, "max_variance")
+    opts = _settings(dim, max_iterations, min_points, tolerance, robust, robust_scale, sigma, max_variance,
+                     max_step, max_correction)
     min_range = as_positive_float(min_range, "min_range", allow_zero=True)
     max_range = as_positive_float(max_range, "max_range")
-    step_t, step_r = (as_positive_float(v, "max_step") for v in _pair(max_step, "max_step"))
-    corr_t, corr_r = (as_positive_float(v, "max_correction") for v in _pair(max_correction, "max_correction"))
     n_points = (600 if dim == 3 else 200) if n_points is None else as_int(n_points, "n_points", minimum=1)
-
     if dim == 2:
-        if not (isinstance(scan, (tuple, list)) and len(scan) == 2):
-            raise TypeError("scan: expected a tuple (angles, ranges)")
-        angles, ranges = as_scan2d(*scan)
-        if sensor_offset is None:
-            sensor_offset = getattr(map, "sensor_offset", None)
-        off = as_sensor_offset((0.0, 0.0) if sensor_offset is None else sensor_offset)
-        ok = valid_beams(ranges, min_range, max_range)
-        n_valid = int(ok.sum())
-        pts = beam_points(angles[ok], ranges[ok], off)
-        pts = pts[arc_length_subsample(pts, n_points)]
+        pts, n_valid = _points_2d(map, scan, sensor_offset, min_range, max_range, n_points)
     else:
         pts = scan3d_points(scan, pixel_stride=as_int(pixel_stride, "pixel_stride", minimum=1),
                             min_range=min_range, max_range=max_range)
         n_valid = len(pts)
         if len(pts) > n_points:
             pts = pts[np.round(np.linspace(0, len(pts) - 1, n_points)).astype(int)]
-
-    x0 = problem.x.copy()
-    dof = 3 if dim == 2 else 6
-    no_cov = np.diag(np.full(dof, np.inf))
     info = {"status": "ok", "iterations": 0, "n_valid": n_valid, "n_points": 0, "rmse": float("nan"),
             "cost": float("nan"), "n_queried": 0, "reason": ""}
-    if len(pts) < min_points:
+    if len(pts) < opts.min_points:
         # Still touch the map once, so that an empty map is an error whatever the scan.
         _query(map, problem.world(np.zeros((1, dim))), dim)
-        info.update(status="no_data", n_queried=1, reason=f"{len(pts)} valid points < min_points={min_points}")
-        return x0, no_cov, info
+        info.update(status="no_data", n_queried=1, reason=f"{len(pts)} valid points < min_points={opts.min_points}")
+        return problem.x.copy(), _no_cov(problem), info
+    pts = np.ascontiguousarray(pts, np.float64)
+    native = getattr(map, "_register_native", None)
+    run = native(pts, problem.x, opts) if callable(native) else None
+    if run is None:
+        run = _gauss_newton(map, problem, pts, opts)
+    else:
+        run = _Run(*run)
+    return _finish(run, problem, opts, info)
 
-    # ---- Gauss-Newton with backtracking
-    best = None  # the last accepted pose (lowest objective so far), its covariance and step
-    for it in range(1, max_iterations + 1):
+
+def _problem(initial_pose):
+    """The pose to estimate: 2D for (x, y, theta), 3D for a 4x4 transform."""
+    pose_arr = as_float_array(initial_pose, "initial_pose")
+    if pose_arr.shape == (3,):
+        return _Problem2D(as_pose2d(pose_arr, "initial_pose"))
+    if pose_arr.shape == (4, 4):
+        return _Problem3D(as_pose(pose_arr, "initial_pose"))
+    raise ValueError(f"initial_pose: expected (x, y, theta) or a 4x4 pose, got shape {pose_arr.shape}")
+
+
+def _settings(*args):
+    """The solver's settings, checked; memoised when every argument is a plain number, string,
+    None or tuple of them (the same arguments come with every scan)."""
+    if not all(_plain(a) for a in args):
+        return _check_settings(*args)
+    key = repr(args)                  # repr, not ==: True == 1 == 1.0 must not share an entry
+    out = _SETTINGS.get(key)
+    if out is None:
+        out = _check_settings(*args)
+        if len(_SETTINGS) < 64:
+            _SETTINGS[key] = out
+    return out
+
+
+def _plain(a):
+    if isinstance(a, tuple):
+        return all(_plain(x) for x in a)
+    return a is None or type(a) in (bool, int, float, str)
+
+
+_SETTINGS = {}
+
+
+def _check_settings(dim, max_iterations, min_points, tolerance, robust, robust_scale, sigma, max_variance,
+                    max_step, max_correction):
+    """The solver's settings, checked (``ValueError``/``TypeError`` naming the argument)."""
+    check_choice(robust, ROBUST_KERNELS, "robust")
+    sigma = as_positive_float(sigma, "sigma")
+    return _Settings(
+        max_iterations=as_int(max_iterations, "max_iterations", minimum=1),
+        min_points=as_int(min_points, "min_points", minimum=dim + 1),
+        tolerance=as_positive_float(tolerance, "tolerance"),
+        kind=KERNEL_CODES[robust],
+        scale=DEFAULT_SCALE[robust] if robust_scale is None else as_positive_float(robust_scale, "robust_scale"),
+        sigma2=sigma * sigma,
+        max_variance=as_positive_float(max_variance, "max_variance"),
+        step=tuple(as_positive_float(v, "max_step") for v in _pair(max_step, "max_step")),
+        corr=tuple(as_positive_float(v, "max_correction") for v in _pair(max_correction, "max_correction")))
+
+
+def _points_2d(map, scan, sensor_offset, min_range, max_range, n_points):
+    """Base-frame end points of the valid beams, subsampled in arc length, and the valid count."""
+    if not (isinstance(scan, (tuple, list)) and len(scan) == 2):
+        raise TypeError("scan: expected a tuple (angles, ranges)")
+    angles, ranges = as_scan2d(*scan)
+    if sensor_offset is None:
+        sensor_offset = getattr(map, "sensor_offset", None)
+    off = as_sensor_offset((0.0, 0.0) if sensor_offset is None else sensor_offset)
+    ok = valid_beams(ranges, min_range, max_range)
+    pts = beam_points(angles[ok], ranges[ok], off)
+    return pts[arc_length_subsample(pts, n_points)], int(ok.sum())
+
+
+def _no_cov(problem):
+    """The covariance of no estimate: an infinite diagonal."""
+    return np.diag(np.full(problem.dof, np.inf))
+
+
+#: How a Gauss-Newton run ended (the ``status`` of ``info``).
+STATUS = ("ok", "no_data", "diverged", "max_iter")
+
+#: What a Gauss-Newton run returns (both the Python loop and a map's compiled one): its status
+#: (an index into STATUS), the last iteration, the points and the RMS residual and objective of
+#: the last accepted step (or, on "no_data", the points found), the points queried, the final
+#: correction (on "diverged"), the pose reached, and the accepted step's normal equations
+#: (H, sum w r^2, points; ``has_best`` False when no step was accepted). The iteration is the
+#: one the run ended on, except for "max_iter": the last accepted step's.
+_Run = namedtuple("_Run", "status iterations n_points rmse cost n_queried ct cr x H wrr n has_best")
+
+
+def _gauss_newton(map, problem, pts, opts):
+    """Gauss-Newton with backtracking from ``problem.x`` on any map; returns a :data:`_Run`."""
+    x0 = problem.x.copy()
+    dim = pts.shape[1]
+    n_queried = 0
+    last = (0, 0, float("nan"), float("nan"))   # iteration, points, rmse, cost of the last accepted step
+    best = None  # the last accepted pose (lowest objective so far), its normal equations and step
+
+    def run(status, it, x, n_points=None, ct=0.0, cr=0.0):
+        k, rmse, cost = last[1:] if n_points is None else (n_points, last[2], last[3])
+        if best is None:
+            return _Run(status, it, k, rmse, cost, n_queried, ct, cr, x, None, 0.0, 0, False)
+        return _Run(status, it, k, rmse, cost, n_queried, ct, cr, x, best["H"], best["wrr"], best["n"], True)
+
+    for it in range(1, opts.max_iterations + 1):
         q = problem.world(pts)
         d, g, v = _query(map, q, dim)
-        info["n_queried"] += len(pts)
-        gn = np.linalg.norm(g, axis=1)
-        use = np.isfinite(d) & np.isfinite(gn) & (gn > 1e-9) & np.isfinite(v) & (v <= max_variance)
-        if use.sum() < min_points:
+        n_queried += len(pts)
+        H = np.empty((problem.dof, problem.dof))
+        b = np.empty(problem.dof)
+        used, cost_sum, wrr, r2 = linearise(q, d, g, v, np.ascontiguousarray(problem.centre()),
+                                             opts.max_variance, opts.sigma2, opts.kind, opts.scale, H, b)
+        if used < opts.min_points:
             if best is None:
-                info.update(status="no_data", iterations=it, n_points=int(use.sum()),
-                            reason=f"{int(use.sum())} points where the map has data < min_points={min_points}")
-                return x0, no_cov, info
+                return run(1, it, x0, n_points=used)
             problem.x = best["x"].copy()  # the last step left the mapped area: retreat
             best["step"] = best["step"] * 0.5
             problem.apply(best["step"])
             continue
-        r = d[use]
-        iv = 1.0 / (np.maximum(v[use], 0.0) + sigma * sigma)
-        cost = float(np.mean(robust_cost(r, robust, scale) * iv))
+        cost = float(cost_sum / used)
         if best is not None and cost > best["cost"]:
             # The last step made things worse (a learned field is not smooth everywhere, e.g. where
             # a GPIS blends clusters, and plain Gauss-Newton can cycle there): retry half of it.
             problem.x = best["x"].copy()
             best["step"] = best["step"] * 0.5
             dt, dr = problem.split(best["step"])
-            if dt < tolerance and dr < tolerance:
-                info["iterations"] = it
-                return problem.x, best["cov"], info
+            if dt < opts.tolerance and dr < opts.tolerance:
+                return run(0, it, problem.x)
             problem.apply(best["step"])
             continue
-        n = g[use] / gn[use, None]
-        J = problem.jacobian(q[use], n)
-        w = robust_weight(r, robust, scale) * iv
-        H = (J * w[:, None]).T @ J
-        H += (1e-9 * np.trace(H) / dof + 1e-12) * np.eye(dof)  # keeps a degenerate scene solvable
-        wrr = float(np.sum(w * r * r))
-        delta = -np.linalg.solve(H, J.T @ (w * r))
-        cov = wrr / max(len(r) - dof, 1) * np.linalg.inv(H)
-        info.update(iterations=it, n_points=len(r), rmse=float(np.sqrt(np.mean(r * r))), cost=cost)
+        delta = np.empty(problem.dof)
+        gauss_newton_step(H, b, delta)
+        last = (it, used, float(np.sqrt(r2 / used)), cost)
         dt, dr = problem.split(delta)
-        delta = delta * min(1.0, step_t / max(dt, 1e-300), step_r / max(dr, 1e-300))
-        best = {"x": problem.x.copy(), "cost": cost, "cov": cov, "step": delta}
+        delta = delta * min(1.0, opts.step[0] / max(dt, 1e-300), opts.step[1] / max(dr, 1e-300))
+        best = {"x": problem.x.copy(), "cost": cost, "H": H, "wrr": wrr, "n": used, "step": delta}
         problem.apply(delta)
         ct, cr = problem.correction(x0)
-        if ct > corr_t or cr > corr_r:
-            info.update(status="diverged", reason=f"moved {ct:.3f} m / {np.degrees(cr):.1f} deg from the prior")
-            logger.debug("register_sdf diverged after %d iterations: %s", it, info["reason"])
-            return x0, no_cov, info
+        if ct > opts.corr[0] or cr > opts.corr[1]:
+            return run(2, it, x0, ct=ct, cr=cr)
         dt, dr = problem.split(delta)
-        if dt < tolerance and dr < tolerance:
-            return problem.x, cov, info
-    info.update(status="max_iter", reason=f"no convergence in {max_iterations} iterations")
-    logger.debug("register_sdf: %s", info["reason"])
-    return problem.x, (no_cov if best is None else best["cov"]), info
+        if dt < opts.tolerance and dr < opts.tolerance:
+            return run(0, it, problem.x)
+    return run(3, last[0], problem.x)     # "iterations": the last accepted step's
+
+
+def _finish(run, problem, opts, info):
+    """(pose, cov, info) of a Gauss-Newton run."""
+    status = STATUS[run.status]
+    info.update(status=status, iterations=int(run.iterations), n_points=int(run.n_points),
+                n_queried=info["n_queried"] + int(run.n_queried))
+    if run.status != 1:
+        info.update(rmse=float(run.rmse), cost=float(run.cost))
+    if status == "no_data":
+        info["reason"] = f"{int(run.n_points)} points where the map has data < min_points={opts.min_points}"
+    elif status == "diverged":
+        info["reason"] = f"moved {run.ct:.3f} m / {np.degrees(run.cr):.1f} deg from the prior"
+        logger.debug("register_sdf diverged after %d iterations: %s", run.iterations, info["reason"])
+    elif status == "max_iter":
+        info["reason"] = f"no convergence in {opts.max_iterations} iterations"
+        logger.debug("register_sdf: %s", info["reason"])
+    cov = _no_cov(problem) if (status in ("no_data", "diverged") or not run.has_best) else \
+        run.wrr / max(run.n - run.H.shape[0], 1) * np.linalg.inv(run.H)
+    return np.array(run.x, dtype=np.float64), cov, info
 
 
 def _pair(v, name):

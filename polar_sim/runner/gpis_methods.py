@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["scan_to_map_odometry", "call_factory", "pf_factory", "icpd_gt", "GridMapper2D", "EDTMapper2D", "GridSDF2D", "ICPGLocalizer2D", "ICPDLocalizer2D", "PFLocalizer2D",
+__all__ = ["scan_to_map_odometry", "call_factory", "pf_factory", "icpd_gt", "GridMapper2D", "EDTMapper2D", "ICPGLocalizer2D", "ICPDLocalizer2D", "PFLocalizer2D",
            "gpis2d", "gpis2d_legacy", "gpis3d", "gpis3d_legacy"]
 
 
@@ -122,41 +122,6 @@ class EDTMapper2D(_GridBase):
         return [e.origin_ + (ln + 0.5) * e.cell_size_ for ln in find_contours(e.sdf_, 0.0) if len(ln) >= 2]
 
 
-class GridSDF2D:
-    """A signed distance sampled at cell centres and interpolated bilinearly, with the gradient
-    of the cell values (``numpy.gradient``) interpolated the same way, as ``DiscreteSDF2D`` does.
-
-    ``values`` (nx, ny) at ``origin + (index + 0.5) * cell``; ``query`` gives variance cell^2/12
-    inside the grid and ``outside_variance`` beyond it.
-    """
-
-    def __init__(self, values, origin, cell, outside_variance=1.0):
-        self.sdf_ = np.asarray(values, float)
-        self.grad_ = np.stack(np.gradient(self.sdf_, cell), axis=-1)
-        self.origin_ = np.asarray(origin, float)
-        self.cell_size_ = float(cell)
-        self.outside_variance = float(outside_variance)
-
-    def query(self, points):
-        from polar_sim._validation import as_points
-
-        p = as_points(points, 2, "points", allow_empty=True)
-        shape = np.array(self.sdf_.shape)
-        u = (p - self.origin_) / self.cell_size_ - 0.5
-        uc = np.clip(u, 0.0, shape - 1)
-        outside = (np.abs(u - uc) > 1e-9).any(axis=1)
-        i0 = np.minimum(np.floor(uc).astype(np.int64), shape - 2)
-        f = uc - i0
-        val, grad = np.zeros(len(p)), np.zeros((len(p), 2))
-        for cx in (0, 1):
-            for cy in (0, 1):
-                w = (f[:, 0] if cx else 1 - f[:, 0]) * (f[:, 1] if cy else 1 - f[:, 1])
-                val += w * self.sdf_[i0[:, 0] + cx, i0[:, 1] + cy]
-                grad += w[:, None] * self.grad_[i0[:, 0] + cx, i0[:, 1] + cy]
-        var = np.where(outside, self.outside_variance, self.cell_size_ ** 2 / 12.0)
-        return val, grad, var
-
-
 def _grid(angles, ranges, poses, cell):
     from polar_sim.baselines import OccupancyGrid2D
 
@@ -212,7 +177,7 @@ class ICPDLocalizer2D(_ICPBase):
     ``truth=False``: the signed EDT of a ``cell`` occupancy grid of the mapping drive.
     ``truth=True``: the dissertation's ground-truth discrete SDF: the scene's exact SDF
     (``exact_sdf``, a callable the experiment passes) sampled at ``cell`` over the mapped area plus
-    1 m, interpolated like the EDT (:class:`GridSDF2D`).
+    1 m, interpolated like the EDT (``DiscreteSDF2D.from_values``).
     """
 
     def __init__(self, *, truth=False, cell=0.05, exact_sdf=None):
@@ -221,7 +186,7 @@ class ICPDLocalizer2D(_ICPBase):
         self.exact_sdf = exact_sdf
 
     def fit(self, angles, ranges, poses):
-        from polar_sim.baselines import ICPLocalizer
+        from polar_sim.baselines import DiscreteSDF2D, ICPLocalizer
         from polar_sim.metrics.maps import hit_points
 
         if not self.truth:
@@ -237,7 +202,7 @@ class ICPDLocalizer2D(_ICPBase):
         ys = lo[1] + (np.arange(int(np.ceil((hi[1] - lo[1]) / self.cell))) + 0.5) * self.cell
         X, Y = np.meshgrid(xs, ys, indexing="ij")
         vals = np.asarray(self.exact_sdf(np.column_stack([X.ravel(), Y.ravel()]))).reshape(X.shape)
-        self.map_ = GridSDF2D(vals, lo, self.cell)
+        self.map_ = DiscreteSDF2D.from_values(vals, lo, self.cell)
         self.icp_ = ICPLocalizer(method="sdf").fit(self.map_)
         return self
 

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-from typing import Callable
+from collections.abc import Callable
 
 __all__ = ["KINDS", "register_method", "get_method", "list_methods", "describe_methods", "Method"]
 

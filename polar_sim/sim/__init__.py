@@ -4,7 +4,7 @@
 >>> w = World("rover_flat", seed=0)
 >>> w.step((5.0, 0.1)); f = w.camera("front"); s = w.lidar("lidar")
 
-Names are imported on first use, so ``polar_sim.sim.recording`` (replaying recorded data) does
+Names are imported on first use, so ``polar_sim.sim.recorders.recording`` (replaying recorded data) does
 not load MuJoCo.
 """
 
@@ -24,7 +24,7 @@ _EXPORTS = {
     "RangeNoise": "polar_sim.sim.sensors",
     "DepthNoise": "polar_sim.sim.sensors",
     "LABELS": "polar_sim.sim.truth",
-    "Recording": "polar_sim.sim.recording",
+    "Recording": "polar_sim.sim.recorders.recording",
 }
 __all__ = list(_EXPORTS)
 

@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import mujoco
 
+from polar_sim.sim.meta import check_meta
 from polar_sim._validation import as_float, as_int, check_choice
 from polar_sim.fileio import check_source
 
@@ -63,21 +64,21 @@ class SceneEntry:
 
 
 SCENES = {
-    "rover_terrain": SceneEntry("rover_terrain.xml", "polar_sim.sim.terrain:build_rover_terrain",
+    "rover_terrain": SceneEntry("rover_terrain.xml", "polar_sim.sim.builders.terrain:build_rover_terrain",
                                 "car-sized rover on a closed route over hills, 4 ground zones, obstacles"),
-    "rover_flat": SceneEntry("rover_flat.xml", "polar_sim.sim.terrain:build_rover_flat",
+    "rover_flat": SceneEntry("rover_flat.xml", "polar_sim.sim.builders.terrain:build_rover_flat",
                              "the rover_terrain route and obstacles on flat ground"),
-    "office2d": SceneEntry("office2d.xml", "polar_sim.sim.office:build_office",
+    "office2d": SceneEntry("office2d.xml", "polar_sim.sim.builders.office:build_office",
                            "30 x 30 m lab floor: rooms, doors, furniture; indoor rover with a 2D lidar"),
-    "warehouse2d": SceneEntry("warehouse2d.xml", "polar_sim.sim.worlds2d:build_warehouse",
+    "warehouse2d": SceneEntry("warehouse2d.xml", "polar_sim.sim.builders.worlds2d:build_warehouse",
                               "randomised warehouse: shelf rows and racks, thin and curved walls, pillars, "
                               "crates, clutter, an open yard; indoor rover with a 2D lidar"),
-    "navworld": SceneEntry("navworld.xml", "polar_sim.sim.navworld:build_navworld",
+    "navworld": SceneEntry("navworld.xml", "polar_sim.sim.builders.navworld:build_navworld",
                            "seeded rooms, doors and clutter with a start and a reachable goal (GPISNav)",
-                           "polar_sim.sim.navworld:relayout_navworld"),
-    "tabletop": SceneEntry("tabletop.xml", "polar_sim.sim.tabletop:build_tabletop",
+                           "polar_sim.sim.builders.navworld:relayout_navworld"),
+    "tabletop": SceneEntry("tabletop.xml", "polar_sim.sim.builders.tabletop:build_tabletop",
                            "table, 4 objects, a scripted mocap hand, static RGB-D camera"),
-    "object_orbit": SceneEntry("object_orbit.xml", "polar_sim.sim.tabletop:build_object_orbit",
+    "object_orbit": SceneEntry("object_orbit.xml", "polar_sim.sim.builders.tabletop:build_object_orbit",
                                "an RGB-D camera circling one object, like a turntable capture"),
 }
 
@@ -112,7 +113,7 @@ def _base_spec(file):
 
 def _check_generic_options(options):
     """Validate the options several scene builders share (rover and sensor options), by name."""
-    from polar_sim.sim.robots import ROVER_PRESETS
+    from polar_sim.sim.actors.robots import ROVER_PRESETS
 
     out = dict(options)
     checks = {
@@ -213,5 +214,5 @@ def load_scene(scene, seed=0, **options):
         raise ValueError(f"{scene}: unknown scene option(s) {unknown}; valid: {sorted(valid)}")
     options = _check_generic_options(options)
     spec = _base_spec(SCENES[scene].file).copy()
-    meta = SCENES[scene].load_builder()(spec, seed, **options)
+    meta = check_meta(scene, SCENES[scene].load_builder()(spec, seed, **options))
     return spec, meta

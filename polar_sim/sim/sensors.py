@@ -17,11 +17,11 @@ import numpy as np
 from polar_sim._validation import as_float, as_int
 from polar_sim.geometry import CV_FROM_GL, make_pose
 from polar_sim.sim.render import OffscreenRenderer
-from polar_sim.sim.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
+from polar_sim.sim.actors.robots import RAY_GROUPS, RENDER_GROUPS, TARGET_ONLY_GROUPS
 
 __all__ = [
     "CameraFrame", "LidarScan", "LidarScan3D", "LidarSpec", "RangeNoise", "DepthNoise",
-    "parse_lidars", "Lidar", "bare_multiray", "CameraRig", "intrinsics", "MAX_LIDAR_RAYS",
+    "parse_lidars", "Lidar", "bare_multiray", "CameraRig", "MAX_LIDAR_RAYS",
 ]
 
 #: Most rays one declared lidar may cast per scan (a 3D lidar's rows x cols included).
@@ -160,11 +160,6 @@ class DepthNoise:
             out_rgb = np.clip(rgb + rng.normal(0.0, self.rgb_sigma, rgb.shape), 0, 255).astype(np.uint8)
         return out_rgb, zn.astype(np.float32)
 
-
-def intrinsics(fovy_deg, width, height):
-    """Pinhole K (3, 3) of a MuJoCo camera: f = (H/2)/tan(fovy/2), principal point at the centre."""
-    f = 0.5 * height / np.tan(np.radians(fovy_deg) / 2)
-    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
 
 
 @dataclasses.dataclass(frozen=True)

@@ -11,7 +11,7 @@ from matplotlib.path import Path as MplPath
 
 from polar_sim.geometry import make_pose, quat_to_matrix
 from polar_sim.sim import sdf as _sdf
-from polar_sim.sim.robots import GROUP
+from polar_sim.sim.actors.robots import GROUP
 
 __all__ = ["LABELS", "name_of", "id_of", "label_table", "body_pose", "body_twist", "geom_trimesh", "body_trimesh",
            "SceneSDF", "static_geoms", "subtree"]

@@ -8,11 +8,11 @@ import mujoco
 import numpy as np
 
 from polar_sim._validation import as_bool, as_float, as_float_array, as_int, as_positive_float, as_rng
-from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat
+from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat, pinhole_intrinsics
 from polar_sim.sim import truth as _truth
-from polar_sim.sim.robots import RoverController
+from polar_sim.sim.actors.robots import RoverController
 from polar_sim.sim.scenes import load_scene
-from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, RangeNoise, camera_pose, intrinsics, parse_lidars
+from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, RangeNoise, camera_pose, parse_lidars
 
 __all__ = ["World"]
 
@@ -363,7 +363,7 @@ class World:
         noise = self._noise.get(name)
         rgb, d, lab, gids = self._rig.render(self.model, self.data, cid, w, h, self._labels,
                                              depth=bool(depth) or noise is not None, seg=bool(labels))
-        K = intrinsics(self.model.cam_fovy[cid], w, h)
+        K = pinhole_intrinsics(w, h, self.model.cam_fovy[cid])
         if noise is not None:
             rgb, d = noise.apply(rgb, d, K[0, 0], self._rng)
         if not labels:
@@ -373,7 +373,7 @@ class World:
     def camera_intrinsics(self, name, *, width=None, height=None):
         """Intrinsics K (3, 3) (OpenCV) of camera ``name`` rendered at ``width`` x ``height`` px."""
         cid = self._camera_id(name)
-        return intrinsics(self.model.cam_fovy[cid], *self._camera_size(cid, width, height))
+        return pinhole_intrinsics(*self._camera_size(cid, width, height), self.model.cam_fovy[cid])
 
     def _camera_id(self, name):
         if _check_name(name, "name") not in self.cameras:

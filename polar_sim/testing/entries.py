@@ -238,7 +238,7 @@ def _pts(n=50, seed=0):
 
 
 def _ep_recording_append():
-    from polar_sim.sim.recording import Recording
+    from polar_sim.sim.recorders.recording import Recording
 
     def frame():
         return {"depth": np.ones((8, 10), np.float32), "pose": np.eye(4), "t": 0.1}
@@ -253,7 +253,7 @@ def _ep_recording_append():
 
 
 def _recording(n=3):
-    from polar_sim.sim.recording import Recording
+    from polar_sim.sim.recorders.recording import Recording
 
     r = Recording(meta={"what": "battery"})
     for i in range(n):
@@ -355,7 +355,7 @@ def _tampered_recordings(valid, tmp, rng):
 
 
 def _ep_recording_load():
-    from polar_sim.sim.recording import Recording
+    from polar_sim.sim.recorders.recording import Recording
 
     def args(t, tmp):
         p = Path(tmp) / "valid_rec.npz"

@@ -8,28 +8,12 @@ translation in the motion filter and in the gates (see ``docs/guide/tracking.md`
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import cKDTree
 
+from polar_sim.geometry import diameter
 from polar_sim.tracking._kernels import nearest_visible
 
-__all__ = ["ShapeModel", "estimate_normals", "object_diameter_points"]
-
-
-def object_diameter_points(points):
-    """Largest distance between two of the points (n, 3), metres (through the convex hull)."""
-    pts = points
-    if len(points) > 4:
-        try:
-            pts = points[ConvexHull(points).vertices]
-        except Exception:  # degenerate (flat) sets: fall back to all points
-            pts = points
-    if len(pts) > 4000:
-        pts = pts[:: int(np.ceil(len(pts) / 4000))]
-    best = 0.0
-    for i in range(0, len(pts), 512):
-        d = np.linalg.norm(pts[i : i + 512, None, :] - pts[None, :, :], axis=2)
-        best = max(best, float(d.max()))
-    return best
+__all__ = ["ShapeModel", "estimate_normals"]
 
 
 def estimate_normals(points, k=12):
@@ -84,7 +68,7 @@ class ShapeModel:
         self.centroid = points.mean(axis=0)
         self.P = np.ascontiguousarray(points - self.centroid)
         self.N = np.ascontiguousarray(normals / np.linalg.norm(normals, axis=1, keepdims=True))
-        self.diameter = object_diameter_points(self.P)
+        self.diameter = diameter(self.P)
         self.tree = cKDTree(self.P)
         if len(self.P) > 1:
             d, _ = self.tree.query(self.P, k=2)

@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 from numba import njit
 
-from polar_sim.geometry import inv_pose, make_pose, so3_exp, transform_points
+from polar_sim.geometry import inv_pose, make_pose, pinhole_intrinsics, so3_exp, transform_points
 
 __all__ = [
     "Part",
@@ -26,7 +26,6 @@ __all__ = [
     "make_hand",
     "make_table",
     "look_at",
-    "intrinsics",
     "render",
     "sample_model",
     "kinect_noise",
@@ -139,11 +138,6 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
     y = np.cross(z, x)
     return make_pose(np.stack([x, y, z], 1), eye)
 
-
-def intrinsics(width=640, height=480, fovy_deg=45.0):
-    """Pinhole K (3, 3) with vertical field of view ``fovy_deg`` and centre ((W-1)/2, (H-1)/2)."""
-    f = 0.5 * height / np.tan(np.deg2rad(fovy_deg) / 2)
-    return np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
 
 
 @njit(cache=True)
@@ -326,7 +320,7 @@ def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape
     the sequence (a lighting change).
     """
     H, W = shape
-    K = intrinsics(W, H)
+    K = pinhole_intrinsics(W, H, 45.0)
     T_wc = look_at([0.0, -0.5, 0.4], [0.0, 0.0, 0.05])
     T_cw = inv_pose(T_wc)
     target = make_object(obj)

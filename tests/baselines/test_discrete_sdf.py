@@ -137,3 +137,27 @@ def test_bad_points_and_unknown_policy_raise(mapped_grid):
         sdf.query([[np.nan, 0.0]])
     with pytest.raises(ValueError, match="unknown"):
         DiscreteSDF2D.from_grid(mapped_grid, unknown="maybe")
+
+
+# from_values: an exact SDF sampled at the cell centres (a disc of radius 1 m) is interpolated
+# bilinearly: exact at the centres, within the bilinear bound between them, and refused when bad.
+def test_from_values_samples_an_exact_sdf():
+    from polar_sim.baselines import DiscreteSDF2D
+
+    cell, lo = 0.05, np.array([-2.0, -2.0])
+    c = lo[0] + (np.arange(80) + 0.5) * cell
+    X, Y = np.meshgrid(c, c, indexing="ij")
+    sdf = DiscreteSDF2D.from_values(np.hypot(X, Y) - 1.0, lo, cell)
+    centres = np.column_stack([X.ravel(), Y.ravel()])
+    d, g, v = sdf.query(centres)
+    np.testing.assert_allclose(d, np.hypot(*centres.T) - 1.0, atol=1e-12)
+    p = np.random.default_rng(0).uniform(-1.8, 1.8, (2000, 2))
+    p = p[np.hypot(*p.T) > 2 * cell]  # away from the cone's tip, where r - 1 is not smooth
+    r = np.hypot(*p.T)
+    # bilinear error <= cell^2 / 8 (|f_xx| + |f_yy|) = cell^2 / (8 r') with r' the cell's smallest radius
+    assert np.all(np.abs(sdf.query(p)[0] - (r - 1.0)) <= cell**2 / (8 * (r - cell)) + 1e-12)
+    assert sdf.inside_.sum() > 0 and np.all(v[: len(centres)] == cell * cell / 12.0)
+    with pytest.raises(ValueError, match="values"):
+        DiscreteSDF2D.from_values(np.full((3, 3), np.nan), lo, cell)
+    with pytest.raises(ValueError, match="cell_size"):
+        DiscreteSDF2D.from_values(np.zeros((3, 3)), lo, -1.0)

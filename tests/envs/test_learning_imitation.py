@@ -7,6 +7,7 @@ import torch
 from stable_baselines3 import PPO
 
 import polar_sim.envs  # noqa: F401
+from polar_sim.envs.features import FAR, stencil_vector
 from polar_sim.envs.imitation import DAggerConfig, _mlp, make_expert, rollout, to_policy
 from polar_sim.envs.learning import FeatureObservation, export_mlp, load_mlp_into
 from polar_sim.envs.mlp_policy import MLPPolicy
@@ -82,7 +83,7 @@ def test_mlp_policy_matches_the_torch_net():
     rng = np.random.default_rng(1)
     mean, std = rng.normal(size=n), rng.uniform(0.5, 2.0, n)
     net = _mlp(n, (32, 16), "tanh")
-    pol = to_policy(net, mean, std, DAggerConfig(hidden=(32, 16)), env, ROOM, {}, {})
+    pol = to_policy(net, mean, std, DAggerConfig(hidden=(32, 16), obs_keys=KEYS, known_var=None), env, ROOM, {}, {})
     x = np.concatenate([obs[k].ravel() for k in KEYS]).astype(np.float64)
     z = np.clip((x - mean) / std, -10, 10)
     ref = net(torch.as_tensor(z, dtype=torch.float32)).detach().numpy()
@@ -113,6 +114,28 @@ def test_mlp_policy_file_round_trip_and_bad_input(tmp_path):
         p({"goal": obs["goal"]})
 
 
+# Masking unknown space: a point with variance >= known_var reads sdf FAR and gradient 0, known
+# distances are capped at FAR, sdf_var becomes the 0/1 known mask; other keys pass unchanged.
+def test_stencil_vector_masks_unknown_space_exactly(tmp_path):
+    obs = {"goal": np.float32([3, -4]), "sdf": np.float32([0.2, -0.7, 2.5, 0.9]),
+           "sdf_grad": np.float32([1, 0, 0, 1, -1, 0, 0.6, 0.8]), "sdf_var": np.float32([0.01, 1.01, 0.2, 1e6])}
+    keys = ["goal", "sdf", "sdf_grad", "sdf_var"]
+    np.testing.assert_array_equal(stencil_vector(obs, keys), np.concatenate([obs[k] for k in keys]))
+    want = [3, -4, 0.2, FAR, FAR, FAR, 1, 0, 0, 0, -1, 0, 0, 0, 1, 0, 1, 0]
+    np.testing.assert_allclose(stencil_vector(obs, keys, known_var=0.5), want, rtol=0, atol=1e-7)
+    kw = dict(obs_keys=keys, obs_shapes={"goal": (2,), "sdf": (4,), "sdf_grad": (8,), "sdf_var": (4,)},
+              mean=np.zeros(18), std=np.ones(18))
+    p = MLPPolicy([np.eye(18)[:2]], [np.zeros(2)], **kw, known_var=0.5)
+    q = MLPPolicy.load(p.save(tmp_path / "masked.npz"))
+    assert q.known_var == 0.5
+    np.testing.assert_allclose(q.features(obs), want, rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="known_var"):
+        MLPPolicy([np.eye(2)], [np.zeros(2)], obs_keys=["goal"], obs_shapes={"goal": (2,)}, mean=np.zeros(2),
+                  std=np.ones(2), known_var=0.5)
+    with pytest.raises(ValueError, match="known_var"):
+        DAggerConfig(obs_keys=KEYS, known_var=0.5)
+
+
 # FeatureObservation concatenates the keys in order and normalises exactly.
 def test_feature_observation_is_exact():
     env = gym.make(ROOM, pose_source="truth")
@@ -137,7 +160,7 @@ def test_imitation_weights_into_ppo_and_back():
     n = 2 + 64 + 128 + 2
     rng = np.random.default_rng(2)
     mean, std = rng.normal(size=n), rng.uniform(0.5, 2.0, n)
-    pol = to_policy(_mlp(n, (16, 16), "tanh"), mean, std, DAggerConfig(hidden=(16, 16)), env, ROOM, {}, {})
+    pol = to_policy(_mlp(n, (16, 16), "tanh"), mean, std, DAggerConfig(hidden=(16, 16), obs_keys=KEYS, known_var=None), env, ROOM, {}, {})
     fenv = FeatureObservation(env, list(KEYS), mean, std)
     model = PPO("MlpPolicy", fenv, device="cpu", seed=0,
                 policy_kwargs={"net_arch": {"pi": [16, 16], "vf": [8]}, "activation_fn": torch.nn.Tanh})

@@ -63,6 +63,8 @@ def test_recipe_trains_saves_and_loads(name, tmp_path):
     ("dagger", {"beta_decay": 1.5}, ROOM, "beta_decay"),
     ("dagger", {"expert": "oracle"}, ROOM, "expert"),
     ("dagger", {"hidden": []}, ROOM, "hidden"),
+    ("dagger", {"obs_keys": ["goal", "sdf"]}, ROOM, "known_var"),
+    ("dagger", {"known_var": -1.0}, ROOM, "known_var"),
     ("dagger", {"env_kwargs": {"pose_source": "truth"}}, ROOM, "train_pose_source"),
     ("ppo", {"learning_rate": 0.0}, ROOM, "learning_rate"),
     ("ppo", {"obs_mode": "pixels"}, ROOM, "obs_mode"),

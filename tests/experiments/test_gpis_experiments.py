@@ -139,7 +139,7 @@ def test_import_path_plugin_is_validated():
 # office2d tiles=2: four floors joined by doors; the mapping_cost snake keeps clear of every wall
 def test_tiled_office_is_drivable():
     from polar_sim.sim import World
-    from polar_sim.sim.drives2d import snake_route
+    from polar_sim.sim.recorders.drives2d import snake_route
 
     w = World("office2d", seed=0, kinematic=True, tiles=2)
     one = World("office2d", seed=0, kinematic=True)

@@ -137,7 +137,8 @@ def test_far_field_sign_at_edge():
     sp = np.full(len(pos), 1e-5)
     sg = np.full(len(pos), 0.01)
     P = np.array([[-0.003, 0.0, 0.008]])                     # exact distance +8 mm (above the top)
-    args = (P, cKDTree(pos), np.arange(len(pos)), pos, nrm, sp, sg, 0.0047, FreeSpace(3, 0.025),
+    gi = cKDTree(pos).query(P, k=4)[1]
+    args = (P, gi, pos, nrm, sp, sg, 0.0047, FreeSpace(3, 0.025),
             1.005)
     d_disc, _, _ = far_field(*args)
     d_imls, g_imls, _ = far_field(*args, sign_h=0.008)

@@ -2,7 +2,6 @@
 loader that treats the file as untrusted input (tampered files raise ValueError, never crash)."""
 
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -11,8 +10,7 @@ from ci_sizes import size
 from polar_sim.gpis import GPISMap2D, GPISMap3D
 
 from . import iofaults
-from .scenes import room_path, scan_2d
-from .test_behaviour import ANG, _map2d, _map3d
+from .test_behaviour import _map2d, _map3d
 
 N_KILLS = size(20, 5)           # full size: benchmarks/bench_gpis_io.py
 N_TAMPER = size(None, 90)       # None: every case (benchmarks/bench_gpis_io.py records the count)

@@ -12,7 +12,7 @@ from polar_sim.gpis._base import FAR_COORD
 from polar_sim.gpis._surface import MAX_SURFACE_NODES
 from polar_sim.gpis.localize import localize
 
-from .scenes import intrinsics, room_path, scan_2d
+from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
 from .test_behaviour import ANG, _map2d, _map3d
 
 
@@ -77,6 +77,44 @@ def test_param_limits():
     with pytest.raises(ValueError, match="cluster_half/min_half"):
         m.update(ANG, scan_2d(pose, ANG), pose)
     assert not [k for k in vars(m) if k.endswith("_")]
+
+
+# issue 34's probe: numbers beyond what memory or arithmetic allow are ValueErrors naming the
+# argument and its limit (they were OverflowError / ZeroDivisionError), raised by the first
+# update with no state created; the limits themselves are accepted
+def _first_update(m):
+    if m.dim == 2:
+        pose = room_path(2)[0]
+        return m.update(ANG, scan_2d(pose, ANG), pose)
+    K, T = intrinsics(160, 120, 130.0), orbit_poses(1)[0]
+    return m.update(render_sphere(T, K, 160, 120), K, T)
+
+
+@pytest.mark.parametrize("cls,name,bad,ok,limit", [
+    (GPISMap2D, "train_cap", 2**63, 4096, "4096"), (GPISMap3D, "train_cap", 4097, 4096, "4096"),
+    (GPISMap2D, "range_noise", 1e300, 100.0, "100 m"), (GPISMap2D, "range_noise", 100.5, 100.0, "100 m"),
+    (GPISMap2D, "sample_spacing", 1e-300, 1e-6, "1e-06 m"), (GPISMap3D, "sample_spacing", 1e-300, 1e-6, "1e-06 m")])
+def test_probe_limits_name_the_argument(cls, name, bad, ok, limit):
+    m = cls(**{name: bad})
+    with pytest.raises(ValueError, match=f"^{name}: .*{limit}"):
+        _first_update(m)
+    assert not [k for k in vars(m) if k.endswith("_")]
+    m.set_params(**{name: ok})
+    m._check_params()                     # the limit itself is a valid value
+
+
+# 10**9 query points (an array that costs nothing until read) are refused naming points and the
+# limit, before anything of their size is allocated; the map is unchanged
+def test_query_refuses_more_points_than_the_limit(tmp_path):
+    from polar_sim.gpis._base import MAX_QUERY_POINTS
+
+    m = _map2d(2)
+    before = _digest(m, tmp_path)
+    huge = np.broadcast_to(np.zeros(2), (10**9, 2))
+    with pytest.raises(ValueError, match=f"^points: .*{MAX_QUERY_POINTS}"):
+        m.query(huge)
+    assert _digest(m, tmp_path) == before
+    assert MAX_QUERY_POINTS < 10**9
 
 
 # a scan that would grow a dense grid past its limit is refused naming the pose, before any

@@ -209,3 +209,40 @@ def test_bad_scan_and_map_raise(room):
         localize(room, (ANGLES, np.ones_like(ANGLES)), prior, robust="cauchy")
     with pytest.raises(ValueError, match="K"):
         localize(RoomSDF3D(), (np.ones((4, 4)), np.eye(3) * -1), np.eye(4))
+
+
+class _QueryOnly:
+    """A GPIS map seen only through its query (register_sdf's Python loop)."""
+
+    def __init__(self, m):
+        self.m = m
+
+    def query(self, points):
+        return self.m.query(points)
+
+
+# the compiled ICP-G loop of a planar GPIS map (GPISMap2D._register_native) gives the same bits
+# as register_sdf's Python loop on the same map, converged, backtracked, diverged or stopped
+@pytest.mark.parametrize("kw,status", [({}, "ok"), ({"robust": "tukey"}, "ok"),
+                                       ({"max_iterations": 1}, "max_iter"),
+                                       ({"max_correction": (0.01, 0.01)}, "diverged"),
+                                       ({"max_variance": 1e-9}, "no_data")])
+def test_compiled_icp_matches_python_loop(room, kw, status):
+    from polar_sim.gpis import GPISMap2D
+
+    ang = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 270)
+    m = GPISMap2D()
+    for k in range(8):
+        pose = np.array([2.5 + 0.3 * k, 1.9 + 0.1 * k, 0.7 + 0.05 * k])
+        m.update(ang, room.scan(pose, ang), pose)
+    truth = np.array([3.4, 2.2, 0.85])
+    scan = (ang, room.scan(truth, ang))
+    start = truth + [0.05, -0.04, 0.03]
+    a = localize(m, scan, start, **kw)
+    b = localize(_QueryOnly(m), scan, start, **kw)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert a[2].keys() == b[2].keys()
+    for k in a[2]:
+        assert a[2][k] == b[2][k] or (np.isnan(a[2][k]) and np.isnan(b[2][k])), k
+    assert a[2]["status"] == status

@@ -1,4 +1,4 @@
-"""The batched GP query kernel against a plain per-point reference.
+"""The batched query kernels against plain per-point references.
 
 ``query_gp`` evaluates the points grouped by cluster, with the cross-covariances built in loops
 over the training samples and the variance solves done several points at a time. Here each
@@ -11,7 +11,8 @@ import pytest
 from scipy.linalg import solve_triangular
 
 from polar_sim.gpis import GPISMap2D, GPISMap3D
-from polar_sim.gpis._kernels import _exp_neg, _nearest3
+from polar_sim.gpis._numeric import _exp_neg
+from polar_sim.gpis._query import _nearest3
 from polar_sim.gpis._localgp import _var_consts
 
 from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
@@ -125,3 +126,71 @@ def test_exp_neg_matches_numpy():
     np.testing.assert_allclose(y[ok], ref[ok], rtol=2.3e-16, atol=0)
     assert (y[~ok] == 0.0).all() and np.abs(ref[~ok]).max() < 3.4e-308
     assert y[x == 0.0][0] == 1.0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_faithful_query_point_independent_of_batch(dim):
+    """The default query (nearest samples, surfel distance, GP blend in one kernel) gives a
+    point bitwise the same answer whatever other points share its batch."""
+    m = _map(dim, False)
+    pts = _near_points(m, 200, 0.3 if dim == 2 else 0.02, seed=2)
+    full = m.query(pts)
+    for k in (1, 3, 7):
+        part = [np.concatenate(x) for x in zip(*(m.query(pts[i:i + k]) for i in range(0, len(pts), k)))]
+        for a, b in zip(part, full):
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_knn_matches_brute_force(dim):
+    """The ring search over cluster cells finds the k nearest samples, also for points far
+    outside the map (distances compared: ties may come in either order)."""
+    from polar_sim.gpis._distance import knn
+    from polar_sim.gpis._kernels import _slot_samples
+
+    m = _map(dim, False)
+    tr = m.tree_
+    sptr, sidx = _slot_samples(tr.node_sample, int(tr.counts[2]))
+    alive = tr.alive()
+    P = tr.pos[alive]
+    rng = np.random.default_rng(3)
+    lo, hi = P.min(0), P.max(0)
+    span = hi - lo
+    pts = np.concatenate([rng.uniform(lo - s * span, hi + s * span, (300, dim)) for s in (0.1, 1.0, 30.0)])
+    out = np.empty((len(pts), 4), np.int64)
+    knn(pts, 4, tr.geo, tr.cgrid, tr.gshape, tr.goff, sptr, sidx, tr.pos, out)
+    d_ref = np.sort(np.linalg.norm(pts[:, None, :] - P[None], axis=2), axis=1)[:, :4]
+    d_got = np.linalg.norm(pts[:, None, :] - tr.pos[out], axis=2)
+    np.testing.assert_allclose(d_got, d_ref, rtol=1e-12, atol=0)
+    assert np.isin(out, alive).all()
+
+
+def test_planar_line_search_kernel_matches_general_form():
+    """The planar scan's line-search kernel and the general vectorised line search (spec §6.2
+    step 3) move every sample to the same place, with the same flags."""
+    from polar_sim.gpis._linesearch import TOL, line_search
+    from polar_sim.gpis import _scan2d as planar
+    from polar_sim.gpis._obsgp import ObsGP1D
+
+    ang = np.deg2rad(np.arange(-135.0, 135.0, 0.5))
+    pose = room_path(4)[1]
+    r = scan_2d(pose, ang)
+    ok = np.isfinite(r)
+    gp = ObsGP1D(ang[ok], r[ok] ** -0.5)
+    rng = np.random.default_rng(4)
+    k = 400
+    phi = rng.uniform(-2.4, 2.4, k)
+    rr = np.interp(phi, ang[ok], r[ok]) + rng.normal(scale=0.05, size=k)
+    p = np.stack([rr * np.cos(phi), rr * np.sin(phi)], 1)
+    t = rng.normal(size=(k, 2))
+    n = -p / np.linalg.norm(p, axis=1)[:, None] + 0.5 * t
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    got = planar.line_search(gp, p, n, 0.1, 0.01, TOL, -0.1)
+    ref = line_search(p, n, lambda q: planar.occupancy(gp, q, 0.1), 0.01, -0.1)
+    for a, b in zip(got, ref):
+        if a.dtype == bool:
+            np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    live, _, _, _, found = got
+    assert 0.3 * k < live.sum() and 0 < found.sum() < live.sum()   # both outcomes exercised

@@ -3,7 +3,7 @@
 office2d: a seeded 60 s drive through the rooms with the 2D lidar (sigma 1 cm); object_orbit:
 an RGB-D orbit with Kinect-like noise. The definitions ("observed", the evaluation sets) are
 those of ``experiments/gpis_accuracy.py`` (``polar_sim.metrics.maps``, drives from
-``polar_sim.sim.drives2d``, orbits from ``polar_sim.sim.orbits``); this is its CI size
+``polar_sim.sim.recorders.drives2d``, orbits from ``polar_sim.sim.recorders.orbits``); this is its CI size
 (a scan every 3rd step, 20 RGB-D frames; ``POLAR_SIM_FULL=1``: every step, 40 frames).
 
 Bounds that the current GPISMap2D/3D miss are marked ``xfail(strict=True)`` with the measured
@@ -32,7 +32,7 @@ SEED = 0
 
 @pytest.fixture(scope="module")
 def office():
-    from polar_sim.sim.drives2d import lidar_world, recorded_drives
+    from polar_sim.sim.recorders.drives2d import lidar_world, recorded_drives
 
     every = size(1, 3)
     d, = recorded_drives("office2d", SEED, [dict(route_seed=SEED, n_rooms=5, duration=60.0, speed=1.0, every_steps=every)])
@@ -54,7 +54,7 @@ def office():
 @pytest.fixture(scope="module")
 def orbit():
     from polar_sim.sim import World
-    from polar_sim.sim.orbits import ObjectTruth, recorded_orbit
+    from polar_sim.sim.recorders.orbits import ObjectTruth, recorded_orbit
 
     w = World("object_orbit", seed=SEED)
     orb = recorded_orbit(w, size(40, 20), SEED)

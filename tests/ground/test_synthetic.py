@@ -1,6 +1,7 @@
 import numpy as np
 
-from polar_sim.ground.synthetic import CorridorScene, intrinsics, make_sequence, unicycle_poses
+from polar_sim.geometry import pinhole_intrinsics as intrinsics
+from polar_sim.ground.synthetic import CorridorScene, make_sequence, unicycle_poses
 
 
 def test_unicycle_poses_are_exact_arcs():

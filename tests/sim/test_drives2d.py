@@ -5,7 +5,7 @@ import pytest
 
 from polar_sim.metrics.maps import hit_points
 from polar_sim.sim import World
-from polar_sim.sim import drives2d as D
+from polar_sim.sim.recorders import drives2d as D
 
 
 @pytest.fixture
@@ -67,7 +67,7 @@ def test_routes_and_bad_legs(cache):
 
 # A recorded orbit replays the same frames, and its noise-free points lie on the object.
 def test_recorded_orbit(cache):
-    from polar_sim.sim.orbits import ObjectTruth, recorded_orbit
+    from polar_sim.sim.recorders.orbits import ObjectTruth, recorded_orbit
 
     w = World("object_orbit", seed=2)
     a = recorded_orbit(w, 4, seed=2)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from polar_sim.sim import objects as O
+from polar_sim.sim.builders import objects as O
 
 
 @pytest.mark.parametrize("name", O.object_names())
@@ -48,7 +48,7 @@ def test_unknown_object_lists_valid_names():
 
 
 def test_assets_regenerate_identically(tmp_path):
-    # `python -m polar_sim.sim.objects` reproduces the shipped OBJ files byte for byte (manifold3d is in
+    # `python -m polar_sim.sim.builders.objects` reproduces the shipped OBJ files byte for byte (manifold3d is in
     # the test extra: the composite objects need its boolean unions).
     for p in O.write_assets(tmp_path):
         assert p.read_bytes() == O.asset_path(p.stem).read_bytes(), p.name

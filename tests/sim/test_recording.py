@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from polar_sim.sim import World
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders.recording import Recording
 
 
 def _record(n=3):

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from polar_sim.sim import LABELS, World
-from polar_sim.sim.appearance_textures import ground_family_texture
-from polar_sim.sim.rover_appearance import FAMILIES, SKIES, resolve_appearance, sample_appearance
+from polar_sim.sim.builders.appearance_textures import ground_family_texture
+from polar_sim.sim.builders.rover_appearance import FAMILIES, SKIES, resolve_appearance, sample_appearance
 from polar_sim.sim.scenes import scene_options
 
 

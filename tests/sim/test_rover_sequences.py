@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from polar_sim.sim.rover_sequences import (DEV_FAMILIES, ROUTES, SPLITS, TEST_ONLY_FAMILIES, TEST_ROUTES, load_route,
+from polar_sim.sim.recorders.rover_sequences import (DEV_FAMILIES, ROUTES, SPLITS, TEST_ONLY_FAMILIES, TEST_ROUTES, load_route,
                                            record_route, reduce2x)
 
 

@@ -5,8 +5,8 @@ import multiprocessing as mp
 import numpy as np
 import pytest
 
-from polar_sim.sim import sequences
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders import sequences
+from polar_sim.sim.recorders.recording import Recording
 
 
 def _build(n=3, seed=0):

@@ -8,8 +8,8 @@ import trimesh
 
 from polar_sim.geometry import inv_pose, transform_points
 from polar_sim.sim import World
-from polar_sim.sim import objects as O
-from polar_sim.sim.tabletop_sequences import SEQUENCES, record_sequence
+from polar_sim.sim.builders import objects as O
+from polar_sim.sim.recorders.tabletop_sequences import SEQUENCES, record_sequence
 from polar_sim.sim.truth import LABELS
 
 W, H = 320, 240
@@ -183,9 +183,9 @@ def test_reset_replays_the_script_exactly():
 
 
 def test_recorded_sequence_is_deterministic_and_cached(tmp_path, monkeypatch):
-    # Same name and seed: byte-identical frames; the cached recording (polar_sim.sim.sequences) reads
+    # Same name and seed: byte-identical frames; the cached recording (polar_sim.sim.recorders.sequences) reads
     # back identical, frame by frame, and a second call reads the cache instead of recording
-    from polar_sim.sim.tabletop_sequences import cached_sequence
+    from polar_sim.sim.recorders.tabletop_sequences import cached_sequence
 
     monkeypatch.setenv("POLAR_SIM_CACHE", str(tmp_path))
     a = record_sequence("mug_touch", seed=0, n_frames=3, width=160, height=120)
@@ -311,8 +311,8 @@ def _texture(model, name):
 def test_explicit_spec_sets_flat_part_colours_hand_and_light():
     # {"colours": ...} with flat objects: each atlas tile of the blocks object is exactly one named colour;
     # the hand is the named glove; the key light is turned and scaled as asked
-    from polar_sim.sim.tabletop import COLOURS
-    from polar_sim.sim.tabletop_appearance import HAND_COLOURS
+    from polar_sim.sim.builders.tabletop import COLOURS
+    from polar_sim.sim.builders.tabletop_appearance import HAND_COLOURS
 
     spec = {"objects": "flat", "hand": "glove_black", "colours": {"blocks": ["blue", "yellow", "red"]},
             "light": {"intensity": 0.5, "azimuth_deg": 90.0}}
@@ -338,7 +338,7 @@ def test_explicit_spec_sets_flat_part_colours_hand_and_light():
 
 def test_appearance_is_seeded():
     # the same seed and family give the same choices; another seed gives other choices
-    from polar_sim.sim.tabletop_appearance import resolve_appearance
+    from polar_sim.sim.builders.tabletop_appearance import resolve_appearance
 
     a, b = resolve_appearance("random", 3), resolve_appearance("random", 3)
     assert a == b
@@ -368,8 +368,8 @@ def test_bad_appearance_raises(appearance, match):
 
 def test_test_split_sequences_are_held_out():
     # the test split: seeds >= 10,000, untextured and multi-part objects, held-out appearance families only
-    from polar_sim.sim.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
-    from polar_sim.sim.tabletop_sequences import SPLIT_SEEDS, TEST_SEQUENCES, list_sequences
+    from polar_sim.sim.builders.tabletop_appearance import DEV_FAMILIES, TEST_FAMILIES
+    from polar_sim.sim.recorders.tabletop_sequences import SPLIT_SEEDS, TEST_SEQUENCES, list_sequences
 
     assert len(list_sequences("test")) >= 10 and min(SPLIT_SEEDS["test"]) >= 10_000
     assert list_sequences("dev") == list(SEQUENCES) and SPLIT_SEEDS["dev"] == (0,)

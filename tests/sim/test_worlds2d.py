@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from polar_sim.sim import World
-from polar_sim.sim.worlds2d import ARC_CHORD, layout_sdf
+from polar_sim.sim.builders.worlds2d import ARC_CHORD, layout_sdf
 
 SEEDS = [0, 1, 2, 3, 10_000]
 

@@ -6,9 +6,10 @@ import pytest
 from polar_sim.geometry import make_pose, se3_exp, so3_exp
 from polar_sim.tracking.icp import weighted_icp
 from polar_sim.tracking.model import ShapeModel
-from polar_sim.tracking.synthetic import intrinsics, make_object, render, sample_model
+from polar_sim.geometry import pinhole_intrinsics
+from polar_sim.tracking.synthetic import make_object, render, sample_model
 
-K = intrinsics(640, 480)
+K = pinhole_intrinsics(640, 480, 45.0)
 SHAPE = (480, 640)
 
 
@@ -168,7 +169,7 @@ def test_unobserved_directions_of_a_face_without_its_edges():
     P, N = sample_model(make_object("box"), 3000, seed=1)
     box = ShapeModel(P, N)
     n0 = np.array([1.0, 0.0, 0.0])
-    face = np.flatnonzero((box.N @ n0 > 0.99))
+    face = np.flatnonzero(box.N @ n0 > 0.99)
     c = box.P[face]
     mid = face[np.max(np.abs(c[:, 1:] - c[:, 1:].mean(0)), axis=1) < 0.015]
     cov = np.diag(np.array([0.05, 0.049, 0.048, 0.012, 0.011, 0.010]) ** 2)

@@ -7,7 +7,7 @@ cube; the centre of the drill's battery; the middle of the bracket's foot), so a
 standing upright on a table at height ``h`` has its body at ``z = h``. The meshes ship as OBJ files in ``scenes/assets/objects/`` (with texture coordinates
 into a 2x2 texture atlas, see :data:`ATLAS_TILES`); regenerate them with
 
-    python -m polar_sim.sim.objects
+    python -m polar_sim.sim.builders.objects
 
 (generation needs ``manifold3d`` for the boolean unions; loading does not). MuJoCo renders and
 ray-casts the true mesh, but collides a mesh through its convex hull, so every object also lists
@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+
+from polar_sim import geometry
 
 __all__ = ["OBJECTS", "DEFAULT_OBJECTS", "PARTS", "ObjectInfo", "object_names", "object_info", "load_mesh", "make_mesh",
            "write_assets", "asset_dir", "asset_path", "diameter", "ATLAS_TILES"]
@@ -415,7 +417,7 @@ def load_mesh(name) -> trimesh.Trimesh:
     p = asset_path(name)
     if not p.is_file():
         raise FileNotFoundError(f"object: mesh file {str(p)!r} is missing; regenerate it with "
-                                "`python -m polar_sim.sim.objects`")
+                                "`python -m polar_sim.sim.builders.objects`")
     V, F = [], []
     for line in p.read_text().splitlines():
         if line.startswith("v "):
@@ -426,10 +428,8 @@ def load_mesh(name) -> trimesh.Trimesh:
 
 
 def diameter(mesh) -> float:
-    """Largest distance (m) between two vertices of a mesh (over its convex hull)."""
-    from scipy.spatial.distance import pdist
-
-    return float(pdist(mesh.convex_hull.vertices).max())
+    """Largest distance (m) between two vertices of a mesh (:func:`polar_sim.geometry.diameter`)."""
+    return geometry.diameter(mesh.vertices)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
+from polar_sim.sim.actors.robots import GROUP, ROVER_PRESETS, add_rover
 
 __all__ = ["build_office", "ROOMS", "DOORS", "TILE", "LANE_X"]
 

@@ -1,13 +1,13 @@
 """Tracking sequences: scripted ``tabletop`` (and one ``object_orbit``) runs rendered from the
 RGB-D camera with exact truth, for the tracking chapter (issue 6, tracking spec Sec. 9.6).
 
->>> from polar_sim.sim.tabletop_sequences import cached_sequence, record_sequence
+>>> from polar_sim.sim.recorders.tabletop_sequences import cached_sequence, record_sequence
 >>> rec = record_sequence("mug_touch", seed=0, n_frames=30)       # in memory
 >>> rec.meta["K"], rec.stack("T_cam_obj").shape          # (3, 3) list, (30, 4, 4)
 >>> r = cached_sequence("mug_touch", seed=0)             # recorded once into $POLAR_SIM_CACHE/tabletop
 >>> for i, frame in r.frames(0, 10): ...                 # a lazy reader: one frame in memory at a time
 
-Each frame of the :class:`~polar_sim.sim.recording.Recording` holds
+Each frame of the :class:`~polar_sim.sim.recorders.recording.Recording` holds
 
 =================  =========================================================================
 rgb                (H, W, 3) uint8, with sensor noise when ``noise=True``
@@ -48,7 +48,7 @@ import zlib
 import numpy as np
 
 from polar_sim.progress import progress_bar
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders.recording import Recording
 from polar_sim.sim.sensors import DepthNoise
 
 __all__ = ["SEQUENCES", "DEV_APPEARANCE_SEQUENCES", "TEST_SEQUENCES", "SPLITS", "SequenceSpec", "PHASES", "list_sequences", "SPLIT_SEEDS",
@@ -239,12 +239,12 @@ def _cache_key(name, seed, n, width, height, noise):
 
 
 def cached_sequence(name, seed=0, n_frames=None, noise=True, *, width=640, height=480, progress=None):
-    """The recording of :func:`record_sequence` from the one cache (:mod:`polar_sim.sim.sequences`,
+    """The recording of :func:`record_sequence` from the one cache (:mod:`polar_sim.sim.recorders.sequences`,
     kind ``"tabletop"``), recorded on first use under the cache's lock (a 450-frame sequence takes
     minutes: a progress bar counts its frames); a lazy
-    :class:`~polar_sim.sim.recording.RecordingReader` (``len``, ``meta``, ``stack``, ``frames``)."""
+    :class:`~polar_sim.sim.recorders.recording.RecordingReader` (``len``, ``meta``, ``stack``, ``frames``)."""
     from polar_sim._validation import as_int
-    from polar_sim.sim import sequences
+    from polar_sim.sim.recorders import sequences
 
     s = _spec(name)
     n = s.frames if n_frames is None else as_int(n_frames, "n_frames", minimum=1)
@@ -281,7 +281,7 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
     """
     from polar_sim._validation import as_int
     from polar_sim.geometry import inv_pose
-    from polar_sim.sim import objects as _objects
+    from polar_sim.sim.builders import objects as _objects
     from polar_sim.sim.truth import LABELS
 
     s = _spec(name)

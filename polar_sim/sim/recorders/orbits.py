@@ -3,7 +3,7 @@
 - :func:`recorded_orbit` renders ``n_frames`` depth frames over one or more turns of the camera
   around the object, masks them to the object with the exact labels (as the published BigBird
   demo masks its depth) and adds Kinect-like :class:`~polar_sim.sim.sensors.DepthNoise`; the
-  frames are cached through :mod:`polar_sim.sim.sequences` and replayed without MuJoCo.
+  frames are cached through :mod:`polar_sim.sim.recorders.sequences` and replayed without MuJoCo.
 - :class:`ObjectTruth` answers the geometry questions a score needs: evaluation points near the
   observed surface with their exact SDF, and the distances between a reconstructed mesh and the
   true mesh on the observed part. The statistics are :func:`polar_sim.metrics.object_map_scores`.
@@ -44,7 +44,7 @@ def _backproject(z, K, T):
 def _capture(world, n_frames, seed, turns):
     import time
 
-    from polar_sim.sim.recording import Recording
+    from polar_sim.sim.recorders.recording import Recording
     from polar_sim.sim.sensors import DepthNoise
     from polar_sim.sim.truth import LABELS
 
@@ -75,7 +75,7 @@ def recorded_orbit(world, n_frames, seed, *, turns=1.0):
     (keyed by the world's seed and options, ``n_frames``, ``seed``, ``turns``), then replayed.
     ``world`` must be as built (or reset); it is left where the capture left it (or untouched, when
     replayed)."""
-    from polar_sim.sim import sequences
+    from polar_sim.sim.recorders import sequences
 
     if world.time != 0.0:
         raise ValueError(f"world: record an orbit from a freshly built or reset world (its time is {world.time:g} s)")

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
+from polar_sim.sim.actors.robots import GROUP, ROVER_PRESETS, add_rover
 
 __all__ = ["build_navworld", "navworld_layout", "NavLayout", "check_layout"]
 

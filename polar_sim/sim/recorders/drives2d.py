@@ -8,7 +8,7 @@ kinematic indoor rover, cached as recordings.
 - :func:`drive` follows a path and takes scans: noisy and noise-free ranges of the same instant,
   the true sensor pose, the travelled distance;
 - :func:`recorded_drives` records one or more legs in one world (a leg after the first starts from
-  a reset world whose noise stream continues) through :mod:`polar_sim.sim.sequences`, so an
+  a reset world whose noise stream continues) through :mod:`polar_sim.sim.recorders.sequences`, so an
   experiment replays a drive without MuJoCo;
 - :func:`snake_route` is the snake through a tiled office (``office2d`` with ``tiles=n``);
 - :func:`section_corners` gives the corners of a scene's section in the lidar plane.
@@ -213,8 +213,8 @@ def recorded_drives(scene, seed, legs, *, noise=True, **options):
     continuing). Returns a list of :class:`Drive`, one per leg. The recording is cached under
     ``$POLAR_SIM_CACHE/lidar_drive`` keyed by all of the above.
     """
-    from polar_sim.sim import sequences
-    from polar_sim.sim.recording import Recording
+    from polar_sim.sim.recorders import sequences
+    from polar_sim.sim.recorders.recording import Recording
 
     legs = [dict(leg) for leg in legs]
     for leg in legs:
@@ -255,7 +255,7 @@ def snake_route(n, tile=30.0):
     """Waypoints (k, 2), 0.1 m apart, of the snake through an n x n tiled office: east along the
     corridor of the first row of tiles, north through an office, a door in the tile wall and a
     store room into the next row's corridor, west along it, and so on."""
-    from polar_sim.sim.office import LANE_X
+    from polar_sim.sim.builders.office import LANE_X
 
     pts = [(-13.0, 0.0)]
     for j in range(n):

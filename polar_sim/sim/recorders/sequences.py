@@ -1,7 +1,7 @@
 """One cache for every recorded input: rover routes, tabletop sequences, office drives, orbits.
 
 A recorded input is a deterministic function of (kind, scene, seed, options) and of the code that
-generates it. :func:`cached` keys a :class:`~polar_sim.sim.recording.Recording` by those, plus
+generates it. :func:`cached` keys a :class:`~polar_sim.sim.recorders.recording.Recording` by those, plus
 a generator ``version`` the caller bumps when its generation code changes, and the recording
 format version; it records the input once (under a file lock, so parallel workers that need the
 same missing input wait for one recorder) and returns a lazy reader. :func:`cached_arrays` does
@@ -10,7 +10,7 @@ the same for derived arrays (e.g. RANSAC candidate sets), saved as ``.npz``.
 The cache lives in ``$POLAR_SIM_CACHE`` (default ``~/.cache/polar_sim``), one folder per kind;
 deleting any file in it is always safe.
 
->>> from polar_sim.sim import sequences
+>>> from polar_sim.sim.recorders import sequences
 >>> r = sequences.cached("office_drive", {"scene": "office2d", "seed": 3, "duration_s": 60},
 ...                      lambda: record_drive(...), version=1)
 >>> len(r), r.meta, r.stack("pose2d")
@@ -30,7 +30,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from polar_sim.fileio import atomic_write
-from polar_sim.sim.recording import FORMAT_VERSION, Recording, RecordingReader
+from polar_sim.sim.recorders.recording import FORMAT_VERSION, Recording, RecordingReader
 
 __all__ = ["cache_root", "cache_path", "cached", "cached_arrays", "cache_lock"]
 

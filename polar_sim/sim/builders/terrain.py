@@ -13,9 +13,9 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from polar_sim.sim.appearance_textures import ground_family_texture, sky_cube
-from polar_sim.sim.rover_appearance import resolve_appearance
-from polar_sim.sim.textures import GROUND_TYPES, OBSTACLE_COLOURS, ground_texture, obstacle_texture
+from polar_sim.sim.builders.appearance_textures import ground_family_texture, sky_cube
+from polar_sim.sim.builders.rover_appearance import resolve_appearance
+from polar_sim.sim.builders.textures import GROUND_TYPES, OBSTACLE_COLOURS, ground_texture, obstacle_texture
 
 __all__ = ["TerrainGrid", "make_route", "build_rover_scene", "build_rover_terrain", "build_rover_flat"]
 
@@ -138,9 +138,9 @@ def build_rover_scene(spec: mujoco.MjSpec, seed: int, *, flat: bool, rover: str 
     Returns the scene metadata: ``route`` (n, 2), ``zones`` (the ground type or family of each zone,
     in route order), ``zone_of_route`` (n,) zone index per waypoint, ``terrain``
     (:class:`TerrainGrid`), ``start_pose2d``, ``appearance`` (the resolved spec, None by default;
-    see :mod:`polar_sim.sim.rover_appearance`).
+    see :mod:`polar_sim.sim.builders.rover_appearance`).
     """
-    from polar_sim.sim.robots import ROVER_PRESETS
+    from polar_sim.sim.actors.robots import ROVER_PRESETS
 
     look = resolve_appearance(appearance, seed)  # validated before anything is built
     if rover not in ROVER_PRESETS:
@@ -197,7 +197,7 @@ def _ground_materials(spec, rng, look):
 def _ground_tiles(spec, grid, route, zone_of_route, materials, repeat, tile=10):
     """The visible ground: meshes of ``tile`` x ``tile`` cells, each in the zone of its nearest
     route point (a contiguous arc of the route)."""
-    from polar_sim.sim.robots import GROUP
+    from polar_sim.sim.actors.robots import GROUP
 
     verts = grid.vertices()
     n = grid.heights.shape[0]
@@ -225,7 +225,7 @@ def _ground_tiles(spec, grid, route, zone_of_route, materials, repeat, tile=10):
 
 def _collision_ground(spec, grid, flat):
     """The collision ground: a hidden plane when flat, else a heightfield, under the visible meshes."""
-    from polar_sim.sim.robots import GROUP
+    from polar_sim.sim.actors.robots import GROUP
 
     heights = grid.heights
     n = heights.shape[0]
@@ -246,7 +246,7 @@ def _collision_ground(spec, grid, flat):
 def _obstacles(spec, rng, grid, route, n_obst=60):
     """``n_obst`` obstacles 5.5-10 m beside the route: boxes, walls and poles, in colours unlike
     the ground, their bases sunk 0.3 m so that no gap shows on slopes."""
-    from polar_sim.sim.robots import GROUP
+    from polar_sim.sim.actors.robots import GROUP
 
     colours = list(OBSTACLE_COLOURS)
     for c in colours:
@@ -283,7 +283,7 @@ def _obstacles(spec, rng, grid, route, n_obst=60):
 def _rover_at_start(spec, grid, route, cfg, camera_height, camera_fovy):
     """Add the rover (preset ``cfg``, camera overrides applied) at the route's start, facing
     along it. Returns (the rover's configuration, the start (x, y, yaw))."""
-    from polar_sim.sim.robots import add_rover
+    from polar_sim.sim.actors.robots import add_rover
 
     if camera_height is not None:
         cfg = dataclasses.replace(cfg, camera_height=float(camera_height))
@@ -326,7 +326,7 @@ def build_rover_terrain(spec, seed, *, camera_height=None, camera_fovy=None, rov
     the ground, default the preset's 1.65), ``camera_fovy`` (vertical field of view, degrees,
     default 45; 29.31 gives KITTI's f = 718.9 px at 376 rows), ``rover`` preset ("car" or
     "indoor"), ``appearance`` (None: the default look; "random", a ground family name or an
-    explicit spec: :mod:`polar_sim.sim.rover_appearance`)."""
+    explicit spec: :mod:`polar_sim.sim.builders.rover_appearance`)."""
     return build_rover_scene(spec, seed, flat=False, rover=rover, camera_height=camera_height,
                              camera_fovy=camera_fovy, appearance=appearance)
 

@@ -1,13 +1,13 @@
 """The tabletop scenes' procedural textures and colours: object and label textures, the wooden
 table and the walls (RGB uint8 images, seeded by a ``numpy.random.Generator``), and the named
-object colours. Kept apart from :mod:`polar_sim.sim.tabletop` so that the appearance options
-(:mod:`polar_sim.sim.tabletop_appearance`) can use them without importing the scene builder."""
+object colours. Kept apart from :mod:`polar_sim.sim.builders.tabletop` so that the appearance options
+(:mod:`polar_sim.sim.builders.tabletop_appearance`) can use them without importing the scene builder."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from polar_sim.sim.hand import HAND_SKIN
+from polar_sim.sim.actors.hand import HAND_SKIN
 
 __all__ = ["COLOURS", "object_texture"]
 

@@ -65,7 +65,7 @@ def add_hand(spec: mujoco.MjSpec, pos, quat, *, skin=HAND_SKIN, sleeve=SLEEVE):
     dynamic geom group and labelled occluder (body name ``hand``). ``skin`` and ``sleeve`` are
     the RGB(A) colours (0..1) of the hand and of the forearm's sleeve.
     """
-    from polar_sim.sim.robots import GROUP
+    from polar_sim.sim.actors.robots import GROUP
 
     skin, sleeve_rgba = tuple(skin)[:3] + (1.0,), tuple(sleeve)[:3] + (1.0,)
     body = spec.worldbody.add_body(name="hand", mocap=True, pos=list(pos), quat=list(quat))
@@ -338,7 +338,7 @@ class HandScript:
         self._hand_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body("hand").id]
         self._obj_geoms = {}
         self._qadr, self._vadr = {}, {}
-        from polar_sim.sim.robots import GROUP
+        from polar_sim.sim.actors.robots import GROUP
 
         for o in self.objects:
             b = model.body(o).id
@@ -687,7 +687,7 @@ class ReachScript:
             self._ids = True
             self._mocap = model.body_mocapid[model.body("hand").id]
             self._hand_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body("hand").id]
-            from polar_sim.sim.robots import GROUP
+            from polar_sim.sim.actors.robots import GROUP
 
             b = model.body(self.target).id
             self._tgt_geoms = [g for g in range(model.ngeom)

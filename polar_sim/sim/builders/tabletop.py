@@ -3,7 +3,7 @@ RGB-D camera) and ``object_orbit`` (an RGB-D camera circling one object).
 
 Both builders add the seeded parts to their base MJCF (``scenes/tabletop.xml``,
 ``scenes/object_orbit.xml``): object choice, placement and colours, procedural textures, the
-hand and the script. Objects come from :mod:`polar_sim.sim.objects`; each is a textured visual
+hand and the script. Objects come from :mod:`polar_sim.sim.builders.objects`; each is a textured visual
 mesh (no collisions) plus hidden collision primitives. The tracked object's visible geom is in
 the ``target`` geom group, so :meth:`World.amodal_mask` renders its full silhouette.
 
@@ -20,7 +20,7 @@ pass      the hand sweeps across in front of the target without touching it, twi
 demo      touch, pass, lift, turn, push, and again (cycles for ever)
 reach     the hand is driven from outside (``meta["script"].command(velocity, yaw_rate)``) and a
           scripted disturbance slides the target about the front of the table
-          (:class:`polar_sim.sim.hand.ReachScript`; used by the ``ObjectTrack-v0`` environment)
+          (:class:`polar_sim.sim.actors.hand.ReachScript`; used by the ``ObjectTrack-v0`` environment)
 ========  =====================================================================================
 """
 
@@ -31,12 +31,12 @@ import logging
 import mujoco
 import numpy as np
 
-from polar_sim.sim import objects as _objects
-from polar_sim.sim.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HandScript, ReachScript, add_hand,
+from polar_sim.sim.builders import objects as _objects
+from polar_sim.sim.actors.hand import (COLLIDE_OBJECT, COLLIDE_STATIC, HandScript, ReachScript, add_hand,
                                 look_at_quat, matrix_to_quat)
-from polar_sim.sim.robots import GROUP
-from polar_sim.sim.tabletop_textures import COLOURS, _wall_texture, _wood_texture, object_texture
-from polar_sim.sim.tabletop_appearance import (HAND_COLOURS, SLEEVE_COLOURS, appearance_rng, flat_texture,
+from polar_sim.sim.actors.robots import GROUP
+from polar_sim.sim.builders.tabletop_textures import COLOURS, _wall_texture, _wood_texture, object_texture
+from polar_sim.sim.builders.tabletop_appearance import (HAND_COLOURS, SLEEVE_COLOURS, appearance_rng, flat_texture,
                                                resolve_appearance, table_texture)
 
 __all__ = ["build_tabletop", "build_object_orbit", "SCRIPTS", "AGENT_SCRIPTS", "COLOURS", "OrbitScript",
@@ -48,7 +48,7 @@ TABLE_Z = 0.75
 CONTROL_DT = 1.0 / 30.0
 TIMESTEP = CONTROL_DT / 20  # 20 physics substeps per camera frame
 
-#: Scripts: (actions, options) — actions as in :mod:`polar_sim.sim.hand`.
+#: Scripts: (actions, options) — actions as in :mod:`polar_sim.sim.actors.hand`.
 SCRIPTS = {
     "touch": [("touch", {"yaw": 0.0}), ("touch", {"yaw": 0.5, "hold": 2.2})],
     "push": [("push", {"dir": 1.0, "dist": 0.10}), ("push", {"dir": -1.0, "dist": 0.08})],
@@ -215,7 +215,7 @@ def _surface_samples(mesh, n=4000):
 def _light_ramp(t):
     """Key-light scale over time: 1 until 1.5 s, down to 0.3 at 4.5 s, held, up to 1.3 at
     9.5 s, held."""
-    from polar_sim.sim.hand import min_jerk
+    from polar_sim.sim.actors.hand import min_jerk
 
     if t < 1.5:
         return 1.0
@@ -241,17 +241,17 @@ def build_tabletop(spec: mujoco.MjSpec, seed: int, *, script="demo", target=None
     """``tabletop``: 4-6 objects on a table, a scripted mocap hand, a static RGB-D camera.
 
     Options: ``script`` (one of :data:`SCRIPTS` or :data:`AGENT_SCRIPTS`), ``target`` (an object name from
-    :func:`polar_sim.sim.objects.object_names`, default chosen from the seed), ``n_objects``
+    :func:`polar_sim.sim.builders.objects.object_names`, default chosen from the seed), ``n_objects``
     (4-6), ``target_colour`` (a name of :data:`COLOURS`, e.g. ``"skin"`` for an object the colour
     of the hand; default seeded), ``distractor_like_target`` (give one other object the
     target's colours), ``camera_motion`` ("static" or "sway": the camera drifts slowly, always
     looking at the table), ``appearance`` (None: the scene as it has always been rendered; a
-    family name, ``"random"`` or a dict spec: see :mod:`polar_sim.sim.tabletop_appearance`).
+    family name, ``"random"`` or a dict spec: see :mod:`polar_sim.sim.builders.tabletop_appearance`).
     A target named explicitly may also be ``"blocks"``; without ``target`` the seed chooses among
-    :data:`polar_sim.sim.objects.DEFAULT_OBJECTS`.
+    :data:`polar_sim.sim.builders.objects.DEFAULT_OBJECTS`.
 
     Returns the metadata: ``objects``, ``target``, ``control_dt``, ``script`` (a
-    :class:`polar_sim.sim.hand.HandScript`), ``script_name``, ``colours``, ``table_z``, and
+    :class:`polar_sim.sim.actors.hand.HandScript`), ``script_name``, ``colours``, ``table_z``, and
     ``appearance`` (the resolved spec as a dict) when one was given.
     """
     _check(script, tuple(SCRIPTS) + AGENT_SCRIPTS, "script")
@@ -413,7 +413,7 @@ def build_object_orbit(spec: mujoco.MjSpec, seed: int, *, object=None, radius=0.
                        period=10.0):
     """``object_orbit``: one object on a stand, the RGB-D camera circling it.
 
-    Options: ``object`` (a name from :func:`polar_sim.sim.objects.object_names`, default from the
+    Options: ``object`` (a name from :func:`polar_sim.sim.builders.objects.object_names`, default from the
     seed), ``radius`` (horizontal distance of the camera from the object, 0.5-1.5 m),
     ``elevation_deg`` (mean camera elevation, 5-60 deg), ``period`` (seconds per turn, > 0).
     The object is welded to the stand (no joint): it belongs to the static scene, so

@@ -41,7 +41,7 @@ import numbers
 import mujoco
 import numpy as np
 
-from polar_sim.sim.robots import GROUP, ROVER_PRESETS, add_rover
+from polar_sim.sim.actors.robots import GROUP, ROVER_PRESETS, add_rover
 
 __all__ = ["build_warehouse", "layout_sdf", "ARC_CHORD"]
 

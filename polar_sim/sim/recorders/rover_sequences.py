@@ -11,7 +11,7 @@ Routes come in two splits (the held-out protocol): :data:`ROUTES` (``dev``, the 
 parameter was chosen on, default appearance, plus four routes of the dev appearance families) and
 :data:`TEST_ROUTES` (``test``, seeds >= 10,000, every ground family including three never used while
 tuning). :func:`load_route` returns a lazy reader from the one recording cache
-(:mod:`polar_sim.sim.sequences`), recording the route first if it is absent; recordings are
+(:mod:`polar_sim.sim.recorders.sequences`), recording the route first if it is absent; recordings are
 deterministic in the route's spec.
 """
 
@@ -25,8 +25,8 @@ import numpy as np
 
 from polar_sim.control import PurePursuit
 from polar_sim.progress import progress_bar
-from polar_sim.sim import sequences
-from polar_sim.sim.recording import Recording
+from polar_sim.sim.recorders import sequences
+from polar_sim.sim.recorders.recording import Recording
 from polar_sim.sim.truth import LABELS
 from polar_sim.sim.world import World
 
@@ -43,7 +43,7 @@ FULL_W, FULL_H = 1242, 376
 class RouteSpec:
     """A route: the scene and its seed, laps of the closed route, the speed range (m/s) and the
     scene's ``appearance`` option (None: the default look; a family name or "random":
-    :mod:`polar_sim.sim.rover_appearance`)."""
+    :mod:`polar_sim.sim.builders.rover_appearance`)."""
 
     scene: str
     seed: int
@@ -243,8 +243,8 @@ def record_route(name, *, max_frames=None, progress=None):
 
 def load_route(name, *, max_frames=None, progress=None):
     """The recording of route ``name`` (its first ``max_frames`` frames if given) as a lazy
-    :class:`~polar_sim.sim.recording.RecordingReader` from the recording cache
-    (:func:`polar_sim.sim.sequences.cached`, kind ``"rover_route"``), recorded first if absent."""
+    :class:`~polar_sim.sim.recorders.recording.RecordingReader` from the recording cache
+    (:func:`polar_sim.sim.recorders.sequences.cached`, kind ``"rover_route"``), recorded first if absent."""
     spec = route_spec(name)
     key = {"route": name, **dataclasses.asdict(spec), "max_frames": int(max_frames or 0)}
     return sequences.cached("rover_route", key, lambda: record_route(name, max_frames=max_frames, progress=progress),

@@ -24,7 +24,7 @@ light          ``{"intensity", "azimuth_deg", "tint", "fill", "ambient"}``: the 
                diffuse scale (0.2-2), its rotation about the vertical through the table centre
                (deg, -180..180), an RGB multiplier of it (each 0.5-1.5), the fill light's scale
                (0-2) and the headlight's ambient level (0-0.6)
-colours        ``{object name: [c0, c1, c2]}``: colour names (:data:`~polar_sim.sim.tabletop_textures.COLOURS`)
+colours        ``{object name: [c0, c1, c2]}``: colour names (:data:`~polar_sim.sim.builders.tabletop_textures.COLOURS`)
                of an object's body, accent and third part (the label tile; ``blocks``' small block)
 =============  ================================================================================
 
@@ -185,8 +185,8 @@ def _check_light(light):
 
 
 def _check_colours(colours):
-    from polar_sim.sim.objects import OBJECTS
-    from polar_sim.sim.tabletop_textures import COLOURS
+    from polar_sim.sim.builders.objects import OBJECTS
+    from polar_sim.sim.builders.tabletop_textures import COLOURS
 
     if not isinstance(colours, dict):
         raise ValueError(f"appearance: field 'colours': expected {{object: [colour, ...]}}, got {colours!r}")
@@ -271,7 +271,7 @@ def _noise(rng, shape, sigma):
 
 def table_texture(kind, rng, size=256):
     """A procedural table texture (size, size, 3) uint8 of ``kind`` (:data:`TABLE_TEXTURES`)."""
-    from polar_sim.sim.tabletop_textures import _wood_texture
+    from polar_sim.sim.builders.tabletop_textures import _wood_texture
 
     _check_name(kind, TABLE_TEXTURES, "table")
     if kind == "wood":
