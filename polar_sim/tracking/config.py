@@ -135,7 +135,15 @@ class RegistrationConfig:
         in front of the predicted surface). A tangential offset from the nearest model point within
         it is a sampling gap, not a slide. With few points visible the gaps no longer average out
         and pull the weakly observed rotations (a mug under a palm); with the whole object visible
-        the tangential term keeps its full pull. 0: every offset pulls.
+        the tangential term keeps its full pull. It is also scaled by the evidence that the object
+        is at rest (``deadzone_rest_speed``). 0: every offset pulls.
+    deadzone_rest_speed : float in [0, 10], default=0.25
+        The surface speed, in model spacings per frame, up to which the motion filter's predicted
+        velocity counts as at rest: the dead zone applies in full below it, fades linearly to
+        nothing at twice it, and is off above. A moving object needs its tangential pull, and
+        behind an occluder its hidden fraction is no evidence of rest: a pose that lags a pushed
+        object puts the pusher in front of the predicted surface, which grew the dead zone and the
+        lag with it. 0: no dead zone at all.
     em_refine : bool, default=True
         When the registration lands more than 2 predicted standard deviations from the prediction,
         redo the prediction map at the registered pose (3 mm / 1 deg spread) and register again: a
@@ -157,6 +165,7 @@ class RegistrationConfig:
     tau_y: float = 0.5
     max_iterations: int = 30
     tangential_deadzone: float = 1.5
+    deadzone_rest_speed: float = 0.25
     em_refine: bool = True
     pose_prior: bool = True
     hold_unobserved: bool = True
@@ -168,6 +177,7 @@ class RegistrationConfig:
         _open(self.tau_y, "tau_y", 0.0, 1.0)
         as_int(self.max_iterations, "max_iterations", minimum=1, maximum=MAX_ITERATIONS)
         as_float(self.tangential_deadzone, "tangential_deadzone", minimum=0.0, maximum=5.0)
+        as_float(self.deadzone_rest_speed, "deadzone_rest_speed", minimum=0.0, maximum=10.0)
         for name in ("em_refine", "pose_prior", "hold_unobserved"):
             as_bool(getattr(self, name), name)
 

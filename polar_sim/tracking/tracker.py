@@ -382,7 +382,8 @@ class ObjectTracker(Parameterised):
         away, the prediction map was centred on the wrong place: redo the E-step at the registered
         pose with a tight spread and register again (``registration.em_refine``)."""
         m, T_bar = self.model_, fr.T_bar
-        fr.deadzone = self.registration.tangential_deadzone * self._hidden_fraction(fr)
+        rest = self._at_rest(fr)
+        fr.deadzone = self.registration.tangential_deadzone * rest * self._hidden_fraction(fr) if rest > 0 else 0.0
         fr.res, fr.n_sel, fr.n_cand = self._register(fr, fr.Pmap, T_bar, fr.proj.vis, fr.sig_pos)
         res = fr.res
         if res is None or not res.ok or not self.registration.em_refine:
@@ -401,10 +402,23 @@ class ObjectTracker(Parameterised):
             fr.res, fr.n_sel, fr.n_cand, fr.Pmap, fr.pi, fr.S = res2, n_sel2, n_cand2, Pmap2, pi2, S2
             fr.at = (proj2, sig2)
 
+    def _at_rest(self, fr):
+        """Evidence in [0, 1] that the object is at rest: 1 while the motion filter's velocity moves
+        the surface (translation plus rotation at half the diameter) by at most
+        ``registration.deadzone_rest_speed`` model spacings over this frame's interval, falling
+        linearly to 0 at twice that."""
+        rc, m = self.registration, self.model_
+        limit = rc.deadzone_rest_speed * m.spacing
+        if rc.tangential_deadzone == 0.0 or limit == 0.0:
+            return 0.0
+        xi = self.filter_.xi
+        u = (float(np.linalg.norm(xi[3:])) + 0.5 * m.diameter * float(np.linalg.norm(xi[:3]))) * fr.dt
+        return float(np.clip(2.0 - u / limit, 0.0, 1.0))
+
     def _hidden_fraction(self, fr):
         """Fraction of the predicted silhouette's valid-depth pixels where something is seen in front
         of the predicted surface (a hand, another object); 0 when no dead zone is asked for."""
-        if self.registration.tangential_deadzone == 0.0:
+        if self.registration.tangential_deadzone == 0.0 or self.registration.deadzone_rest_speed == 0.0:
             return 0.0
         seen = (fr.D > 0) & (fr.S > 0)
         n_seen = int(np.count_nonzero(seen))
