@@ -406,7 +406,7 @@ class ObjectTracker(Parameterised):
         """Evidence in [0, 1] that the object is at rest: 1 while the motion filter's velocity moves
         the surface (translation plus rotation at half the diameter) by at most
         ``registration.deadzone_rest_speed`` model spacings over this frame's interval, falling
-        linearly to 0 at twice that."""
+        linearly to 0 at twice that (``motion.filter="none"`` keeps no velocity: always 1)."""
         rc, m = self.registration, self.model_
         limit = rc.deadzone_rest_speed * m.spacing
         if rc.tangential_deadzone == 0.0 or limit == 0.0:
@@ -418,7 +418,7 @@ class ObjectTracker(Parameterised):
     def _hidden_fraction(self, fr):
         """Fraction of the predicted silhouette's valid-depth pixels where something is seen in front
         of the predicted surface (a hand, another object); 0 when no dead zone is asked for."""
-        if self.registration.tangential_deadzone == 0.0 or self.registration.deadzone_rest_speed == 0.0:
+        if self.registration.tangential_deadzone == 0.0:
             return 0.0
         seen = (fr.D > 0) & (fr.S > 0)
         n_seen = int(np.count_nonzero(seen))

@@ -125,7 +125,8 @@ def test_symmetry_directions_from_the_model_alone():
 def test_static_revolved_object_touched_by_a_moving_hand_does_not_spin():
     # issue 13 item 5 under touch: a cylinder at rest while the hand's fingers slide 40 deg round it, in
     # contact. The hand's points pull a geometric registration along the free axis (without holding it
-    # the estimate turns with the fingers, by about 40 deg); held, it stays within 1 degree of the truth
+    # the estimate turns with the fingers: about 40 deg before issue 35, 16 deg with the rest-gated dead
+    # zone; either is over 10x the bound); held, it stays within 1 degree of the truth
     from polar_sim.geometry import make_pose, so3_exp
 
     n = 40
@@ -142,7 +143,7 @@ def test_static_revolved_object_touched_by_a_moving_hand_does_not_spin():
         drift[hold] = np.rad2deg(metrics.rotation_drift(seq.poses, np.stack([r.pose for r in res]))).max()
         assert not any(r.lost for r in res)
         assert all(r.n_unobserved >= 1 for r in res[1:]) == hold
-    assert drift[True] < 1.0 and drift[False] > 20.0, drift
+    assert drift[True] < 1.0 and drift[False] > 10.0, drift
 
 
 def test_static_box_has_no_unobserved_direction():
