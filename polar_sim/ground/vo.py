@@ -355,6 +355,8 @@ class GroundVO(Parameterised):
             self.rates_ = np.zeros(3)
         self._integrate_pose(k, dt, fr.diag)
         prob = self._ground_map(labels)
+        if c.calibration.method == "platt":
+            fr.diag["calibration_fallback"] = self.calibrator_.fallback_
         if self._replenish(g, fr.diag) and fr.status == "no_features":
             fr.status = "few_triplets"  # nothing was tracked in, but this image has features to track on
         fr.diag["status"] = fr.status
