@@ -391,8 +391,12 @@ class DenseConfig(_Stage):
     label_evidence : float, default=4.0
         Ground self-labels: pixels whose parallax fits the ground better than points at infinity by this
         much (windowed mean difference of squared residuals, grey levels²); 0 = no dense labels.
+    label_region : {"support", "evidence"}, default="support"
+        Where the dense ground labels are spread: over the ground the evidence is connected to through
+        untextured pixels the fitted motion agrees with (:func:`polar_sim.ground.dense.ground_evidence`),
+        or over the evidence alone (the textured parts of the ground).
     max_labels : int, default=300
-        Dense ground labels per image (spread over the evidence).
+        Dense ground labels per image (spread evenly over the label region).
     track_alias_px : float, default=1.5
         Aliasing in tracks: a point tracked both plainly and in the ground-warped image, to two positions
         farther apart than this (processed px, at the KITTI focal length), is dropped.
@@ -423,6 +427,7 @@ class DenseConfig(_Stage):
     alias_var_scale: float = 100.0
     gate: float = 3.0
     label_evidence: float = 4.0
+    label_region: str = "support"
     max_labels: int = 300
     track_alias_px: float = 1.5
     periodic_ncc: float = 0.7
@@ -450,6 +455,7 @@ class DenseConfig(_Stage):
         as_float(self.alias_var_scale, "alias_var_scale", minimum=1.0)
         as_positive_float(self.gate, "gate")
         as_positive_float(self.label_evidence, "label_evidence", allow_zero=True)
+        check_choice(self.label_region, ("support", "evidence"), "label_region")
         as_int(self.max_labels, "max_labels", minimum=0, maximum=MAX_FEATURES)
         as_positive_float(self.track_alias_px, "track_alias_px")
         as_float(self.periodic_ncc, "periodic_ncc", minimum=-1.0, maximum=1.0)

@@ -659,8 +659,14 @@ class GroundVO(Parameterised):
                     dense_iterations=fit.iterations)
         self.dense_labels_ = np.zeros((0, 2))
         if fit.ok and not fit.aliased and d.label_evidence > 0 and d.max_labels > 0:
-            self.evidence_ = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_)
-            self.dense_labels_ = label_points(self.evidence_, d.label_evidence, d.max_labels)
+            if d.label_region == "support":
+                # Labels spread over the ground the evidence is connected to, not only over its texture.
+                self.evidence_, support = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_,
+                                                          support_threshold=d.label_evidence)
+                self.dense_labels_ = label_points(support.view(np.uint8), 0, d.max_labels)
+            else:
+                self.evidence_ = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_)
+                self.dense_labels_ = label_points(self.evidence_, d.label_evidence, d.max_labels)
         diag["n_dense_labels"] = int(len(self.dense_labels_))
 
     def _dense_pair_motion(self):
