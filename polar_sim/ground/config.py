@@ -385,8 +385,12 @@ class DenseConfig(_Stage):
         ``alias_margin`` (relative) of the solution's, multiplies the fit's variance by
         ``alias_var_scale``; 0 turns the test off.
     gate : float, default=3.0
-        Sparse and dense speeds that differ by more than ``gate`` standard deviations are not averaged:
-        the one with the smaller variance is used alone.
+        Sparse and dense speeds (and yaw rates) that differ by more than ``gate`` standard deviations are
+        not averaged: the one with the smaller variance is used alone.
+    fuse_yaw : bool, default=True
+        The yaw-rate measurement is the tracks' yaw rate fused with the dense fit's by their variances
+        (both scaled by ``var_scale``); the tracks' variance grows by 1 + ``alias_var_scale`` x the share of
+        tracks caught aliasing. False: the tracks' yaw rate alone.
 
     label_evidence : float, default=4.0
         Ground self-labels: pixels whose parallax fits the ground better than points at infinity by this
@@ -426,6 +430,7 @@ class DenseConfig(_Stage):
     alias_margin: float = 0.2
     alias_var_scale: float = 100.0
     gate: float = 3.0
+    fuse_yaw: bool = True
     label_evidence: float = 4.0
     label_region: str = "support"
     max_labels: int = 300
@@ -454,6 +459,7 @@ class DenseConfig(_Stage):
         as_positive_float(self.alias_margin, "alias_margin", allow_zero=True)
         as_float(self.alias_var_scale, "alias_var_scale", minimum=1.0)
         as_positive_float(self.gate, "gate")
+        as_bool(self.fuse_yaw, "fuse_yaw")
         as_positive_float(self.label_evidence, "label_evidence", allow_zero=True)
         check_choice(self.label_region, ("support", "evidence"), "label_region")
         as_int(self.max_labels, "max_labels", minimum=0, maximum=MAX_FEATURES)

@@ -70,6 +70,7 @@ class _Frame:
     motion_done: bool = False
     speed_raw: float = np.nan
     yaw_raw: float = np.nan
+    yaw_measured: float = np.nan
     speed_dense: float = np.nan
     speed_measured: float = np.nan
     rates_raw: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
@@ -523,6 +524,7 @@ class GroundVO(Parameterised):
             return
         m, idx, x1, u, v = solved
         fr.motion_done, fr.rates_raw, fr.yaw_raw = True, m.rates.copy(), float(m.rates[1])
+        fr.yaw_measured = self._measured_yaw(fr, m)
         fit, ci, below = self._fit_ground(fr, m, idx, x1, u, v)
         fr.speed_raw = fit.speed if fit.ok else np.nan
         vf, yf = self.speed_filter_, self.yaw_filter_
@@ -532,7 +534,7 @@ class GroundVO(Parameterised):
         measured = self._measured_speed(fr, fit if accepted else None)
         if measured is not None:
             vf.update(measured[0], var=measured[1])
-        yf.update(fr.yaw_raw)
+        yf.update(fr.yaw_measured)
         self.rates_ = np.array([fr.rates_raw[0], yf.x, fr.rates_raw[2]])
         if measured is not None:
             self._fuse_depths(m, idx, fit.speed)
@@ -716,6 +718,21 @@ class GroundVO(Parameterised):
                                   c.dense.gate)
         fr.speed_measured = z[0]
         return z
+
+    def _measured_yaw(self, fr, m):
+        """The yaw-rate measurement of this frame (rad/s): the tracks' yaw rate fused with the dense fit's by
+        their variances. The tracks' variance grows with the share of the ground's tracks seen to alias
+        (1 + alias_var_scale x share): on a repeating texture the tracks that were not caught alias too.
+        The tracks' yaw alone without the dense stage, or when either variance is unknown."""
+        c = self.cfg_
+        dense = self._dense_speed() if c.dense.enabled and c.dense.fuse_yaw else None
+        if dense is None or dense.aliased or not np.isfinite(m.yaw_var) or not np.isfinite(dense.yaw_var):
+            return fr.yaw_raw
+        d = fr.diag
+        share = d.get("n_track_aliased", 0) / max(d.get("n_track_aliased", 0) + d.get("n_tracked", 0), 1)
+        var = c.dense.var_scale * m.yaw_var * (1.0 + c.dense.alias_var_scale * share)
+        d.update(yaw_tracks_var=var, yaw_dense=dense.yaw_rate, yaw_dense_var=dense.yaw_var)
+        return fuse_measurements(fr.yaw_raw, var, dense.yaw_rate, dense.yaw_var, c.dense.gate)[0]
 
     def _dense_ground_at(self, xy):
         """Whether the dense fit's evidence marks each point (n, 2) of the previous image as ground."""
