@@ -731,8 +731,10 @@ class GroundVO(Parameterised):
         d = fr.diag
         share = d.get("n_track_aliased", 0) / max(d.get("n_track_aliased", 0) + d.get("n_tracked", 0), 1)
         var = c.dense.var_scale * m.yaw_var * (1.0 + c.dense.alias_var_scale * share)
-        d.update(yaw_tracks_var=var, yaw_dense=dense.yaw_rate, yaw_dense_var=dense.yaw_var)
-        return fuse_measurements(fr.yaw_raw, var, dense.yaw_rate, dense.yaw_var, c.dense.gate)[0]
+        z, z_var = fuse_measurements(fr.yaw_raw, var, dense.yaw_rate, dense.yaw_var, c.dense.gate)
+        d.update(yaw_tracks_var=var, yaw_dense=dense.yaw_rate, yaw_dense_var=dense.yaw_var, yaw_measured=z,
+                 yaw_measured_var=z_var)
+        return z
 
     def _dense_ground_at(self, xy):
         """Whether the dense fit's evidence marks each point (n, 2) of the previous image as ground."""
