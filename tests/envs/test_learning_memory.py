@@ -10,8 +10,9 @@ import pytest
 import torch
 
 import polar_sim.envs  # noqa: F401
-from polar_sim.envs.evaluate import evaluate, load_policy
-from polar_sim.envs.imitation_map import MapDAggerConfig, MapNet, _to_policy, train_dagger_map
+from polar_sim.envs import recipes
+from polar_sim.envs.evaluate import load_policy
+from polar_sim.envs.imitation_map import MapDAggerConfig, MapNet, _to_policy
 from polar_sim.envs.map_memory import MapMemory
 from polar_sim.envs.map_policy import MapCNNPolicy, conv2d
 from polar_sim.envs.observers import SDFStencil
@@ -144,16 +145,18 @@ def test_numpy_policy_is_the_torch_net():
     env.close()
 
 
-# The DAgger loop at CI size: behaviour cloning, one DAgger round, saved and loaded to the same
-# actions over an episode (memory included), scored by evaluate and load_policy.
-def test_dagger_map_loop_save_load(tmp_path):
-    cfg = MapDAggerConfig(rounds=2, steps_per_round=150, epochs=1, convs=((4, 1), (4, 2)), hidden=(16,))
-    policy, hist = train_dagger_map(ROOM, config=cfg, env_kwargs={"pose_source": "truth"}, progress=False,
-                                    recipe={"name": "dagger_map"})
-    assert [h["steps"] for h in hist] == [150, 300] and hist[1]["beta"] == 0.5
-    assert policy.env_kwargs == {} and policy.recipe == {"name": "dagger_map"}
-    path = policy.save(tmp_path / "p.npz")
-    loaded = load_policy(str(path), gym.make(ROOM))
+# The dagger_map recipe at CI size: behaviour cloning, one DAgger round, a dev checkpoint,
+# policy.npz saved and loaded (through the one load_policy) to the same actions over an episode,
+# memory included.
+def test_dagger_map_recipe_trains_saves_and_loads(tmp_path):
+    torch.set_num_threads(1)
+    params = {"rounds": 2, "steps_per_round": 150, "epochs": 1, "hidden": [16], "train_pose_source": "truth",
+              "eval_every": 300, "eval_episodes": 1}
+    policy, summary = recipes.train("dagger_map", ROOM, params=params, out=tmp_path, progress=False)
+    assert summary["steps"] == 300 and len(summary["curve"]) == 1 and (tmp_path / "curve.csv").exists()
+    assert isinstance(policy, MapCNNPolicy) and policy.env_kwargs == {}
+    assert policy.recipe["name"] == "dagger_map" and policy.recipe["params"]["rounds"] == 2
+    loaded = load_policy(str(tmp_path / "policy.npz"), gym.make(ROOM))
     assert isinstance(loaded, MapCNNPolicy)
     env = gym.make(ROOM, pose_source="truth")
     for p in (policy, loaded):
@@ -167,8 +170,14 @@ def test_dagger_map_loop_save_load(tmp_path):
             break
     assert (loaded.memory.hits == policy.memory.hits).all() and loaded.memory.visited.any()
     env.close()
-    _, s = evaluate(ROOM, loaded, episodes=1, seed=1000, env_kwargs={"pose_source": "truth"}, progress=False)
-    assert s["episodes"] == 1
+
+
+# Unknown or bad recipe parameters are refused before anything is built.
+@pytest.mark.parametrize("params,match", [({"expert": "reactive"}, "expert"), ({"rounds": 0}, "rounds"),
+                                          ({"hidden": []}, "hidden"), ({"obs_keys": ["goal"]}, "obs_keys")])
+def test_dagger_map_recipe_refuses_bad_parameters(params, match):
+    with pytest.raises(ValueError, match=match):
+        recipes.check_recipe("dagger_map", params, ROOM)
 
 
 # A tampered file, another format version, another kind, a garbled header, and an env observing
