@@ -18,8 +18,8 @@ from polar_sim.envs.policy_file import POLICY_FORMAT_VERSION, read_policy_file, 
 from polar_sim.envs.shipped import policy_path
 
 ROOM = "polar_sim/GPISNav-Room-v1"
-SHIPPED = ["polar_sim/GPISNav-Room-v2", "polar_sim/GPISNav-Rooms2-v2", "polar_sim/GPISNav-Room-v1",
-           "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1"]
+SHIPPED = ["polar_sim/GPISNav-Room-v2", "polar_sim/GPISNav-Rooms2-v2", "polar_sim/GPISNav-v2",
+           "polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Rooms2-v1", "polar_sim/GPISNav-v1"]
 
 
 # The shipped policies are exactly the files in polar_sim/data/policies, one per tier listed.
