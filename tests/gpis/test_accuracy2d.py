@@ -47,7 +47,7 @@ def test_far_field_is_euclidean(room):
 # the published SDF (legacy) cannot do this: it falls back toward the 0.2 bias
 def test_legacy_far_field_drifts_to_bias(room):
     rng = np.random.default_rng(1)
-    leg = GPISMap2D(legacy=True)
+    leg = GPISMap2D.published()
     for pose in room["path"]:
         leg.update(ANGLES, scan_2d(pose, ANGLES, noise=0.01, rng=rng), pose)
     far = room["far"] & (room["gt"] > 1.0)

@@ -22,11 +22,11 @@ ANG = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
 
 def _map(dim, legacy):
     if dim == 2:
-        m = GPISMap2D(legacy=legacy)
+        m = GPISMap2D.published() if legacy else GPISMap2D()
         for pose in room_path(8):
             m.update(ANG, scan_2d(pose, ANG), pose)
         return m
-    m = GPISMap3D(legacy=legacy)
+    m = GPISMap3D.published() if legacy else GPISMap3D()
     K = intrinsics(160, 120, 130.0)
     for T in orbit_poses(3):
         m.update(render_sphere(T, K, 160, 120), K, T)
@@ -42,7 +42,7 @@ def _near_points(m, n, spread, seed=0):
 def _nearest_gp(m, x):
     """Slot of the nearest cluster with a current GP (the kernel's first choice), or -1."""
     tr, g = m.tree_, m.gps_
-    W = m._QUERY_W if m._QUERY_W is not None else 4.0 * m.map_scale
+    W = m._QUERY_W if m._QUERY_W is not None else 4.0 * m.local_gp.map_scale
     best_s, best_d = np.zeros(3, np.int64), np.zeros(3)
     n = _nearest3(x, float(W), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.node_sample,
                   tr.node_internal, best_s, best_d, np.zeros(3, np.int64),
@@ -51,7 +51,7 @@ def _nearest_gp(m, x):
         s = best_s[j]
         if g.gp_m[s] > 0 and m.gp_gen_[s] == m.slot_gen_[s]:
             return s
-        if m.legacy:
+        if m._pub("query_mode"):
             return -1
     return -1
 
@@ -63,7 +63,7 @@ def _reference(m, s, x):
     X, kinds, alpha = g.X[ob:ob + n], g.kinds[ob:ob + n], g.alpha[ob:ob + n]
     L = np.zeros((n, n))
     L[np.tril_indices(n)] = g.Lbuf[tri:tri + n * (n + 1) // 2]      # packed by rows
-    a = np.sqrt(3.0) / m.map_scale
+    a = np.sqrt(3.0) / m.local_gp.map_scale
     d = x - X                                   # (n, dim)
     r = np.linalg.norm(d, axis=1)
     e = np.exp(-a * r)
@@ -79,7 +79,7 @@ def _reference(m, s, x):
                          a * a * ((cc == i) - a * d[:, i] * dc * inv_r) * e,
                          -a * a * d[:, i] * e)
     v = solve_triangular(L, kf, lower=True)
-    var_f0, _ = _var_consts(dim, float(m.map_scale))
+    var_f0, _ = _var_consts(dim, float(m.local_gp.map_scale))
     return np.concatenate([[kf @ alpha], kg @ alpha, [var_f0 - v @ v]])
 
 
