@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polar_sim._validation import as_int, as_positive_float, check_choice
+from polar_sim._validation import as_positive_float, check_choice
 
 __all__ = ["SWITCHES", "ObservationConfig2D", "ObservationConfig3D", "NoiseConfig2D",
            "NoiseConfig3D", "TreeConfig2D", "TreeConfig3D", "LocalGPConfig2D", "LocalGPConfig3D",

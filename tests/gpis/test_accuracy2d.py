@@ -82,7 +82,7 @@ def test_variance_meaning(room):
     m, P, v = room["m"], room["P"], room["v"]
     assert np.median(v[room["far"]]) < 0.1
     outside = (P[:, 0] < -0.3) & (np.abs(room["d"]) > 0.3)
-    assert np.all(v[outside] >= 1.0 + m.map_noise - 1e-9)
+    assert np.all(v[outside] >= 1.0 + m.noise.map_noise - 1e-9)
 
 
 # surface(): Hausdorff distance to the true walls <= 10 cm in the observed area

@@ -13,7 +13,7 @@ from polar_sim.gpis.config import DistanceConfig2D, TreeConfig2D, TreeConfig3D
 from polar_sim.gpis._surface import MAX_SURFACE_NODES
 from polar_sim.gpis.localize import localize
 
-from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
+from .scenes import intrinsics, room_path, scan_2d
 from .test_behaviour import ANG, _map2d, _map3d
 
 
@@ -150,7 +150,7 @@ def test_huge_points_get_the_prior(make, dim):
     expect = np.zeros((3, dim))
     expect[0, 0], expect[1, 0], expect[2, -1] = 1.0, -1.0, 1.0
     np.testing.assert_array_equal(g[5:], expect)
-    np.testing.assert_array_equal(v[5:], 1.0 + m.map_noise)
+    np.testing.assert_array_equal(v[5:], 1.0 + m.noise.map_noise)
     assert np.isfinite(d).all() and np.isfinite(g).all() and np.isfinite(v).all()
 
 
@@ -158,7 +158,7 @@ def test_huge_points_get_the_prior(make, dim):
 def test_huge_points_legacy():
     m = _map2d(3, published=True)
     d, g, v = m.query(np.array([[1e300, 0.0]]))
-    assert d[0] == 1e300 and v[0] == 1.0 + m.map_noise
+    assert d[0] == 1e300 and v[0] == 1.0 + m.noise.map_noise
 
 
 # localisation from a pose 1e300 m away returns without an exception, the map unchanged
