@@ -43,7 +43,7 @@ def _params_json(m):
 def _from_version1(cls, params):
     """Version-1 parameters (flat, with ``legacy``) as version-2 ones (stage configs as dicts)."""
     legacy = params.pop("legacy", False)
-    out = {k: params.pop(k) for k in cls._param_names() if k in params}
+    out = {k: params.pop(k) for k in cls._param_names() if k in params and k not in cls._STAGES}
     for stage, config in cls._STAGES.items():
         names = {f.name for f in dataclasses.fields(config)}
         fields = {k: params.pop(k) for k in sorted(names & set(params))}

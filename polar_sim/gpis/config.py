@@ -1,18 +1,19 @@
 """Stage settings of :class:`~polar_sim.gpis.GPISMap2D` and :class:`~polar_sim.gpis.GPISMap3D`.
 
-One frozen dataclass per stage of the pipeline (``docs/specs/gpis.md``), in a 2D and a 3D
-variant that differ only in their defaults (the spec's quadtree and octree values; the 2D noise
-stage also has the laser's range noise and scan model):
+One frozen dataclass per stage of the pipeline (``docs/specs/gpis.md``). Each stage's base class
+documents and checks its fields; its 2D and 3D variants, the ones a map takes, differ only in their
+defaults (the spec's quadtree and octree values; the 2D noise stage also has the laser's range
+noise and scan model):
 
-=============  ==========================================  =====================================
-stage          classes                                     spec
-=============  ==========================================  =====================================
-observation    ``ObservationConfig2D`` / ``3D``            §3-4: observation GP, occupancy test
-noise          ``NoiseConfig2D`` / ``3D``                  §5-6: sample noise, re-evaluation
-tree           ``TreeConfig2D`` / ``3D``                   §7: quadtree / octree, sample spacing
-local_gp       ``LocalGPConfig2D`` / ``3D``                §8: local GPs, retraining
-distance       ``DistanceConfig2D`` / ``3D``               §9: query, the faithful distance
-=============  ==========================================  =====================================
+- ``observation``: :class:`ObservationConfig2D` / :class:`ObservationConfig3D`, the observation GP
+  and occupancy test (spec §3-4);
+- ``noise``: :class:`NoiseConfig2D` / :class:`NoiseConfig3D`, sample noise and re-evaluation (§5-6);
+- ``tree``: :class:`TreeConfig2D` / :class:`TreeConfig3D`, the quadtree / octree and sample
+  spacing (§7);
+- ``local_gp``: :class:`LocalGPConfig2D` / :class:`LocalGPConfig3D`, the local GPs and their
+  retraining (§8);
+- ``distance``: :class:`DistanceConfig2D` / :class:`DistanceConfig3D`, the query and the faithful
+  distance (§9).
 
 Each config checks every field in ``__post_init__`` (type, range, finiteness, and the limits of
 the sizes, before anything is allocated) and raises ``ValueError``/``TypeError`` naming the
@@ -34,7 +35,8 @@ import numpy as np
 
 from polar_sim._validation import as_positive_float, check_choice
 
-__all__ = ["SWITCHES", "ObservationConfig2D", "ObservationConfig3D", "NoiseConfig2D",
+__all__ = ["SWITCHES", "ObservationConfig", "NoiseConfig", "TreeConfig", "LocalGPConfig", "DistanceConfig",
+           "ObservationConfig2D", "ObservationConfig3D", "NoiseConfig2D",
            "NoiseConfig3D", "TreeConfig2D", "TreeConfig3D", "LocalGPConfig2D", "LocalGPConfig3D",
            "DistanceConfig2D", "DistanceConfig3D", "MAX_CLUSTER_NODES", "MAX_TRAIN_CAP",
            "MAX_RANGE_NOISE", "MIN_SAMPLE_SPACING"]
@@ -88,8 +90,11 @@ class _Stage:
 
 
 @dataclass(frozen=True)
-class _Observation(_Stage):
+class ObservationConfig(_Stage):
     """Observation GP and occupancy test (spec §3-4).
+
+    The fields of the stage, without defaults: a map takes :class:`ObservationConfig2D` or
+    :class:`ObservationConfig3D`.
 
     Parameters
     ----------
@@ -115,8 +120,8 @@ class _Observation(_Stage):
 
 
 @dataclass(frozen=True)
-class ObservationConfig2D(_Observation):
-    """:class:`_Observation` with the 2D defaults."""
+class ObservationConfig2D(ObservationConfig):
+    """:class:`ObservationConfig` with the 2D defaults."""
 
     obs_scale: float = 0.5
     obs_noise: float = 0.01
@@ -125,8 +130,8 @@ class ObservationConfig2D(_Observation):
 
 
 @dataclass(frozen=True)
-class ObservationConfig3D(_Observation):
-    """:class:`_Observation` with the 3D defaults."""
+class ObservationConfig3D(ObservationConfig):
+    """:class:`ObservationConfig` with the 3D defaults."""
 
     obs_scale: float = 0.5
     obs_noise: float = 0.01
@@ -135,8 +140,11 @@ class ObservationConfig3D(_Observation):
 
 
 @dataclass(frozen=True)
-class _Noise(_Stage):
+class NoiseConfig(_Stage):
     """Noise of the surface samples and their re-evaluation (spec §5-6).
+
+    The fields of the stage, without defaults: a map takes :class:`NoiseConfig2D` or
+    :class:`NoiseConfig3D`.
 
     Parameters
     ----------
@@ -165,8 +173,8 @@ class _Noise(_Stage):
 
 
 @dataclass(frozen=True)
-class NoiseConfig2D(_Noise):
-    """:class:`_Noise` with the 2D defaults, and the laser's noise model.
+class NoiseConfig2D(NoiseConfig):
+    """:class:`NoiseConfig` with the 2D defaults, and the laser's noise model.
 
     Parameters
     ----------
@@ -202,8 +210,8 @@ class NoiseConfig2D(_Noise):
 
 
 @dataclass(frozen=True)
-class NoiseConfig3D(_Noise):
-    """:class:`_Noise` with the 3D defaults."""
+class NoiseConfig3D(NoiseConfig):
+    """:class:`NoiseConfig` with the 3D defaults."""
 
     min_position_noise: float = 0.001
     min_grad_noise: float = 0.01
@@ -212,8 +220,11 @@ class NoiseConfig3D(_Noise):
 
 
 @dataclass(frozen=True)
-class _Tree(_Stage):
+class TreeConfig(_Stage):
     """The quadtree / octree and the sample spacing (spec §7).
+
+    The fields of the stage, without defaults: a map takes :class:`TreeConfig2D` or
+    :class:`TreeConfig3D`.
 
     Parameters
     ----------
@@ -270,8 +281,8 @@ class _Tree(_Stage):
 
 
 @dataclass(frozen=True)
-class TreeConfig2D(_Tree):
-    """:class:`_Tree` with the 2D (quadtree) defaults."""
+class TreeConfig2D(TreeConfig):
+    """:class:`TreeConfig` with the 2D (quadtree) defaults."""
 
     init_half: float = 12.8
     cluster_half: float = 0.8
@@ -284,8 +295,8 @@ class TreeConfig2D(_Tree):
 
 
 @dataclass(frozen=True)
-class TreeConfig3D(_Tree):
-    """:class:`_Tree` with the 3D (octree) defaults."""
+class TreeConfig3D(TreeConfig):
+    """:class:`TreeConfig` with the 3D (octree) defaults."""
 
     init_half: float = 0.4
     cluster_half: float = 0.025
@@ -298,8 +309,11 @@ class TreeConfig3D(_Tree):
 
 
 @dataclass(frozen=True)
-class _LocalGP(_Stage):
+class LocalGPConfig(_Stage):
     """The local GPs of the clusters and their retraining (spec §8).
+
+    The fields of the stage, without defaults: a map takes :class:`LocalGPConfig2D` or
+    :class:`LocalGPConfig3D`.
 
     Parameters
     ----------
@@ -351,8 +365,8 @@ class _LocalGP(_Stage):
 
 
 @dataclass(frozen=True)
-class LocalGPConfig2D(_LocalGP):
-    """:class:`_LocalGP` with the 2D defaults."""
+class LocalGPConfig2D(LocalGPConfig):
+    """:class:`LocalGPConfig` with the 2D defaults."""
 
     map_scale: float = 1.2
     fbias: float = 0.2
@@ -363,8 +377,8 @@ class LocalGPConfig2D(_LocalGP):
 
 
 @dataclass(frozen=True)
-class LocalGPConfig3D(_LocalGP):
-    """:class:`_LocalGP` with the 3D defaults."""
+class LocalGPConfig3D(LocalGPConfig):
+    """:class:`LocalGPConfig` with the 3D defaults."""
 
     map_scale: float = 0.04
     fbias: float = 0.2
@@ -375,8 +389,11 @@ class LocalGPConfig3D(_LocalGP):
 
 
 @dataclass(frozen=True)
-class _Distance(_Stage):
+class DistanceConfig(_Stage):
     """The query (spec §9) and its faithful distance.
+
+    The fields of the stage, without defaults: a map takes :class:`DistanceConfig2D` or
+    :class:`DistanceConfig3D`.
 
     Parameters
     ----------
@@ -417,8 +434,8 @@ class _Distance(_Stage):
 
 
 @dataclass(frozen=True)
-class DistanceConfig2D(_Distance):
-    """:class:`_Distance` with the 2D defaults."""
+class DistanceConfig2D(DistanceConfig):
+    """:class:`DistanceConfig` with the 2D defaults."""
 
     blend_near: float = 0.05
     blend_far: float = 0.25
@@ -428,8 +445,8 @@ class DistanceConfig2D(_Distance):
 
 
 @dataclass(frozen=True)
-class DistanceConfig3D(_Distance):
-    """:class:`_Distance` with the 3D defaults."""
+class DistanceConfig3D(DistanceConfig):
+    """:class:`DistanceConfig` with the 3D defaults."""
 
     blend_near: float = 0.002
     blend_far: float = 0.006
