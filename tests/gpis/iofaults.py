@@ -246,16 +246,22 @@ def tamper_cases(data, dim):
     for key in list(data):
         cases.append((f"{key}:missing", lambda d, key=key: {k: v for k, v in d.items() if k != key}))
     cases.append(("extra-key", lambda d: {**d, "tree/evil": np.arange(3)}))
-    for v, lab in ((np.array("1"), "str"), (np.array(1.5), "float"), (np.array(True), "bool"), (np.array(3), "3"), (np.array(1), "1"),
-                   (np.array(-1), "-1"), (np.array([1]), "array"), (np.array(1.0), "float-1.0"),
+    return cases + _header_cases()
+
+
+def _header_cases():
+    """Tampered header scalars: version, format, class, fitted flag, parameters, update count."""
+    cases = []
+    for v, lab in ((np.array("1"), "str"), (np.array(1.5), "float"), (np.array(True), "bool"), (np.array(3), "3"),
+                   (np.array(1), "1"), (np.array(-1), "-1"), (np.array([1]), "array"), (np.array(1.0), "float-1.0"),
                    (np.array(None, dtype=object), "object")):
         cases.append((f"version={lab}", lambda d, v=v: {**d, "version": v}))
     for key, v in (("format", np.array("other")), ("format", np.array(1)), ("cls", np.array("GPISMapXD")),
                    ("fitted", np.array("yes")), ("fitted", np.array(1)), ("params", np.array("{not json")),
                    ("params", np.array('{"local_gp": {"map_scale": -1}}')), ("params", np.array('{"evil": 1}')),
                    ("params", np.array('[1, 2]')), ("params", np.array('{"tree": {"min_half": 1e-9}}')),
-                   ("params", np.array('{"tree": "no"}')), ("params", np.array('{"legacy": true}')), ("n_updates", np.array(-1)), ("n_updates", np.array(1.5)),
-                   ("n_updates", np.array("3"))):
+                   ("params", np.array('{"tree": "no"}')), ("params", np.array('{"legacy": true}')),
+                   ("n_updates", np.array(-1)), ("n_updates", np.array(1.5)), ("n_updates", np.array("3"))):
         cases.append((f"{key}={v!r}", lambda d, key=key, v=v: {**d, key: v}))
     return cases
 
