@@ -31,6 +31,9 @@ _KAPPA = 0.5
 class GPISMap2D(GPISMapBase):
     """Online Gaussian-process implicit surface in the plane (GPisMap, quadtree).
 
+    The configs' fields are in :mod:`polar_sim.gpis.config`; ``GPISMap2D.published()`` sets
+    every stage's behaviour switch to the published C++'s.
+
     Parameters
     ----------
     sensor_offset : (2,) array_like, default=(0.0, 0.0)
@@ -56,9 +59,6 @@ class GPISMap2D(GPISMapBase):
         Query and the faithful distance (spec §9). In 2D the GPIS weight is further scaled by
         ``clip(1 - var_f / 0.4, 0, 1)``: where the local GP is uninformative (no gradient
         observations) the surfel distance is used.
-
-    The configs' fields are in :mod:`polar_sim.gpis.config`; ``GPISMap2D.published()`` sets
-    every stage's behaviour switch to the published C++'s.
 
     Attributes
     ----------

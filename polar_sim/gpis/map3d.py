@@ -25,6 +25,11 @@ MAX_OBS_SKIP = 1 << 20
 class GPISMap3D(GPISMapBase):
     """Online Gaussian-process implicit surface in 3D (GPisMap3, octree).
 
+    The configs' fields are in :mod:`polar_sim.gpis.config`; ``GPISMap3D.published()`` sets
+    every stage's behaviour switch to the published C++'s (3D line search that re-projects the
+    original point, inverted normal-fusion weight, unnormalised rotation axis, chain-only
+    spacing, box retraining, the published query).
+
     Parameters
     ----------
     obs_skip : int, default=2
@@ -41,11 +46,6 @@ class GPISMap3D(GPISMapBase):
         Local GPs and their retraining (spec §8).
     distance : DistanceConfig3D
         Query and the faithful distance (spec §9).
-
-    The configs' fields are in :mod:`polar_sim.gpis.config`; ``GPISMap3D.published()`` sets
-    every stage's behaviour switch to the published C++'s (3D line search that re-projects the
-    original point, inverted normal-fusion weight, unnormalised rotation axis, chain-only
-    spacing, box retraining, the published query).
 
     Attributes
     ----------
