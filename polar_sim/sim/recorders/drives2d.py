@@ -4,9 +4,9 @@ kinematic indoor rover, cached as recordings.
 - :func:`plan_route` visits a scene's named regions (office2d: its rooms; warehouse2d: its
   aisles, main aisle, partition zone and yard) in a seeded random order, each at a random point
   with 0.9 m clearance, along the cheapest path on the exact clearance map (``World.sdf``);
-- :class:`Follower` is a forward-only pure-pursuit follower for a unicycle;
-- :func:`drive` follows a path and takes scans: noisy and noise-free ranges of the same instant,
-  the true sensor pose, the travelled distance;
+- :func:`drive` follows a path (:class:`polar_sim.control.PurePursuit` on waypoints: forward only,
+  slowing in turns, on the spot when the target is behind) and takes scans: noisy and noise-free
+  ranges of the same instant, the true sensor pose, the travelled distance;
 - :func:`recorded_drives` records one or more legs in one world (a leg after the first starts from
   a reset world whose noise stream continues) through :mod:`polar_sim.sim.recorders.sequences`, so an
   experiment replays a drive without MuJoCo;
@@ -22,10 +22,11 @@ import dataclasses
 
 import numpy as np
 
+from polar_sim.control import PurePursuit
 from polar_sim.geometry import T_to_pose2d
 
-__all__ = ["LIDAR_SIGMA", "ROBOT_CLEARANCE", "Drive", "lidar_world", "clearance_map", "plan_route", "Follower",
-           "drive", "recorded_drives", "snake_route", "section_corners", "regions"]
+__all__ = ["LIDAR_SIGMA", "ROBOT_CLEARANCE", "Drive", "lidar_world", "clearance_map", "plan_route", "drive",
+           "recorded_drives", "snake_route", "section_corners", "regions"]
 
 LIDAR_SIGMA = 0.01          # 2D lidar range noise of the GPIS experiments, m (issue 3)
 ROBOT_CLEARANCE = 0.45      # m, clearance below which a route cell costs 1e6 (crossed only in doors)
@@ -120,36 +121,6 @@ def plan_route(world, seed, *, n_rooms=5, start=None, clearance=None, res=0.1):
                             gaussian_filter1d(p[:, 1], 3, mode="nearest")])
 
 
-class Follower:
-    """Forward-only path follower for a unicycle: pure pursuit on a point ``lookahead`` metres
-    ahead along the path (progress never goes back, so routes that pass near themselves are safe);
-    slows down and turns on the spot when the target is behind."""
-
-    def __init__(self, path, lookahead=0.5, max_yaw_rate=2.0):
-        self.path = np.asarray(path, float)
-        self.i = 0
-        self.lookahead = float(lookahead)
-        self.max_yaw_rate = float(max_yaw_rate)
-
-    @property
-    def done(self):
-        return self.i >= len(self.path) - 1
-
-    def __call__(self, pose, vmax):
-        """Command (v m/s, omega rad/s) from the pose (x, y, theta), at most ``vmax`` m/s."""
-        x, y, th = pose
-        while self.i < len(self.path) - 1 and np.hypot(*(self.path[self.i] - (x, y))) < self.lookahead:
-            self.i += 1
-        dx, dy = self.path[self.i] - (x, y)
-        a = (np.arctan2(dy, dx) - th + np.pi) % (2 * np.pi) - np.pi
-        v = max(vmax * max(0.0, np.cos(a)) ** 2, 0.05)
-        if abs(a) < np.pi / 3:
-            om = 2.0 * v * np.sin(a) / max(np.hypot(dx, dy), 1e-6)
-        else:
-            om = np.sign(a) * self.max_yaw_rate
-        return float(v), float(np.clip(om, -self.max_yaw_rate, self.max_yaw_rate))
-
-
 def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1, lookahead=0.5, clean=True):
     """Follow ``path`` with the kinematic rover for ``duration`` seconds at up to ``speed`` m/s.
 
@@ -158,7 +129,8 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
     Stops early at the end of the path. ``clean=False`` skips the noise-free twin scans (their
     ranges are then NaN). Returns a :class:`Drive`.
     """
-    follow = Follower(path, lookahead)
+    follow = PurePursuit(path, lookahead, target="waypoint", max_yaw_rate=2.0, turn_in_place=np.pi / 3,
+                         min_speed=0.05)
     n_steps = int(round(duration / world.dt))
     angles = None
     poses, noisy, twins, trav, base = [], [], [], [], []
@@ -166,7 +138,7 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
     prev = world.truth()["robot_pose2d"]
     for k in range(n_steps + 1):
         if k:
-            world.step(follow(prev, speed))
+            world.step(follow.command(prev, speed))
             cur = world.truth()["robot_pose2d"]
             dist += float(np.hypot(*(cur[:2] - prev[:2])))
             prev = cur
