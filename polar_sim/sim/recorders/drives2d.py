@@ -24,6 +24,7 @@ import numpy as np
 
 from polar_sim.control import PurePursuit
 from polar_sim.geometry import T_to_pose2d
+from polar_sim.sim.meta import Office2DMeta, Warehouse2DMeta
 
 __all__ = ["LIDAR_SIGMA", "ROBOT_CLEARANCE", "Drive", "lidar_world", "clearance_map", "plan_route", "drive",
            "recorded_drives", "snake_route", "section_corners", "regions"]
@@ -58,16 +59,16 @@ def lidar_world(scene, seed, *, noise=True, **options):
 def regions(world):
     """The named regions (x0, x1, y0, y1) a route visits: office2d's rooms, warehouse2d's regions."""
     meta = world.meta
-    if "regions" in meta:
-        return dict(meta["regions"])
-    if "rooms" in meta:
-        return dict(meta["rooms"])
+    if isinstance(meta, Warehouse2DMeta):
+        return dict(meta.regions)
+    if isinstance(meta, Office2DMeta):
+        return dict(meta.rooms)
     raise ValueError(f"world: scene {world.scene!r} has no rooms or regions to plan a route through")
 
 
 def clearance_map(world, res=0.1, bounds=None):
     """Exact clearance (signed distance) on a grid over the scene: ``(xs, ys, C[ix, iy])``, m."""
-    x0, x1, y0, y1 = bounds if bounds is not None else world.meta["bounds"]
+    x0, x1, y0, y1 = bounds if bounds is not None else world.meta.bounds
     xs = np.arange(x0 + res / 2, x1, res)
     ys = np.arange(y0 + res / 2, y1, res)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
@@ -99,7 +100,7 @@ def plan_route(world, seed, *, n_rooms=5, start=None, clearance=None, res=0.1):
         return (int(np.clip(np.round((p[0] - xs[0]) / res), 0, len(xs) - 1)),
                 int(np.clip(np.round((p[1] - ys[0]) / res), 0, len(ys) - 1)))
 
-    start = np.asarray(world.meta["start_pose2d"][:2] if start is None else start, float)
+    start = np.asarray(world.meta.start_pose2d[:2] if start is None else start, float)
     pts = [start]
     names = list(rooms)
     order = []
@@ -168,7 +169,7 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
 
 def _leg_path(world, leg, clearance):
     if leg.get("route") == "snake":
-        return snake_route(int(world.meta.get("tiles", 1)))
+        return snake_route(world.meta.tiles)
     return plan_route(world, int(leg["route_seed"]), n_rooms=int(leg.get("n_rooms", 5)), clearance=clearance)
 
 
@@ -249,7 +250,7 @@ def snake_route(n, tile=30.0):
 def section_corners(world):
     """Corner points (m, 2) of the scene's section in the lidar plane.
 
-    warehouse2d lists its corners (``meta["corners"]``: convex box vertices on the boundary and
+    warehouse2d lists its corners (``meta.corners``: convex box vertices on the boundary and
     the concave corners). Otherwise: the vertices of every vertical box that the plane cuts
     (walls, desks, cabinets, shelves); where boxes join (a wall junction), the concave corner lies
     within a wall thickness of such a vertex.
@@ -258,8 +259,8 @@ def section_corners(world):
 
     from polar_sim.sim.truth import static_geoms
 
-    if "corners" in world.meta:
-        return np.asarray(world.meta["corners"], float).copy()
+    if isinstance(world.meta, Warehouse2DMeta):
+        return np.asarray(world.meta.corners, float).copy()
     m, dat = world.model, world.data
     z = world.lidar_plane_height()
     out = []
