@@ -274,7 +274,7 @@ def test_appearance_changes_colours_only(looks):
             assert np.array_equal(getattr(x["f"], k), getattr(ref["f"], k)), (a, k)
         assert np.array_equal(x["full"], ref["full"]), a
         assert np.abs(x["f"].rgb.astype(int) - ref["f"].rgb).mean() > 3, a
-        assert x["meta"]["appearance"]["family"] == a
+        assert x["meta"].appearance["family"] == a
 
 
 def test_labels_come_from_geoms_under_every_appearance(looks):
