@@ -54,6 +54,10 @@ class SceneMeta:
         raise TypeError(f"World.meta is a {type(self).__name__} dataclass, not a dict: read w.meta.{key} "
                         "(or w.meta.to_dict())")
 
+    def __contains__(self, key):
+        raise TypeError(f"World.meta is a {type(self).__name__} dataclass, not a dict: test hasattr(w.meta, {key!r}) "
+                        "(or key in w.meta.to_dict())")
+
     def to_dict(self) -> dict:
         """``{field: value}`` of every field (the values themselves, not copies)."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

@@ -69,3 +69,5 @@ def test_subscript_says_use_attributes():
     _, meta = load_scene("navworld", 1)
     with pytest.raises(TypeError, match=r"read w\.meta\.goal"):
         meta["goal"]
+    with pytest.raises(TypeError, match=r"hasattr\(w\.meta, 'pooled'\)"):
+        "pooled" in meta
