@@ -15,7 +15,8 @@ the returned polylines, inside the observed area of ``metrics.maps.ObservedArea`
   surface point to the returned surface; a point of the observed true surface (a noise-free end
   point) is claimed when its nearest returned point lies within 10 cm, or within the 0.3 m band
   *beside* a polyline running along the point's face (the offset to the nearest returned point
-  and the true face's tangent both within 45 deg of the polyline's normal and tangent): a polyline
+  and the true face's tangent both within 45 deg of the polyline's normal and tangent, and the
+  true outward normals at both within 45 deg: not the other face of a thin wall): a polyline
   beside the true surface counts, the stretches the map leaves out, past the ends of what it
   returns, do not (they are in ``coverage``);
 - ``coverage``: share of the observed true surface points within 10 cm of a returned point
@@ -106,6 +107,7 @@ class Level:
         g = sdf_gradient(sdf, self.P)
         g /= np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
         q = self.P - sdf(self.P)[:, None] * g
+        self.normal = g
         dc = cKDTree(corners).query(q)[0] if len(corners) else np.full(len(q), np.inf)
         corner = dc < CORNER_R
         sparse = ~corner & (obs.count(q) < WELL_K)
@@ -136,7 +138,9 @@ class Level:
             t = self.tan[self.seg[kp][j[beside]]]
             u = (h - P[j[beside]]) / dB[beside][:, None]
             c45 = np.cos(np.radians(45.0))
-            beside[beside] = (np.abs(np.einsum("ij,ij->i", n, t)) < c45) & (np.abs(np.einsum("ij,ij->i", u, t)) < c45)
+            nP = self.normal[kp][j[beside]]         # the true face the polyline lies on, outward
+            beside[beside] = ((np.abs(np.einsum("ij,ij->i", n, t)) < c45) & (np.abs(np.einsum("ij,ij->i", u, t)) < c45)
+                              & (np.einsum("ij,ij->i", n, nP) > c45))
         claimed = beside | (dB <= TOL)
         out = {"max_err_m": float(err.max()), "p99_err_m": float(np.percentile(err, 99)),
                "share_over_10cm": float(np.mean(err > TOL)), "surface_rmse_m": float(np.sqrt(np.mean(err ** 2))),

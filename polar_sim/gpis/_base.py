@@ -534,7 +534,7 @@ class GPISMapBase(Parameterised):
             observed free space lies ``free_depth`` inside it, when fewer than ``min_support``
             samples with a trusted normal lie within ``support_radius``, or when the map's
             variance there reaches ``gate_var`` (defaults ``_surface.FREE_DEPTH`` 0.1 m,
-            ``SUPPORT_RADIUS`` 0.15 m, ``MIN_SUPPORT`` 1, ``GATE_VAR`` 0.5).
+            ``SUPPORT_RADIUS`` 0.25 m, ``MIN_SUPPORT`` 2, ``GATE_VAR`` 0.5; chosen on dev seeds).
         free_depth, support_radius, min_support, gate_var : optional
             The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
             pass ``evidence=False``.

@@ -21,10 +21,12 @@ __all__ = ["surface_2d", "surface_3d", "grid_query", "gate_2d", "SurfaceEvidence
 #: Evidence gates of the 2D surface (default mode); each is also an argument of ``surface()``.
 #: ``FREE_DEPTH`` (m): a vertex whose inside at this depth (along minus the map's gradient) lies
 #: in observed free space is contradicted by the rays that crossed it. ``SUPPORT_RADIUS`` (m) and
-#: ``MIN_SUPPORT``: a vertex needs this many samples with a trusted normal within the radius.
+#: ``MIN_SUPPORT``: a vertex needs this many samples with a trusted normal within the radius (the
+#: zero level of objects below the grid's resolution, :func:`_refined`, passes the variance gate
+#: only: their normals are not resolved and a free-space cell is larger than they are).
 #: ``GATE_VAR``: a vertex where the map's variance reaches this is unsupported (the prior is
 #: ``1 + map_noise``). Chosen on the dev seeds of office2d and warehouse2d (benchmarks/RESULTS.md).
-FREE_DEPTH, SUPPORT_RADIUS, MIN_SUPPORT, GATE_VAR = 0.1, 0.15, 1, 0.5
+FREE_DEPTH, SUPPORT_RADIUS, MIN_SUPPORT, GATE_VAR = 0.1, 0.25, 2, 0.5
 
 
 def grid_query(m, axes, band, var_max, chunk=100_000):
@@ -118,7 +120,15 @@ def surface_2d(m, res, band, var_max, gates=None):
         # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
         # field's sign (a spurious zero between samples), not a surface the grid can resolve
         out = [ln for ln in out if not _bubble(ln, res)]
-        out += _refined(m, out, res)
+        small = _refined(m, out, res)
+        if gates is not None:
+            # an object below the grid's resolution (a post a few cm across) is a sample or two whose
+            # normals the beam spacing cannot resolve, inside one free-space cell: only the
+            # variance gate can judge it
+            ev = gated_2d(m, out, **gates)
+            sv = gated_2d(m, small, **{**gates, "free_depth": None, "min_support": 0})
+            return SurfaceEvidence(*(a + b for a, b in zip(_fields(ev), _fields(sv))))
+        out += small
     if gates is not None:
         return gated_2d(m, out, **gates)
     return out
@@ -217,6 +227,11 @@ class SurfaceEvidence:
     sigma: list
     rejected: list
     reason: list
+
+
+def _fields(ev):
+    """The fields of a :class:`SurfaceEvidence`, in order (no deep copy, unlike dataclasses.astuple)."""
+    return ev.lines, ev.support, ev.sigma, ev.rejected, ev.reason
 
 
 _REASONS = ("free", "support", "variance")
