@@ -54,8 +54,7 @@ TOL, CORNER_R, WELL_K = 0.10, 0.3, 10
 CLAIM_R = 0.3       # m: a true point beside a polyline's interior is claimed up to this far (the band)
 #: The dev sweep: (name, surface() keywords).
 SWEEP = [("off", {"evidence": False}), ("default", {})] + [
-    (f"fd{fd}_r{r}_k{k}", {"free_depth": fd, "support_radius": r, "min_support": k})
-    for fd in (0.05, 0.1, 0.15, None) for r in (0.15, 0.2, 0.25) for k in (0, 1, 2)]
+    (f"fd{fd}_end{e}", {"free_depth": fd, "face_end": e}) for fd in (0.05, 0.1) for e in (0.125, 0.15, 0.175, 0.2, 0.25)]
 
 
 def build(scene, seed, cache):
@@ -175,7 +174,7 @@ def trial(scene, seed, cache, settings, near=True):
             sc = Level(m.surface(**kw), w.sdf, obs, corners).scores()
         else:                            # the sweep: the same vertices, gated per setting
             g = _surface.gate_args(m, None, kw.get("free_depth"), kw.get("support_radius"), kw.get("min_support"),
-                                   kw.get("gate_var"), False)
+                                   kw.get("gate_var"), False, kw.get("face_end"))
             if kw.get("free_depth", 0) is None:
                 g["free_depth"] = None
             sc = level.scores(_surface.gate_2d(m, verts, **g)[0] == 0)

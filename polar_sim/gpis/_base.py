@@ -517,7 +517,7 @@ class GPISMapBase(Parameterised):
         self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
     def surface(self, res=None, band=None, *, evidence=None, free_depth=None, support_radius=None,
-                min_support=None, gate_var=None, return_evidence=False):
+                min_support=None, gate_var=None, face_end=None, return_evidence=False):
         """Zero level set of :meth:`query` near the observed samples.
 
         Parameters
@@ -531,11 +531,13 @@ class GPISMapBase(Parameterised):
         evidence : bool, optional
             2D only: return the zero level only where the map has evidence for it (default: on
             in default mode, off in the published ``query_mode``). A vertex is left out when
-            observed free space lies ``free_depth`` inside it, when fewer than ``min_support``
-            samples with a trusted normal lie within ``support_radius``, or when the map's
-            variance there reaches ``gate_var`` (defaults ``_surface.FREE_DEPTH`` 0.1 m,
-            ``SUPPORT_RADIUS`` 0.25 m, ``MIN_SUPPORT`` 2, ``GATE_VAR`` 0.5; chosen on dev seeds).
-        free_depth, support_radius, min_support, gate_var : optional
+            observed free space lies ``free_depth`` inside it; when fewer than ``min_support``
+            samples of its face with a trusted normal lie within ``support_radius``, or it lies
+            past the end of its face (not between two of them along the face, and farther than
+            ``face_end`` from each); or when the map's variance there reaches ``gate_var``
+            (defaults ``_surface.FREE_DEPTH`` 0.05 m, ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1,
+            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds).
+        free_depth, support_radius, min_support, gate_var, face_end : optional
             The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
             pass ``evidence=False``.
         return_evidence : bool, default False
@@ -561,7 +563,7 @@ class GPISMapBase(Parameterised):
         from polar_sim.gpis import _surface
 
         gates = _surface.gate_args(self, evidence, free_depth, support_radius, min_support, gate_var,
-                                   return_evidence)
+                                   return_evidence, face_end)
         check_updated(self, "tree_")
         res = self._SURF_RES if res is None else as_positive_float(res, "res")
         band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)

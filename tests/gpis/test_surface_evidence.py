@@ -142,9 +142,9 @@ def room():
 
 def _well_seen(path, k=10, max_incidence=60.0, corner_r=0.3):
     """True surface points hit by >= k of the drive's scans at incidence <= max_incidence, farther
-    than corner_r from a corner of the room or the box: every such point has samples with trusted
-    normals 0.2 m apart along its face (so one within 0.1 m + its noise, under the 0.15 m support
-    radius), and rays end at its face (so no observed free space lies behind it)."""
+    than corner_r from a corner of the room or the box: every such point lies between samples of
+    its face with trusted normals, 0.2 m apart along it (so within the support gate), and rays end
+    at its face (so no observed free space lies behind it)."""
     W = wall_points_2d(0.02)
     hits = np.zeros(len(W), int)
     for pose in path:
@@ -184,6 +184,7 @@ def test_gate_arguments_are_checked(wall_end):
     for kw, exc in [({"free_depth": -0.1}, ValueError), ({"free_depth": np.inf}, ValueError),
                     ({"support_radius": 0.0}, ValueError), ({"min_support": 1.5}, TypeError),
                     ({"min_support": -1}, ValueError), ({"gate_var": np.nan}, ValueError),
+                    ({"face_end": 0}, ValueError),
                     ({"evidence": "yes"}, TypeError), ({"return_evidence": 1}, TypeError)]:
         with pytest.raises(exc, match=next(iter(kw))):
             wall_end.surface(**kw)
@@ -194,7 +195,7 @@ def test_gate_arguments_are_checked(wall_end):
 def test_gates_are_arguments(wall_end):
     # a looser support gate and no free-space gate let more of the level through
     n = sum(map(len, wall_end.surface()))
-    loose = wall_end.surface(free_depth=0.5, support_radius=0.3, min_support=0, gate_var=2.0)
+    loose = wall_end.surface(free_depth=0.5, min_support=0, gate_var=2.0, face_end=1.0)
     assert sum(map(len, loose)) > n
 
 
