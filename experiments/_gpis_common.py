@@ -84,13 +84,13 @@ def orbit_trial(method, seed, *, n_frames, n_eval, **options):
     return row, m, truth, cmp
 
 
-def surface_points(m, spacing=0.01):
+def surface_points(m, spacing=0.01, **surface_kw):
     """The estimated surface of a mapper2d as points: ``surface_points()`` if it has one, else its
-    ``surface()`` polylines sampled every ``spacing`` m, else None."""
+    ``surface(**surface_kw)`` polylines sampled every ``spacing`` m, else None."""
     if callable(getattr(m, "surface_points", None)):
         return np.asarray(m.surface_points(), float).reshape(-1, 2)
     if callable(getattr(m, "surface", None)):
-        return polyline_points(m.surface(), spacing)
+        return polyline_points(m.surface(**surface_kw), spacing)
     return None
 
 
