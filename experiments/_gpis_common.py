@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from polar_sim.gpis import GPISMap2D
 from polar_sim.metrics.maps import polyline_points
 from polar_sim.runner.gpis_methods import call_factory
 from polar_sim.runner.methods import get_method
@@ -79,13 +80,13 @@ def orbit_trial(method, seed, *, n_frames, n_eval, **options):
     return row, m, truth, cmp
 
 
-def surface_points(m, spacing=0.01):
+def surface_points(m, spacing=0.01, **surface_kw):
     """The estimated surface of a mapper2d as points: ``surface_points()`` if it has one, else its
-    ``surface()`` polylines sampled every ``spacing`` m, else None."""
+    ``surface(**surface_kw)`` polylines sampled every ``spacing`` m, else None."""
     if callable(getattr(m, "surface_points", None)):
         return np.asarray(m.surface_points(), float).reshape(-1, 2)
     if callable(getattr(m, "surface", None)):
-        return polyline_points(m.surface(), spacing)
+        return polyline_points(m.surface(**surface_kw), spacing)
     return None
 
 
@@ -108,10 +109,11 @@ def mean(rows, key):
     return float(v.mean()) if len(v) else float("nan")
 
 
-def drive_trial(scene, method, seed, ctx, drive, n_eval, k, hits_every):
+def drive_trial(scene, method, seed, ctx, drive, n_eval, k, hits_every, ungated=False):
     """Map ``scene``'s recorded drive (``recorded_drives`` options ``drive``) with mapper2d ``method`` at
     the true poses and score it against the exact SDF (``metrics.map_scores_2d``, ``k`` scans for
-    well-seen and sparse); saves the path, every ``hits_every``-th observed hit and the score arrays."""
+    well-seen and sparse); saves the path, every ``hits_every``-th observed hit and the score arrays.
+    ``ungated`` scores GPIS's whole zero level (``surface(evidence=False)``), as the grids' surfaces are."""
     from polar_sim.metrics.maps import ObservedArea, map_scores_2d
     from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
 
@@ -120,7 +122,8 @@ def drive_trial(scene, method, seed, ctx, drive, n_eval, k, hits_every):
     cpu = fuse(m, d.angles, d.poses, d.ranges)
     w = truth_world(scene, seed)
     obs = ObservedArea(d.angles, d.poses, d.clean)
-    row, arr = map_scores_2d(m.query, surface_points(m), w.sdf, obs, section_corners(w), n_eval=n_eval, seed=seed,
+    kw = {"evidence": False} if ungated and isinstance(m, GPISMap2D) else {}
+    row, arr = map_scores_2d(m.query, surface_points(m, **kw), w.sdf, obs, section_corners(w), n_eval=n_eval, seed=seed,
                              well_k=k, sparse_k=k)
     w.close()
     ctx.save_arrays(path=d.poses[:, :2], hits=obs.hits[::hits_every], **arr)

@@ -28,7 +28,7 @@ from polar_sim.runner.report import length, markdown_table, number, percent, sav
 from polar_sim.experiments import _gpis_common as C
 
 M2D = ["near_rmse_m", "near_median_abs_m", "near_rmse_wellseen_m", "far_mae_m", "grad_near_median_deg",
-       "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m", "near_coverage95",
+       "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_m", "surface_rmse_m", "near_coverage95",
        "corner_rmse_m", "corner_coverage95", "sparse_rmse_m", "sparse_coverage95", "wall_rmse_m", "wall_coverage95",
        "worst_corner_share", "worst_sparse_share", "worst_wall_share", "n_scans", "update_cpu_ms_median"]
 M3D = ["object", "sdf_rmse_m", "sdf_median_abs_m", "chamfer_m", "surface_to_mesh_m", "mesh_to_surface_m",
@@ -63,11 +63,13 @@ TARGETS = [  # (scene, method, metric, bound, op, "worst" | "mean", label, known
     ("office2d", "gpis", "grad_near_median_deg", 5.0, "<=", "worst", "office2d: median gradient angle error <= 5 deg (near)", False),
     ("office2d", "gpis", "grad_far_median_deg", 5.0, "<=", "worst", "office2d: median gradient angle error <= 5 deg (far)", False),
     ("office2d", "gpis", "hausdorff_m", 0.10, "<=", "worst", "office2d: Hausdorff of surface(), observed area <= 10 cm", True),
+    ("office2d", "gpis", "h_est_to_true_m", 0.10, "<=", "worst", "office2d: no point of surface() farther than 10 cm from the true surface", True),
     ("office2d", "gpis", "far_mae_m", 0.05, "<=", "worst", "office2d: MAE in observed free space 0.3-2 m <= 5 cm", False),
     ("office2d", "gpis_legacy", "far_mae_m", 0.05, ">", "best", "office2d: the published (legacy) method's MAE > 5 cm", False),
     ("warehouse2d", "gpis", "near_rmse_m", 0.02, "<=", "mean", "warehouse2d: near-surface SDF RMSE <= 2 cm (mean)", True),
     ("warehouse2d", "gpis", "far_mae_m", 0.05, "<=", "mean", "warehouse2d: free-space MAE (0.3-2 m) <= 5 cm (mean)", False),
     ("warehouse2d", "gpis", "hausdorff_wellseen_m", 0.10, "<=", "mean", "warehouse2d: Hausdorff on surfaces hit by >= 10 scans <= 10 cm (mean)", True),
+    ("warehouse2d", "gpis", "h_est_to_true_m", 0.10, "<=", "worst", "warehouse2d: no point of surface() farther than 10 cm from the true surface", True),
     ("warehouse2d", "gpis", "near_coverage95", (0.90, 0.98), "in", "mean", "warehouse2d: 95 % interval coverage of the SDF in 90-98 % (mean)", True),
     ("object_orbit", "gpis", "sdf_rmse_m", 0.002, "<=", "worst", "object_orbit: SDF RMSE within 1 cm <= 2 mm", False),
     ("object_orbit", "gpis", "chamfer_m", 0.003, "<=", "worst", "object_orbit: Chamfer of surface() <= 3 mm", False),

@@ -553,7 +553,8 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
-    def surface(self, res=None, band=None):
+    def surface(self, res=None, band=None, *, evidence=None, free_depth=None, support_radius=None,
+                min_support=None, gate_var=None, face_end=None, return_evidence=False):
         """Zero level set of :meth:`query` near the observed samples.
 
         Parameters
@@ -564,6 +565,22 @@ class GPISMapBase(Parameterised):
             Only grid nodes within this distance of a sample are used (default 0.3 m in 2D,
             0.01 m in 3D); legacy mode also drops nodes with GP variance >= 0.4 (2D) / 0.1 (3D),
             as the published demos do.
+        evidence : bool, optional
+            2D only: return the zero level only where the map has evidence for it (default: on
+            in default mode, off in the published ``query_mode``). A vertex is left out when
+            observed free space lies ``free_depth`` inside it; when fewer than ``min_support``
+            samples of its face with a trusted normal lie within ``support_radius``, or it lies
+            past the end of its face (not between two of them along the face, and farther than
+            ``face_end`` from each); or when the map's variance there reaches ``gate_var``
+            (defaults ``_surface.FREE_DEPTH`` 0.05 m, ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1,
+            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds).
+        free_depth, support_radius, min_support, gate_var, face_end : optional
+            The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
+            pass ``evidence=False``.
+        return_evidence : bool, default False
+            2D only: return a :class:`~polar_sim.gpis._surface.SurfaceEvidence` (the polylines
+            with an evidence count and a position sigma per vertex, and the rejected pieces with
+            the gate they failed) instead of the list of polylines.
 
         Returns
         -------
@@ -578,15 +595,20 @@ class GPISMapBase(Parameterised):
             Naming ``res`` when the grid over the samples' bounding box would exceed
             ``_surface.MAX_SURFACE_NODES`` (2**24) nodes: a coarser ``res`` is needed (e.g. a
             3D map spanning a room at the default 2 mm). Nothing is allocated before the check.
+            Naming a gate argument that is out of range, or ``return_evidence`` in 3D.
         """
         from polar_sim.gpis import _surface
 
+        gates = _surface.gate_args(self, evidence, free_depth, support_radius, min_support, gate_var,
+                                   return_evidence, face_end)
         check_updated(self, "tree_")
         res = self._SURF_RES if res is None else as_positive_float(res, "res")
         band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)
         var_max = self._SURF_VAR if self._pub("query_mode") else np.inf
-        fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
-        return fn(self, res, band, var_max)
+        if self.dim == 3:
+            return _surface.surface_3d(self, res, band, var_max)
+        out = _surface.surface_2d(self, res, band, var_max, gates)
+        return out.lines if gates is not None and not return_evidence else out
 
     # -- samples, persistence --------------------------------------------------------------------
     def samples(self):
