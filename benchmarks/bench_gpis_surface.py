@@ -46,7 +46,6 @@ import _gpis_common as C  # noqa: E402
 
 from polar_sim.gpis import GPISMap2D, _surface  # noqa: E402
 from polar_sim.metrics.maps import ObservedArea, map_scores_2d, sdf_gradient  # noqa: E402
-from polar_sim.metrics.surface import sample_polyline  # noqa: E402
 from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners  # noqa: E402
 
 SPLITS = {"dev": range(5), "test": range(10_000, 10_005)}

@@ -3,8 +3,7 @@
 The kinematic rover drives the seeded 60 s route of ``gpis_accuracy`` (``office2d``, and the
 randomised ``warehouse2d`` worlds; 2D lidar, 1081 beams, sigma = 1 cm); a scan is fed every
 ``spacing_m`` metres of travel (0.1, 0.25, 0.5, 1.0 m) to the ``mapper2d`` method at the true pose:
-``gpis`` (its whole zero level, ``surface(evidence=False)``, sampled every 1 cm: the grids' surfaces
-are not gated either; the evidence gates of the default ``surface()`` are scored by ``gpis_accuracy``), ``grid5`` / ``grid10`` (occupied cells next
+``gpis`` (its ungated zero level, ``surface(evidence=False)``, as the grids', every 1 cm; ``gpis_accuracy`` scores the gates), ``grid5`` / ``grid10`` (occupied cells next
 to free ones), ``edt5`` (the zero contour of the 5 cm grid's signed EDT), or a plug-in.
 
 Scores (``polar_sim.metrics.maps``): *surface RMSE* (RMS of the exact |SDF| at the estimated surface

@@ -159,7 +159,9 @@ class MapCNNPolicy:
                 "recipe": self.recipe, "layers": len(self.weights), "strides": [s for _, _, s in self.convs],
                 "known_var": self.known_var, "memory": self.memory_params}
         # The weights as float32: torch trains them in float32, so this loses nothing and halves the file.
-        single = (lambda a: a.astype(np.float32) if np.array_equal(a.astype(np.float32), a) else a)
+        def single(a):
+            return a.astype(np.float32) if np.array_equal(a.astype(np.float32), a) else a
+
         arrays = {"obs_mean": self.mean, "obs_std": self.std}
         for i, (w, b, _) in enumerate(self.convs):
             arrays[f"conv{i}/W"], arrays[f"conv{i}/b"] = single(w), single(b)
