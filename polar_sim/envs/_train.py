@@ -17,7 +17,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
 from polar_sim.envs.action_maps import wrap_action
-from polar_sim.envs.curriculum import GoalDistanceCurriculum, LinearSchedule
+from polar_sim.envs.curriculum import ClutterCurriculum, Ramp
 from polar_sim.envs.evaluate import evaluate
 from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
@@ -117,17 +117,18 @@ def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
                         env_kwargs=_train_env_kwargs(p), wrapper_class=wrapper, wrapper_kwargs=wrapper_kwargs)
 
 
-def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None):
+def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None, clutter_start=0):
     if schedule is not None:
-        env = GoalDistanceCurriculum(env, schedule)
+        env = ClutterCurriculum(env, schedule, clutter_start)
     return FeatureObservation(wrap_action(env, action), keys, mean, std, known_var=known_var)
 
 
 def _schedule(p):
-    """The goal-distance curriculum of ``p`` (None when ``curriculum_steps`` is 0)."""
+    """The clutter curriculum of ``p``: from ``curriculum_start`` pieces to the tier's own over
+    ``curriculum_steps`` (None when 0)."""
     if not p.get("curriculum_steps"):
         return None
-    return LinearSchedule(p["curriculum_start"], p["curriculum_steps"])
+    return Ramp(p["curriculum_steps"])
 
 
 def _ppo_kwargs(p, hidden, log_std_init, activation="tanh"):
@@ -161,7 +162,7 @@ def _ppo(env_id, p, seed, curve, progress):
     recipe = {"name": "ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
               "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"]), "action": action}
     kv, schedule = p["known_var"], _schedule(p)
-    wk = {"action": action, "keys": keys, "known_var": kv, "schedule": schedule}
+    wk = {"action": action, "keys": keys, "known_var": kv, "schedule": schedule, "clutter_start": p["curriculum_start"]}
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=True, norm_reward=True,
                         clip_obs=10.0, gamma=p["gamma"])
     model = make_model(recipe, venv, seed=seed)
@@ -228,7 +229,8 @@ def _sb3(env_id, p, seed, curve, progress, name):
     if p["obs_mode"] == "stencil":  # the masked stencil as one vector, as PPO's MLP reads it
         recipe["features"] = {"keys": list(p["obs_keys"]), "known_var": p["known_var"]}
         recipe["policy"] = recipe["policy"].replace("MultiInput", "Mlp")
-        wrapper, wk = _feature_wrapper, {"action": recipe["action"], **recipe["features"], "schedule": schedule}
+        wrapper, wk = _feature_wrapper, {"action": recipe["action"], **recipe["features"], "schedule": schedule,
+                                         "clutter_start": p["curriculum_start"]}
     else:
         wrapper, wk = wrap_action, {"action": recipe["action"]}
     venv = VecNormalize(_vec_env(env_id, pp, seed, wrapper, wk), norm_obs=True,

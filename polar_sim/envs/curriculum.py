@@ -1,11 +1,12 @@
-"""A goal-distance curriculum for training on the GPISNav tiers (gymnasium only).
+"""A clutter curriculum for training on the GPISNav tiers (gymnasium only).
 
-:class:`GoalDistanceCurriculum` keeps the env as it is (its worlds, reward and observations) and
-only chooses which episodes a learner trains on: it resets until the episode's straight-line goal
-distance is within the current limit of a :class:`LinearSchedule`, which a training callback moves
-forward with the learner's environment steps. Early training then sees near goals, where the
-progress and success terms of the reward are met by a policy that has not yet learned to avoid
-clutter; the limit grows to every goal. Evaluation never wraps: it scores every episode.
+:class:`ClutterCurriculum` chooses which worlds a learner trains on: each episode is drawn from an
+env of the same id and arguments but with ``clutter`` pieces, ``clutter`` following a
+:class:`Ramp` that a training callback moves forward with the learner's environment
+steps (from few pieces to the tier's own). Early training then meets the progress and success
+terms of the reward before it has learned to avoid clutter. The observation, action and reward
+are the env's own; evaluation never wraps. (A goal-distance curriculum does not fit these tiers:
+their start and goal are drawn at least 4.8 m apart, 4.8-6.6 m on the room tier.)
 """
 
 from __future__ import annotations
@@ -14,28 +15,26 @@ import gymnasium as gym
 import numpy as np
 
 from polar_sim._validation import as_float, as_int
+from polar_sim.envs.lidar_nav import resolve_tier
 
-__all__ = ["LinearSchedule", "GoalDistanceCurriculum"]
+#: Episode seeds a curriculum draws from (the training split; dev worlds are 1000-9999, held-out
+#: worlds 10,000 and more).
+TRAIN_SEEDS = (0, 1000)
+
+__all__ = ["Ramp", "ClutterCurriculum", "TRAIN_SEEDS"]
 
 
-class LinearSchedule:
-    """The goal-distance limit (m) against training steps: ``start`` at step 0, growing linearly
-    to ``far`` at ``steps``, then unlimited (``inf``).
+class Ramp:
+    """Training progress: ``fraction`` grows linearly from 0 at step 0 to 1 at ``steps``, then stays 1.
 
     Parameters
     ----------
-    start : float
-        Limit at step 0, m (> 0).
     steps : int
-        Environment steps until the limit is lifted (>= 1).
-    far : float, default=10.0
-        Limit just before ``steps``, m (>= ``start``).
+        Environment steps of the ramp (>= 1).
     """
 
-    def __init__(self, start, steps, far=10.0):
-        self.start = as_float(start, "start", minimum=0.0, maximum=1e3, exclusive_minimum=True)
+    def __init__(self, steps):
         self.steps = as_int(steps, "steps", minimum=1)
-        self.far = as_float(far, "far", minimum=self.start, maximum=1e3)
         self.t = 0
 
     def update(self, t):
@@ -43,48 +42,66 @@ class LinearSchedule:
         self.t = as_int(t, "t", minimum=0)
 
     @property
-    def limit(self):
-        """The current limit on the goal distance, m."""
-        if self.t >= self.steps:
-            return np.inf
-        return self.start + (self.far - self.start) * self.t / self.steps
+    def fraction(self):
+        """The current progress in [0, 1]."""
+        return min(self.t / self.steps, 1.0)
 
 
-class GoalDistanceCurriculum(gym.Wrapper):
-    """Reset until ``info["goal_distance"] <= schedule.limit`` (at most ``max_tries`` resets, then
-    the last episode is kept); the redraws continue the env's own seeded stream, so a seeded run
-    trains on the same episodes every time.
+class ClutterCurriculum(gym.Wrapper):
+    """Each episode in a world with ``round(start + ramp.fraction * (max_clutter - start))``
+    pieces of clutter, ``max_clutter`` being the wrapped env's own; the env otherwise as made.
+
+    The env of each clutter level is made once, with the wrapped env's id and ``gym.make``
+    arguments, when first needed. Each episode's seed is drawn from the training seeds
+    (:data:`TRAIN_SEEDS`, 0-999) by a stream that the first reset's seed seeds, so a seeded run
+    trains on the same worlds every time and never on dev or held-out ones.
 
     Parameters
     ----------
     env : gymnasium.Env
-        An env whose reset ``info`` holds ``goal_distance`` (m), e.g. any GPISNav id.
-    schedule : LinearSchedule
+        A GPISNav env made by ``gym.make`` (its ``spec`` names the id and arguments).
+    ramp : Ramp
         Shared with the callback that advances it (one process, e.g. SB3's ``DummyVecEnv``).
-    max_tries : int, default=50
+    start : int, default=0
+        Pieces of clutter at the start of the ramp (at most the env's own).
 
     Examples
     --------
     >>> import gymnasium as gym, polar_sim.envs
-    >>> sched = LinearSchedule(start=2.0, steps=100_000)
-    >>> env = GoalDistanceCurriculum(gym.make("polar_sim/GPISNav-Room-v2", pose_source="truth",
-    ...                                       sdf_source="truth"), sched)
-    >>> _, info = env.reset(seed=0)
-    >>> bool(info["goal_distance"] <= 2.0)
-    True
+    >>> env = ClutterCurriculum(gym.make("polar_sim/GPISNav-Room-v2", pose_source="truth",
+    ...                                  sdf_source="truth"), Ramp(100_000))
+    >>> _ = env.reset(seed=0)
+    >>> env.clutter
+    0
     """
 
-    def __init__(self, env, schedule, max_tries=50):
-        if not isinstance(schedule, LinearSchedule):
-            raise TypeError(f"schedule: expected a LinearSchedule, got {type(schedule).__name__}")
+    def __init__(self, env, ramp, start=0):
+        if not isinstance(ramp, Ramp):
+            raise TypeError(f"ramp: expected a Ramp, got {type(ramp).__name__}")
+        spec = env.spec
+        if spec is None:
+            raise ValueError("env: expected an env made by gym.make (its spec names the id and arguments)")
         super().__init__(env)
-        self.schedule = schedule
-        self.max_tries = as_int(max_tries, "max_tries", minimum=1, maximum=10_000)
+        kw = spec.kwargs
+        self.max_clutter = resolve_tier(kw.get("tier"), kw.get("rooms"), kw.get("room_size"), kw.get("clutter"))[2]
+        self.ramp, self.start = ramp, as_int(start, "start", minimum=0, maximum=self.max_clutter)
+        self._envs = {self.max_clutter: env}
+        self._spec = spec
+        self._rng = None
+        self.clutter = self.max_clutter
+
+    def _env_of(self, clutter):
+        if clutter not in self._envs:
+            self._envs[clutter] = gym.make(self._spec.id, **{**self._spec.kwargs, "clutter": clutter})
+        return self._envs[clutter]
 
     def reset(self, *, seed=None, options=None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        for _ in range(self.max_tries - 1):
-            if info["goal_distance"] <= self.schedule.limit:
-                break
-            obs, info = self.env.reset(options=options)
-        return obs, info
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        self.clutter = int(round(self.start + self.ramp.fraction * (self.max_clutter - self.start)))
+        self.env = self._env_of(self.clutter)
+        return self.env.reset(seed=int(self._rng.integers(*TRAIN_SEEDS)), options=options)
+
+    def close(self):
+        for e in self._envs.values():
+            e.close()

@@ -51,9 +51,9 @@ _DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "step
            "known_var": 0.5}
 # RL from scratch: the masked stencil (the imitation recipe's observation), trained where a step is
 # cheapest (true pose, exact SDF: about 10x the slam mode's steps per CPU-second) and scored in slam;
-# an optional goal-distance curriculum (polar_sim.envs.curriculum; curriculum_steps 0 = off).
+# an optional clutter curriculum (polar_sim.envs.curriculum; curriculum_steps 0 = off).
 _RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "curriculum_steps": 0,
-       "curriculum_start": 2.0}
+       "curriculum_start": 0}
 _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
@@ -85,15 +85,14 @@ def _check_value(key, value, default):
     if isinstance(default, bool):
         return as_bool(value, key)
     if isinstance(default, int):
-        lo = 0 if key in ("eval_every", "critic_warmup_steps", "learning_starts", "curriculum_steps") else 1
+        lo = 0 if key in ("eval_every", "critic_warmup_steps", "learning_starts", "curriculum_steps",
+                          "curriculum_start") else 1
         return as_int(value, key, minimum=lo, maximum=100_000_000)
     if isinstance(default, float):
         if key in _UNIT:
             return as_float(value, key, minimum=0.0, maximum=1.0)
         if key == "log_std_init":
             return as_float(value, key, minimum=-10.0, maximum=2.0)
-        if key == "curriculum_start":
-            return as_float(value, key, minimum=0.0, maximum=100.0, exclusive_minimum=True)
         return as_float(value, key, minimum=0.0, maximum=10.0, exclusive_minimum=key in ("lr", "learning_rate"))
     if key == "hidden":
         if not isinstance(value, (list, tuple)) or not value:
