@@ -14,7 +14,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from polar_sim._validation import as_float, as_int
+from polar_sim._validation import as_int
 from polar_sim.envs.lidar_nav import resolve_tier
 
 #: Episode seeds a curriculum draws from (the training split; dev worlds are 1000-9999, held-out
