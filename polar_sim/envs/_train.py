@@ -20,6 +20,7 @@ from polar_sim.envs.action_maps import wrap_action
 from polar_sim.envs.curriculum import ClutterCurriculum, Ramp
 from polar_sim.envs.evaluate import evaluate
 from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
+from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
                                      make_model, ppo_recipe, sb3_recipe)
 
@@ -177,12 +178,29 @@ def _ppo(env_id, p, seed, curve, progress):
     return policy, model.num_timesteps
 
 
+def _initial_policy(env_id, p, seed, curve, progress, clock):
+    """The imitation policy to fine-tune and its env steps: ``dagger``'s, or ``init_policy``'s (0 steps)."""
+    if not p["init_policy"]:
+        return _dagger(env_id, p, seed, curve, progress, clock)
+    if p["init_policy"] == "pretrained":
+        from polar_sim.envs.shipped import pretrained
+
+        policy = pretrained(env_id)
+    else:
+        policy = MLPPolicy.load(p["init_policy"], name="init_policy")
+    if policy.action is not None or policy.env_id != env_id:
+        raise ValueError(f"init_policy: expected an imitation policy of {env_id} (env action), got one of "
+                         f"{policy.env_id} with action {policy.action}")
+    return policy, 0
+
+
 def _dagger_ppo(env_id, p, seed, curve, progress):
     clock = _Clock()
-    imitation, steps0 = _dagger(env_id, p, seed, curve, progress, clock)
+    imitation, steps0 = _initial_policy(env_id, p, seed, curve, progress, clock)
     keys = imitation.obs_keys
+    hidden = [w.shape[0] for w in imitation.weights[:-1]]
     recipe = {"name": "dagger_ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
-              "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"], p["activation"]), "action": None}
+              "kwargs": _ppo_kwargs(p, hidden, p["log_std_init"], imitation.activation), "action": None}
     wk = {"action": None, "keys": keys, "mean": imitation.mean, "std": imitation.std, "known_var": imitation.known_var}
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=False, norm_reward=True,
                         gamma=p["gamma"])

@@ -11,7 +11,7 @@ and writes ``policy.npz``, ``curve.csv`` and ``summary.json`` to ``out``.
 | recipe | what | policy file |
 |---|---|---|
 | ``dagger`` | behaviour cloning + DAgger rounds from a scripted expert (:mod:`polar_sim.envs.imitation`) | numpy MLP |
-| ``dagger_ppo`` | ``dagger``, then PPO fine-tuning from its weights (critic warm-up first) | numpy MLP |
+| ``dagger_ppo`` | ``dagger`` (or ``init_policy``: a policy file, ``"pretrained"``), then PPO fine-tuning from its weights (critic warm-up first) | numpy MLP |
 | ``ppo`` | PPO from scratch, masked-stencil MLP (or ``obs_mode="grid"``: the grid CNN) | numpy MLP (grid: SB3) |
 | ``recurrent_ppo`` | sb3-contrib RecurrentPPO, an LSTM policy on the masked stencil | SB3 |
 | ``sac``, ``tqc`` | off-policy SAC (SB3) / TQC (sb3-contrib) on the masked stencil | SB3 |
@@ -62,7 +62,8 @@ RECIPES = {
     "dagger": {**_COMMON, **_DAGGER},
     "dagger_ppo": {**_COMMON, **_DAGGER, "finetune_steps": 50_000, "n_envs": 4, "learning_rate": 5e-5,
                    "n_steps": 512, "batch_size": 256, "n_epochs": 5, "gamma": 0.99, "gae_lambda": 0.95,
-                   "clip_range": 0.1, "ent_coef": 0.0, "log_std_init": -2.0, "critic_warmup_steps": 10_000},
+                   "clip_range": 0.1, "ent_coef": 0.0, "log_std_init": -2.0, "critic_warmup_steps": 10_000,
+                   "init_policy": ""},
     "ppo": {**_COMMON, **_PPO},
     "recurrent_ppo": {**_COMMON, **{k: v for k, v in _PPO.items() if k != "hidden"}, "n_steps": 128,
                       "batch_size": 128},
@@ -77,7 +78,19 @@ _CHOICES = {"train_pose_source": ("truth", "odometry", "slam"), "train_sdf_sourc
 _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 
+def _check_init_policy(value):
+    """``init_policy``: "" (run ``dagger`` first), "pretrained" (the tier's shipped policy) or an
+    existing ``.npz`` policy file."""
+    if not isinstance(value, str):
+        raise ValueError(f"init_policy: expected '', 'pretrained' or a .npz path, got {value!r}")
+    if value not in ("", "pretrained") and not (value.endswith(".npz") and Path(value).is_file()):
+        raise ValueError(f"init_policy: expected '', 'pretrained' or an existing .npz policy file, got {value!r}")
+    return value
+
+
 def _check_value(key, value, default):
+    if key == "init_policy":
+        return _check_init_policy(value)
     if key == "known_var":
         return None if value is None else as_float(value, key, minimum=0.0, maximum=1e6, exclusive_minimum=True)
     if key in _CHOICES:

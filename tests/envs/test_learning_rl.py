@@ -113,6 +113,25 @@ def test_baselines_read_the_masked_stencil(name, params, tmp_path):
     env.close()
 
 
+# PPO fine-tuning can start from a shipped imitation policy instead of running DAgger first: no
+# expert steps, the same network widths, an env-action policy for the default slam mode.
+def test_dagger_ppo_from_the_shipped_policy(tmp_path):
+    from polar_sim.envs import pretrained
+
+    torch.set_num_threads(1)
+    params = {"init_policy": "pretrained", "finetune_steps": 128, "n_envs": 2, "n_steps": 64, "batch_size": 64,
+              "n_epochs": 1, "critic_warmup_steps": 128}
+    policy, summary = recipes.train("dagger_ppo", ROOM, params=params, out=tmp_path, progress=False)
+    ref = pretrained(ROOM)
+    assert summary["steps"] == 128 + 128  # warm-up and fine-tuning, no DAgger steps
+    assert [w.shape for w in policy.weights] == [w.shape for w in ref.weights] and policy.action is None
+    assert policy.known_var == ref.known_var and policy.env_kwargs == {}
+    env = gym.make(ROOM)
+    obs, _ = env.reset(seed=10_002)
+    np.testing.assert_allclose(load_policy(tmp_path / "policy.npz", env)(obs), policy(obs), rtol=0, atol=1e-6)
+    env.close()
+
+
 # Wrong RL parameters are refused with a ValueError naming them, before any env is built.
 @pytest.mark.parametrize("name,params,match", [
     ("ppo", {"train_sdf_source": "slam"}, "train_sdf_source"),
@@ -122,6 +141,8 @@ def test_baselines_read_the_masked_stencil(name, params, tmp_path):
     ("ppo", {"obs_keys": ["goal", "sdf", "twist"]}, "known_var"),
     ("sac", {"known_var": 0.0}, "known_var"),
     ("recurrent_ppo", {"curriculum": 3}, "curriculum"),
+    ("dagger_ppo", {"init_policy": "no_such_file.npz"}, "init_policy"),
+    ("dagger_ppo", {"init_policy": 3}, "init_policy"),
 ])
 def test_bad_rl_params_refused_before_training(name, params, match, monkeypatch):
     monkeypatch.setattr(gym, "make", lambda *a, **k: pytest.fail("an env was built"))
