@@ -19,6 +19,7 @@ from tqdm.auto import tqdm
 from polar_sim.envs.action_maps import wrap_action
 from polar_sim.envs.curriculum import ClutterCurriculum, Ramp
 from polar_sim.envs.evaluate import evaluate
+from polar_sim.envs.far_mask import FarAsUnknown
 from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
@@ -118,9 +119,12 @@ def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
                         env_kwargs=_train_env_kwargs(p), wrapper_class=wrapper, wrapper_kwargs=wrapper_kwargs)
 
 
-def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None, clutter_start=0):
+def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None, clutter_start=0,
+                     far_unknown=False):
     if schedule is not None:
         env = ClutterCurriculum(env, schedule, clutter_start)
+    if far_unknown:
+        env = FarAsUnknown(env)
     return FeatureObservation(wrap_action(env, action), keys, mean, std, known_var=known_var)
 
 
@@ -155,7 +159,7 @@ def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None, known_var
 
 
 def _ppo(env_id, p, seed, curve, progress):
-    if p["obs_mode"] == "grid":
+    if p["obs_mode"] == "grid" or p["far_unknown"]:  # an SB3 policy file (the numpy MLP reads no far mask)
         return _sb3(env_id, p, seed, curve, progress, name="ppo")
     clock = _Clock()
     keys = list(p["obs_keys"])
@@ -245,7 +249,10 @@ def _sb3(env_id, p, seed, curve, progress, name):
     pp = {**p, "env_kwargs": env_kwargs}
     schedule = _schedule(p)
     if p["obs_mode"] == "stencil":  # the masked stencil as one vector, as PPO's MLP reads it
-        recipe["features"] = {"keys": list(p["obs_keys"]), "known_var": p["known_var"]}
+        recipe["features"] = {"keys": list(p["obs_keys"]), "known_var": p["known_var"],
+                              "far_unknown": p["far_unknown"]}
+        if "hidden" in p:
+            recipe["kwargs"]["policy_kwargs"]["net_arch"] = {"pi": list(p["hidden"]), "vf": list(p["hidden"])}
         recipe["policy"] = recipe["policy"].replace("MultiInput", "Mlp")
         wrapper, wk = _feature_wrapper, {"action": recipe["action"], **recipe["features"], "schedule": schedule,
                                          "clutter_start": p["curriculum_start"]}

@@ -26,7 +26,8 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from polar_sim.envs.action_maps import ACTION_WRAPPERS, ForwardDriveAction, env_action, wrap_action
-from polar_sim.envs.features import FeatureObservation, stencil_vector
+from polar_sim.envs.far_mask import FarAsUnknown, feature_vector
+from polar_sim.envs.features import FeatureObservation
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
@@ -195,6 +196,8 @@ def load_model(path, env, name="path"):
         raise ValueError(f"{name}: a policy of kind {meta['kind']!r}, expected 'sb3'")
     features = meta["recipe"].get("features")
     if features:  # trained on the flat (masked) stencil: rebuild on the same vector
+        if features.get("far_unknown"):
+            env = FarAsUnknown(env)
         env = FeatureObservation(env, features["keys"], known_var=features["known_var"])
     shapes = meta.get("obs_shapes", {})
     if "" in shapes:
@@ -218,8 +221,8 @@ def load_model(path, env, name="path"):
 
 class SB3Policy:
     """``policy(obs) -> action`` of an SB3 model: deterministic actions on normalised
-    observations (first flattened as the recipe's ``features``, ``{"keys", "known_var"}``, say, if
-    it has them: :func:`~polar_sim.envs.features.stencil_vector`), mapped to the env's action by
+    observations (first flattened as the recipe's ``features`` say, ``{"keys", "known_var",
+    "far_unknown"}``, if it has them: :func:`~polar_sim.envs.far_mask.feature_vector`), mapped to the env's action by
     the recipe's ``action``; ``reset()`` clears a recurrent policy's state."""
 
     def __init__(self, model, normaliser, recipe, env_id=None, env_kwargs=None):
@@ -239,7 +242,7 @@ class SB3Policy:
 
     def __call__(self, obs):
         if self.features:
-            obs = stencil_vector(obs, self.features["keys"], self.features["known_var"])
+            obs = feature_vector(obs, **self.features)
         o = self.normaliser(obs)
         o = o[None] if self.normaliser.flat else {k: v[None] for k, v in o.items()}
         if self.recurrent:

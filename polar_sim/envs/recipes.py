@@ -52,8 +52,8 @@ _DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "step
 # RL from scratch: the masked stencil (the imitation recipe's observation), trained where a step is
 # cheapest (true pose, exact SDF: about 10x the slam mode's steps per CPU-second) and scored in slam;
 # an optional clutter curriculum (polar_sim.envs.curriculum; curriculum_steps 0 = off).
-_RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "curriculum_steps": 0,
-       "curriculum_start": 0}
+_RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "far_unknown": False,
+       "curriculum_steps": 0, "curriculum_start": 0}
 _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
@@ -149,6 +149,8 @@ def check_recipe(name, params=None, env_id=None):
         raise ValueError(f"obs_mode: recipe {name!r} trains on the stencil only")
     if out.get("known_var") is not None and out.get("obs_mode") != "grid" and "sdf_var" not in out["obs_keys"]:
         raise ValueError(f"known_var: masking unknown space needs 'sdf_var' among the obs_keys, got {out['obs_keys']}")
+    if out.get("far_unknown") and out.get("known_var") is None:
+        raise ValueError("far_unknown: reading far points as unknown needs the masked stencil (known_var)")
     if name == "dagger_ppo" and out["finetune_steps"] < out["n_envs"] * out["n_steps"]:
         raise ValueError(f"finetune_steps: expected at least n_envs * n_steps = {out['n_envs'] * out['n_steps']}")
     return out
