@@ -93,12 +93,14 @@ def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
 # action depends only on that vector (unknown-space values beyond the mask do not reach it).
 @pytest.mark.parametrize("name,params", [
     ("recurrent_ppo", {"steps": 128, "n_envs": 2, "n_steps": 32, "batch_size": 64, "n_epochs": 1}),
+    ("ppo", {"steps": 128, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "far_unknown": True}),
     ("sac", {"steps": 120, "learning_starts": 50, "batch_size": 32}),
 ])
 def test_baselines_read_the_masked_stencil(name, params, tmp_path):
     torch.set_num_threads(1)
     policy, _ = recipes.train(name, ROOM, params=params, out=tmp_path, progress=False)
-    assert policy.recipe["features"] == {"keys": ["goal", "sdf", "sdf_grad", "sdf_var", "twist"], "known_var": 0.5}
+    assert policy.recipe["features"] == {"keys": ["goal", "sdf", "sdf_grad", "sdf_var", "twist"], "known_var": 0.5,
+                                         "far_unknown": params.get("far_unknown", False)}
     env = gym.make(ROOM)
     loaded = load_policy(tmp_path / "policy.npz", env)
     obs, _ = env.reset(seed=10_001)
@@ -111,6 +113,20 @@ def test_baselines_read_the_masked_stencil(name, params, tmp_path):
     loaded.reset()
     np.testing.assert_allclose(loaded(obs), policy(other), rtol=0, atol=1e-6)
     env.close()
+
+
+# Far points read as unknown: sdf FAR, gradient 0, mask 0, whatever their variance; near points
+# keep the masked stencil's values; the input is not changed.
+def test_far_as_unknown_exact_values():
+    from polar_sim.envs.far_mask import far_as_unknown, feature_vector
+
+    obs = {"sdf": np.array([0.2, 1.5, 3.0, -0.4], np.float32), "sdf_var": np.array([0.0, 0.0, 0.1, 0.9], np.float32),
+           "sdf_grad": np.arange(8, dtype=np.float32)}
+    out = far_as_unknown(obs)
+    np.testing.assert_array_equal(out["sdf_var"], np.float32([0.0, 1e6, 1e6, 0.9]))
+    np.testing.assert_array_equal(obs["sdf_var"], np.float32([0.0, 0.0, 0.1, 0.9]))
+    v = feature_vector(obs, ["sdf", "sdf_grad", "sdf_var"], known_var=0.5, far_unknown=True)
+    np.testing.assert_allclose(v, [0.2, 1.5, 1.5, 1.5, 0, 1, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0], atol=1e-7)
 
 
 # PPO fine-tuning can start from a shipped imitation policy instead of running DAgger first: no
@@ -141,6 +157,7 @@ def test_dagger_ppo_from_the_shipped_policy(tmp_path):
     ("ppo", {"obs_keys": ["goal", "sdf", "twist"]}, "known_var"),
     ("sac", {"known_var": 0.0}, "known_var"),
     ("recurrent_ppo", {"curriculum": 3}, "curriculum"),
+    ("ppo", {"far_unknown": True, "known_var": None}, "far_unknown"),
     ("dagger_ppo", {"init_policy": "no_such_file.npz"}, "init_policy"),
     ("dagger_ppo", {"init_policy": 3}, "init_policy"),
 ])
