@@ -49,11 +49,13 @@ _COMMON = {"train_pose_source": "truth", "env_kwargs": {}, "eval_every": 0, "eva
 _DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "steps_per_round": 5000, "beta_decay": 0.5, "hidden": [256, 256],
            "activation": "tanh", "epochs": 100, "batch_size": 256, "lr": 1e-3, "obs_keys": MASKED_KEYS,
            "known_var": 0.5}
-# RL from scratch: the masked stencil (the imitation recipe's observation), trained where a step is
-# cheapest (true pose, exact SDF: about 10x the slam mode's steps per CPU-second) and scored in slam;
-# an optional clutter curriculum (polar_sim.envs.curriculum; curriculum_steps 0 = off).
-_RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "far_unknown": False,
-       "curriculum_steps": 0, "curriculum_start": 0}
+# RL from scratch: the masked stencil (the imitation recipe's observation) with far points read as
+# unknown (polar_sim.envs.far_mask), trained where a step is cheapest (true pose, exact SDF: about 10x
+# the slam mode's steps per CPU-second) and scored in slam, with a clutter curriculum over the first
+# half of training (polar_sim.envs.curriculum; curriculum_steps 0 = off). Chosen on dev worlds
+# 1000-1009 (benchmarks/RESULTS.md, "PPO from scratch on GPISNav-Room-v2").
+_RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "far_unknown": True,
+       "curriculum_steps": 150_000, "curriculum_start": 0}
 _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}

@@ -9,12 +9,13 @@ id, so the file ships inside polar_sim and needs no path::
         -f logs/ --no-render -n 600 --env-kwargs pose_source:"'slam'" sdf_source:"'gpis'"
 
 The values are the ``ppo`` recipe's defaults (:data:`polar_sim.envs.recipes.RECIPES`): the masked
-stencil as one vector (:class:`~polar_sim.envs.features.FeatureObservation` with ``known_var``),
+stencil as one vector (:class:`~polar_sim.envs.features.FeatureObservation` with ``known_var``,
+after :class:`~polar_sim.envs.far_mask.FarAsUnknown`),
 the forward-drive action, an MLP of two layers of 128, observation and reward normalisation, 4
 environments, trained where a step is cheapest (``pose_source: truth``, ``sdf_source: truth``).
 rl-zoo3 evaluates in the training env; score a zoo model in the default slam mode with the
 ``--env-kwargs`` of ``enjoy`` above. rl-zoo3 saves its models with SB3's own ``save`` (a zip with
-pickled parts), not polar_sim's policy file.
+pickled parts), not polar_sim's policy file. rl-zoo3 does not run the recipe's clutter curriculum.
 """
 
 from polar_sim.envs.recipes import RECIPES
@@ -30,8 +31,9 @@ def _ppo(env_id):
     p = RECIPES["ppo"]
     features = {"keys": list(p["obs_keys"]), "known_var": p["known_var"]}
     return {"n_timesteps": _TIME_STEPS[env_id], "policy": "MlpPolicy", "n_envs": p["n_envs"], "normalize": True,
-            "env_wrapper": ["polar_sim.envs.action_maps.ForwardDriveAction",
-                            {"polar_sim.envs.features.FeatureObservation": features}],
+            "env_wrapper": ["polar_sim.envs.action_maps.ForwardDriveAction"]
+            + (["polar_sim.envs.far_mask.FarAsUnknown"] if p["far_unknown"] else [])
+            + [{"polar_sim.envs.features.FeatureObservation": features}],
             "env_kwargs": {"pose_source": p["train_pose_source"], "sdf_source": p["train_sdf_source"]},
             **{k: p[k] for k in ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
                                  "clip_range", "ent_coef")},

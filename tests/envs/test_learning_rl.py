@@ -1,5 +1,5 @@
 """RL from scratch on GPISNav-Room-v2: the masked-stencil observation, the training modes, the
-goal-distance curriculum, and the baselines' policy files. Tiny runs check the loop, the save and
+clutter curriculum, the far mask, PPO fine-tuning from a shipped policy, and the baselines' policy files. Tiny runs check the loop, the save and
 the load, never a learning threshold."""
 
 import gymnasium as gym
@@ -60,7 +60,8 @@ def test_clutter_curriculum_follows_the_ramp_deterministically():
 
 
 # PPO from scratch trains with the true pose and the exact SDF, on the masked stencil, with a
-# curriculum, and its policy file is made for the default slam mode and reads the same vector.
+# curriculum, and its policy file is made for the default slam mode and reads the same vector
+# (without the far mask: the numpy MLP file).
 def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
     torch.set_num_threads(1)
     made = []
@@ -72,7 +73,7 @@ def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
 
     monkeypatch.setattr(gym, "make", spy)
     params = {"steps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "eval_every": 256,
-              "eval_episodes": 1, "curriculum_steps": 128, "curriculum_start": 2}
+              "eval_episodes": 1, "curriculum_steps": 128, "curriculum_start": 2, "far_unknown": False}
     policy, summary = recipes.train("ppo", ROOM, params=params, out=tmp_path, progress=False)
     assert any(k.get("pose_source") == "truth" and k.get("sdf_source") == "truth" for k in made)
     assert policy.env_kwargs == {} and policy.known_var == 0.5
@@ -93,14 +94,14 @@ def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
 # action depends only on that vector (unknown-space values beyond the mask do not reach it).
 @pytest.mark.parametrize("name,params", [
     ("recurrent_ppo", {"steps": 128, "n_envs": 2, "n_steps": 32, "batch_size": 64, "n_epochs": 1}),
-    ("ppo", {"steps": 128, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "far_unknown": True}),
+    ("ppo", {"steps": 128, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1}),
     ("sac", {"steps": 120, "learning_starts": 50, "batch_size": 32}),
 ])
 def test_baselines_read_the_masked_stencil(name, params, tmp_path):
     torch.set_num_threads(1)
     policy, _ = recipes.train(name, ROOM, params=params, out=tmp_path, progress=False)
     assert policy.recipe["features"] == {"keys": ["goal", "sdf", "sdf_grad", "sdf_var", "twist"], "known_var": 0.5,
-                                         "far_unknown": params.get("far_unknown", False)}
+                                         "far_unknown": params.get("far_unknown", True)}
     env = gym.make(ROOM)
     loaded = load_policy(tmp_path / "policy.npz", env)
     obs, _ = env.reset(seed=10_001)

@@ -47,6 +47,7 @@ def test_zoo_hyperparameters_are_the_recipes():
         assert all(h[k] == p[k] for k in ("n_steps", "batch_size", "n_epochs", "learning_rate", "clip_range"))
         assert h["policy_kwargs"]["net_arch"]["pi"] == p["hidden"]
         assert h["env_wrapper"] == ["polar_sim.envs.action_maps.ForwardDriveAction",
+                                    "polar_sim.envs.far_mask.FarAsUnknown",
                                     {"polar_sim.envs.features.FeatureObservation":
                                      {"keys": list(p["obs_keys"]), "known_var": p["known_var"]}}]
         assert h["env_kwargs"] == {"pose_source": "truth", "sdf_source": "truth"}
