@@ -11,15 +11,17 @@ and writes ``policy.npz``, ``curve.csv`` and ``summary.json`` to ``out``.
 | recipe | what | policy file |
 |---|---|---|
 | ``dagger`` | behaviour cloning + DAgger rounds from a scripted expert (:mod:`polar_sim.envs.imitation`) | numpy MLP |
+| ``dagger_map`` | DAgger of ``SDFNavigator`` for a learner with a map memory (:mod:`polar_sim.envs.imitation_map`) | numpy map CNN |
 | ``dagger_ppo`` | ``dagger`` (or ``init_policy``: a policy file, ``"pretrained"``), then PPO fine-tuning from its weights (critic warm-up first) | numpy MLP |
-| ``ppo`` | PPO from scratch, masked-stencil MLP (or ``obs_mode="grid"``: the grid CNN) | numpy MLP (grid: SB3) |
+| ``ppo`` | PPO from scratch, masked-stencil MLP (or ``obs_mode="grid"``: the grid CNN) | SB3 (``far_unknown: false``: numpy MLP) |
 | ``recurrent_ppo`` | sb3-contrib RecurrentPPO, an LSTM policy on the masked stencil | SB3 |
 | ``sac``, ``tqc`` | off-policy SAC (SB3) / TQC (sb3-contrib) on the masked stencil | SB3 |
 
 The RL recipes train with ``train_pose_source`` and ``train_sdf_source`` (default: the true pose and
-the exact SDF, the cheapest steps) and are scored in the default slam mode: the masked stencil
-(:func:`polar_sim.envs.features.stencil_vector`) reads the same in both, except that the exact SDF
-has no unknown space.
+the exact SDF, the cheapest steps) and are scored in the default slam mode; the masked stencil with
+``far_unknown`` (:mod:`polar_sim.envs.far_mask`) reads far free space alike in both, and the two
+differ only near surfaces the online map has not seen yet.
+
 
 Torch, stable-baselines3 and sb3-contrib are needed to train (the ``[test]`` extra), not to act.
 """
@@ -62,6 +64,8 @@ _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_r
 #: Recipe name -> its parameters' defaults (every parameter a recipe takes is here).
 RECIPES = {
     "dagger": {**_COMMON, **_DAGGER},
+    "dagger_map": {**_COMMON, "train_pose_source": "slam", "rounds": 3, "steps_per_round": 3000, "beta_decay": 0.5,
+                   "hidden": [256, 256], "activation": "tanh", "epochs": 15, "batch_size": 256, "lr": 1e-3},
     "dagger_ppo": {**_COMMON, **_DAGGER, "finetune_steps": 50_000, "n_envs": 4, "learning_rate": 5e-5,
                    "n_steps": 512, "batch_size": 256, "n_epochs": 5, "gamma": 0.99, "gae_lambda": 0.95,
                    "clip_range": 0.1, "ent_coef": 0.0, "log_std_init": -2.0, "critic_warmup_steps": 10_000,

@@ -116,7 +116,8 @@ def _mod_gpis2d():
             out.append((a, r, pose))
         return out
 
-    return ModuleCase("GPISMap2D", build=lambda **p: GPISMap2D(**p), params={"map_scale": 1.1, "obs_var_thre": 0.1},
+    return ModuleCase("GPISMap2D", build=lambda **p: GPISMap2D().set_params(**p),
+                      params={"local_gp__map_scale": 1.1, "observation__obs_var_thre": 0.1},
                       frames=frames, method="update", query=("query", (np.array([[0.5, 0.5], [2.0, -1.0]]),)),
                       savable=True)
 
@@ -133,7 +134,8 @@ def _mod_gpis3d():
             out.append((depth, K, T))
         return out
 
-    return ModuleCase("GPISMap3D", build=lambda **p: GPISMap3D(**p), params={"map_scale": 0.05}, frames=frames,
+    return ModuleCase("GPISMap3D", build=lambda **p: GPISMap3D().set_params(**p), params={"local_gp__map_scale": 0.05},
+                      frames=frames,
                       method="update", query=("query", (np.array([[0.0, 0.0, 0.9], [0.05, 0.0, 1.0]]),)), savable=True)
 
 
