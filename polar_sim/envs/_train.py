@@ -17,9 +17,12 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
 from polar_sim.envs.action_maps import wrap_action
+from polar_sim.envs.curriculum import ClutterCurriculum, Ramp
 from polar_sim.envs.evaluate import evaluate
+from polar_sim.envs.far_mask import FarAsUnknown
 from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
 from polar_sim.envs.imitation_map import MapDAggerConfig, train_dagger_map
+from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
                                      make_model, ppo_recipe, sb3_recipe)
 
@@ -46,7 +49,10 @@ def bar_disable(progress):
 
 
 def _train_env_kwargs(p):
-    return {**p["env_kwargs"], "pose_source": p["train_pose_source"]}
+    kw = {**p["env_kwargs"], "pose_source": p["train_pose_source"]}
+    if "train_sdf_source" in p:
+        kw["sdf_source"] = p["train_sdf_source"]
+    return kw
 
 
 class _Clock:
@@ -105,15 +111,18 @@ def _dagger_map(env_id, p, seed, curve, progress):
 
 
 class _Progress(BaseCallback):
-    """A tqdm bar over the env steps, and a dev-world checkpoint every ``every`` steps."""
+    """A tqdm bar over the env steps, a dev-world checkpoint every ``every`` steps, and the
+    curriculum's ``schedule`` (if any) moved to the step count."""
 
-    def __init__(self, total, desc, progress, every=0, checkpoint=None):
+    def __init__(self, total, desc, progress, every=0, checkpoint=None, schedule=None):
         super().__init__()
         self.bar = tqdm(total=total, desc=desc, unit="step", disable=bar_disable(progress))
-        self.every, self.checkpoint, self.next = every, checkpoint, every
+        self.every, self.checkpoint, self.next, self.schedule = every, checkpoint, every, schedule
 
     def _on_step(self):
         self.bar.update(self.num_timesteps - self.bar.n)
+        if self.schedule is not None:
+            self.schedule.update(self.num_timesteps)
         if self.every and self.num_timesteps >= self.next:
             self.next += self.every
             self.checkpoint(self.num_timesteps)
@@ -128,8 +137,21 @@ def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
                         env_kwargs=_train_env_kwargs(p), wrapper_class=wrapper, wrapper_kwargs=wrapper_kwargs)
 
 
-def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None):
+def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None, clutter_start=0,
+                     far_unknown=False):
+    if schedule is not None:
+        env = ClutterCurriculum(env, schedule, clutter_start)
+    if far_unknown:
+        env = FarAsUnknown(env)
     return FeatureObservation(wrap_action(env, action), keys, mean, std, known_var=known_var)
+
+
+def _schedule(p):
+    """The clutter curriculum of ``p``: from ``curriculum_start`` pieces to the tier's own over
+    ``curriculum_steps`` (None when 0)."""
+    if not p.get("curriculum_steps"):
+        return None
+    return Ramp(p["curriculum_steps"])
 
 
 def _ppo_kwargs(p, hidden, log_std_init, activation="tanh"):
@@ -155,32 +177,52 @@ def _mlp_of(model, venv, p, keys, recipe, env_id, mean=None, std=None, known_var
 
 
 def _ppo(env_id, p, seed, curve, progress):
-    if p["obs_mode"] == "grid":
+    if p["obs_mode"] == "grid" or p["far_unknown"]:  # an SB3 policy file (the numpy MLP reads no far mask)
         return _sb3(env_id, p, seed, curve, progress, name="ppo")
     clock = _Clock()
     keys = list(p["obs_keys"])
     action = {"name": "forward_drive", "kwargs": {}}
     recipe = {"name": "ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
               "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"]), "action": action}
-    venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, {"action": action, "keys": keys}),
-                        norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=p["gamma"])
+    kv, schedule = p["known_var"], _schedule(p)
+    wk = {"action": action, "keys": keys, "known_var": kv, "schedule": schedule, "clutter_start": p["curriculum_start"]}
+    venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=True, norm_reward=True,
+                        clip_obs=10.0, gamma=p["gamma"])
     model = make_model(recipe, venv, seed=seed)
 
     def ckpt(n):
-        _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id), p, curve, clock, n)
+        _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id, known_var=kv), p, curve, clock, n)
 
-    model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt))
-    policy = _mlp_of(model, venv, p, keys, recipe, env_id)
+    model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt,
+                                               schedule))
+    policy = _mlp_of(model, venv, p, keys, recipe, env_id, known_var=kv)
     venv.close()
     return policy, model.num_timesteps
 
 
+def _initial_policy(env_id, p, seed, curve, progress, clock):
+    """The imitation policy to fine-tune and its env steps: ``dagger``'s, or ``init_policy``'s (0 steps)."""
+    if not p["init_policy"]:
+        return _dagger(env_id, p, seed, curve, progress, clock)
+    if p["init_policy"] == "pretrained":
+        from polar_sim.envs.shipped import pretrained
+
+        policy = pretrained(env_id)
+    else:
+        policy = MLPPolicy.load(p["init_policy"], name="init_policy")
+    if policy.action is not None or policy.env_id != env_id:
+        raise ValueError(f"init_policy: expected an imitation policy of {env_id} (env action), got one of "
+                         f"{policy.env_id} with action {policy.action}")
+    return policy, 0
+
+
 def _dagger_ppo(env_id, p, seed, curve, progress):
     clock = _Clock()
-    imitation, steps0 = _dagger(env_id, p, seed, curve, progress, clock)
+    imitation, steps0 = _initial_policy(env_id, p, seed, curve, progress, clock)
     keys = imitation.obs_keys
+    hidden = [w.shape[0] for w in imitation.weights[:-1]]
     recipe = {"name": "dagger_ppo", "algorithm": "PPO", "policy": "MlpPolicy", "params": p, "seed": seed,
-              "kwargs": _ppo_kwargs(p, p["hidden"], p["log_std_init"], p["activation"]), "action": None}
+              "kwargs": _ppo_kwargs(p, hidden, p["log_std_init"], imitation.activation), "action": None}
     wk = {"action": None, "keys": keys, "mean": imitation.mean, "std": imitation.std, "known_var": imitation.known_var}
     venv = VecNormalize(_vec_env(env_id, p, seed, _feature_wrapper, wk), norm_obs=False, norm_reward=True,
                         gamma=p["gamma"])
@@ -223,7 +265,18 @@ def _sb3(env_id, p, seed, curve, progress, name):
     recipe.update(name=name, params=p, seed=seed)
     env_kwargs = {**p["env_kwargs"], "obs_mode": p["obs_mode"]}
     pp = {**p, "env_kwargs": env_kwargs}
-    venv = VecNormalize(_vec_env(env_id, pp, seed, wrap_action, {"action": recipe["action"]}), norm_obs=True,
+    schedule = _schedule(p)
+    if p["obs_mode"] == "stencil":  # the masked stencil as one vector, as PPO's MLP reads it
+        recipe["features"] = {"keys": list(p["obs_keys"]), "known_var": p["known_var"],
+                              "far_unknown": p["far_unknown"]}
+        if "hidden" in p:
+            recipe["kwargs"]["policy_kwargs"]["net_arch"] = {"pi": list(p["hidden"]), "vf": list(p["hidden"])}
+        recipe["policy"] = recipe["policy"].replace("MultiInput", "Mlp")
+        wrapper, wk = _feature_wrapper, {"action": recipe["action"], **recipe["features"], "schedule": schedule,
+                                         "clutter_start": p["curriculum_start"]}
+    else:
+        wrapper, wk = wrap_action, {"action": recipe["action"]}
+    venv = VecNormalize(_vec_env(env_id, pp, seed, wrapper, wk), norm_obs=True,
                         norm_reward=name not in ("sac", "tqc"), clip_obs=10.0, gamma=p["gamma"])
     model = make_model(recipe, venv, seed=seed)
 
@@ -231,7 +284,7 @@ def _sb3(env_id, p, seed, curve, progress, name):
         return SB3Policy(model, ObsNormaliser.from_vecnormalize(venv), recipe, env_id, env_kwargs)
 
     model.learn(p["steps"], callback=_Progress(p["steps"], f"{name} {env_id}", progress, p["eval_every"],
-                                               lambda n: _score(env_id, export(), pp, curve, clock, n)))
+                                               lambda n: _score(env_id, export(), pp, curve, clock, n), schedule))
     policy = export()
     venv.close()
     return policy, model.num_timesteps
