@@ -118,10 +118,6 @@ class GPISMapBase(Parameterised):
     def _check_params(self):
         return self._checked_params()
 
-    def get_params(self):
-        """The constructor arguments, by name."""
-        return {k: getattr(self, k) for k in self._PARAMS}
-
     def set_params(self, **params):
         """Change parameters (checked; the map unchanged on a bad value).
 

@@ -14,6 +14,7 @@ from polar_sim.gpis._linesearch import TOL
 from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
 from polar_sim.gpis._scan2d import line_search, new_samples, occupancy
+from polar_sim.params import Tags
 
 __all__ = ["GPISMap2D"]
 
@@ -142,6 +143,7 @@ class GPISMap2D(GPISMapBase):
     """
 
     dim = 2
+    TAGS = Tags(update="update", query="query", saves=True, data="polar_sim.gpis.synthetic:check_data_2d")
     PUBLISHED = {**GPISMapBase.PUBLISHED, "scan_model": "published"}
     # the two faces of a wall thinner than the sample spacing (office walls are 15 cm) both
     # need samples: spacing is enforced only between samples whose normals agree (dot >= -0.5)
