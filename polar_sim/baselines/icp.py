@@ -15,7 +15,6 @@ from polar_sim._validation import (
     check_choice,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.baselines.discrete_sdf import DiscreteSDF2D
 from polar_sim.geometry import matrix_to_pose2d, pose2d_to_matrix, so3_log
 from polar_sim.registration import (
@@ -29,13 +28,14 @@ from polar_sim.registration import (
     scan3d_points,
     valid_beams,
 )
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["ICPLocalizer"]
 
 _METHODS = ("sdf", "point")
 
 
-class ICPLocalizer(ResetMixin):
+class ICPLocalizer(Parameterised):
     """Scan-to-map registration baselines.
 
     - ``method="sdf"`` ("ICP-D"): Gauss-Newton on a discrete signed distance field, each end point
@@ -75,6 +75,8 @@ class ICPLocalizer(ResetMixin):
     tree_ : scipy.spatial.cKDTree
         ``"point"``: KD-tree over ``points_``.
     """
+
+    TAGS = Tags(update="fit", query="localize", data="polar_sim.baselines.examples:icp")
 
     def __init__(
         self,

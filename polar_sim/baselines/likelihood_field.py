@@ -8,12 +8,12 @@ import numpy as np
 from scipy import ndimage
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
-from polar_sim.baselines._common import ResetMixin
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["LikelihoodField"]
 
 
-class LikelihoodField(ResetMixin):
+class LikelihoodField(Parameterised):
     """Precomputed per-cell log-likelihood of a beam end point.
 
     ``p(z | x, m) = z_hit * N(dist; 0, sigma_hit**2) + z_rand / max_range``, where ``dist`` is the
@@ -43,6 +43,8 @@ class LikelihoodField(ResetMixin):
     cell_size_ : float
         Cell side, metres.
     """
+
+    TAGS = Tags(update="fit", query="log_likelihood", data="polar_sim.baselines.examples:likelihood_field")
 
     def __init__(
         self,

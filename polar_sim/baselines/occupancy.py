@@ -16,9 +16,9 @@ from polar_sim._validation import (
     as_positive_float,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, transform2d, valid_beams
 from polar_sim.geometry import compose2d
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["OccupancyGrid2D"]
 
@@ -89,7 +89,7 @@ def _logit(p):
     return math.log(p / (1.0 - p))
 
 
-class OccupancyGrid2D(ResetMixin):
+class OccupancyGrid2D(Parameterised):
     """Log-odds occupancy grid (Thrun, Burgard & Fox, ch. 9) with exact ray traversal.
 
     Each valid beam marks the cell of its end point occupied and every cell it crosses before
@@ -128,6 +128,8 @@ class OccupancyGrid2D(ResetMixin):
     n_scans_ : int
         Number of scans fused.
     """
+
+    TAGS = Tags(update="update", query="probability", data="polar_sim.baselines.examples:occupancy_grid")
 
     def __init__(
         self,

@@ -12,9 +12,9 @@ from polar_sim._validation import (
     as_rng,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, valid_beams
 from polar_sim.geometry import wrap_angle
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["ParticleFilterLocalizer", "sample_motion_model_odometry", "low_variance_resample"]
 
@@ -58,7 +58,7 @@ def low_variance_resample(weights, rng):
     return np.minimum(np.searchsorted(c, pointers, side="right"), n - 1)
 
 
-class ParticleFilterLocalizer(ResetMixin):
+class ParticleFilterLocalizer(Parameterised):
     """MCL with the odometry motion model and a likelihood-field sensor model.
 
     Parameters
@@ -94,6 +94,8 @@ class ParticleFilterLocalizer(ResetMixin):
     resampled_ : bool
         Whether the last correction resampled.
     """
+
+    TAGS = Tags(update="update", random_state="seed", data="polar_sim.baselines.examples:particle_filter")
 
     def __init__(
         self,

@@ -28,8 +28,11 @@ from polar_sim.testing.digest import flatten, output_digest, same_output, state_
 __all__ = ["MODULE_CLASSES", "Subject", "example", "module_checks", "module_instances"]
 
 #: The module classes held to the contract, as ``"package.module:Class"`` (imported on demand).
-MODULE_CLASSES = ("polar_sim.gpis:GPISMap2D", "polar_sim.gpis:GPISMap3D", "polar_sim.ground:GroundVO",
-                  "polar_sim.tracking:ObjectTracker")
+MODULE_CLASSES = tuple(f"{package}:{name}" for package, names in (
+    ("polar_sim.gpis", ("GPISMap2D", "GPISMap3D")), ("polar_sim.ground", ("GroundVO",)),
+    ("polar_sim.tracking", ("ObjectTracker",)),
+    ("polar_sim.baselines", ("OccupancyGrid2D", "DiscreteSDF2D", "DiscreteSDF3D", "LikelihoodField",
+                             "ParticleFilterLocalizer", "ICPLocalizer", "RoomSDF2D", "RoomSDF3D"))) for name in names)
 
 #: A lazily built search index is a cache, not state: left out of "the state did not change".
 _CACHES = ("_kd_tree", "_kd_idx", "_kd_version")
@@ -54,8 +57,12 @@ class Subject:
         return copy.deepcopy(_check_data(self.tags))
 
     def clone(self):
-        """A new instance with the same parameters, unfed."""
-        return type(self.obj)(**copy.deepcopy(self.obj.get_params(deep=False)))
+        """A new instance with the same parameters, unfed; a random-state parameter left at None
+        (fresh OS entropy) is set to 0, as scikit-learn's ``set_random_state`` does."""
+        params = copy.deepcopy(self.obj.get_params(deep=False))
+        if self.tags.random_state is not None and params.get(self.tags.random_state) is None:
+            params[self.tags.random_state] = 0
+        return type(self.obj)(**params)
 
     def fresh(self):
         """A clone with the data's ``prepare`` calls made: ready for its first frame."""
@@ -99,7 +106,7 @@ def check_params_stored(s):
     assert sorted(got) == sorted(names), f"get_params(deep=False) keys {sorted(got)} != constructor's {sorted(names)}"
     for k in names:
         assert same_output(getattr(s.obj, k), got[k]), f"get_params()[{k!r}] differs from the attribute {k!r}"
-    c = s.clone()
+    c = type(s.obj)(**copy.deepcopy(got))
     assert same_output(c.get_params(deep=False), got), "a clone's get_params() differs from the original's"
     assert c.set_params(**got) is c, "set_params() does not return self"
     assert same_output(c.get_params(deep=False), got), "set_params(**get_params()) changed the parameters"
@@ -187,7 +194,7 @@ def check_across_processes(s):
     stage configs come from the check data or the defaults)."""
     cls = type(s.obj)
     path = f"{cls.__module__}:{cls.__qualname__}"
-    params = json.dumps(_json_params(s.obj, s.data().init))
+    params = json.dumps(_json_params(s.clone(), s.data().init))
     code = f"from polar_sim.testing.contract import example_outputs; print(example_outputs({path!r}, {params!r}))"
     outs = []
     for _ in range(2):
