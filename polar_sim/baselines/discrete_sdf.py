@@ -121,6 +121,10 @@ class _DiscreteSDF(Parameterised):
     def _as_mask(a, name):
         if not isinstance(a, np.ndarray):
             raise TypeError(f"{name}: expected a numpy array, got {type(a).__name__}")
+        if a.dtype.kind in "cOSUVMm":   # complex, objects, text, timestamps: no truth value per cell
+            raise TypeError(f"{name}: expected a boolean (or numeric) array, got dtype {a.dtype}")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise ValueError(f"{name}: contains NaN or inf")
         return np.asarray(a, dtype=bool)
 
     def _check_mask_dim(self, a, name):

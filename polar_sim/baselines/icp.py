@@ -101,6 +101,12 @@ class ICPLocalizer(Parameterised):
         self.max_range = max_range
         self.max_correction = max_correction
 
+    def _check_params(self):
+        """Refuse a bad method or correspondence gate before any map is set (the other parameters
+        are checked where the solver reads them)."""
+        check_choice(self.method, _METHODS, "method")
+        as_positive_float(self.max_correspondence_distance, "max_correspondence_distance")
+
     def fit(self, target):
         """Set the map.
 
@@ -115,7 +121,7 @@ class ICPLocalizer(Parameterised):
         -------
         self
         """
-        check_choice(self.method, _METHODS, "method")
+        self._check_params()
         self.reset()
         if self.method == "sdf":
             if hasattr(target, "occupied_mask"):

@@ -63,8 +63,9 @@ class LikelihoodField(Parameterised):
 
     def _log_p(self, dist):
         s = self.sigma_hit
-        g = np.exp(-0.5 * (dist / s) ** 2) / (math.sqrt(2 * math.pi) * s)
-        return np.log(self.z_hit * g + self.z_rand / self.max_range)
+        with np.errstate(over="ignore", divide="ignore"):   # far from walls g underflows to 0: no error
+            g = np.exp(-0.5 * (np.asarray(dist, np.float64) / s) ** 2) / (math.sqrt(2 * math.pi) * s)
+            return np.log(self.z_hit * g + self.z_rand / self.max_range)
 
     def fit(self, grid):
         """Precompute the field of an :class:`~polar_sim.baselines.OccupancyGrid2D`. Returns ``self``."""

@@ -31,6 +31,8 @@ def sample_motion_model_odometry(particles, odom_prev, odom_now, alphas, rng):
     a1, a2, a3, a4 = alphas
     dx, dy = odom_now[0] - odom_prev[0], odom_now[1] - odom_prev[1]
     trans = float(np.hypot(dx, dy))
+    if not trans < 1e100:   # its square would overflow the noise model
+        raise ValueError(f"odom_pose2d: the odometry increment ({trans:.3g} m) is too large to model")
     rot1 = float(wrap_angle(np.arctan2(dy, dx) - odom_prev[2])) if trans > 1e-3 else 0.0
     rot2 = float(wrap_angle(odom_now[2] - odom_prev[2] - rot1))
     n = particles.shape[0]
@@ -56,6 +58,10 @@ def low_variance_resample(weights, rng):
     c[-1] = 1.0  # guard against round-off leaving the last pointer past the end
     pointers = (rng.uniform(0.0, 1.0 / n) + np.arange(n) / n)
     return np.minimum(np.searchsorted(c, pointers, side="right"), n - 1)
+
+
+#: At most this many particles (240 MB of poses): more is refused before anything is allocated.
+MAX_PARTICLES = 10**7
 
 
 class ParticleFilterLocalizer(Parameterised):
@@ -119,7 +125,7 @@ class ParticleFilterLocalizer(Parameterised):
         self.seed = seed
 
     def _check_params(self):
-        as_int(self.n_particles, "n_particles", minimum=1)
+        as_int(self.n_particles, "n_particles", minimum=1, maximum=MAX_PARTICLES)
         as_int(self.n_beams, "n_beams", minimum=1)
         a = as_float_array(self.alphas, "alphas")
         if a.shape != (4,) or not np.isfinite(a).all() or (a < 0).any():

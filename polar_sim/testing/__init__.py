@@ -42,13 +42,13 @@ safe; the hostile battery of ``reset``, ``step`` and the constructor's keyword a
 from polar_sim.testing.battery import FAILURES, OUTCOMES, Counts, EntryPoint, generate, run_battery
 from polar_sim.testing.checks import Check, check_entry_points, check_module, check_polar_env, env_ids
 from polar_sim.testing.digest import state_digest
-from polar_sim.testing.entries import ENTRY_POINTS, entry_points_of
+from polar_sim.testing.entries import ENTRY_POINTS, entry_point_names, entry_points_of
 from polar_sim.testing.inputs import BadInput, bad_inputs
 from polar_sim.testing.soak import SoakResult, rss_bytes, soak, soak_env, soak_gpis, soak_renderers, vector_workers_closed
 
 __all__ = [
     "BadInput", "EntryPoint", "Check", "Counts", "OUTCOMES", "FAILURES",
     "bad_inputs", "generate", "state_digest", "run_battery", "check_module", "check_polar_env",
-    "ENTRY_POINTS", "check_entry_points", "env_ids", "entry_points_of",
+    "ENTRY_POINTS", "check_entry_points", "env_ids", "entry_points_of", "entry_point_names",
     "SoakResult", "rss_bytes", "soak", "soak_env", "soak_gpis", "soak_renderers", "vector_workers_closed",
 ]

@@ -12,7 +12,7 @@ import numpy as np
 from polar_sim.testing.battery import run_battery
 from polar_sim.testing.contract import Subject, module_checks
 from polar_sim.testing.digest import flatten, output_digest, same_output
-from polar_sim.testing.entries import _env_ids, _env_state, _make_env, entry_points_of
+from polar_sim.testing.entries import _env_ids, _env_state, _make_env, _module_class, entry_points_of
 
 __all__ = ["Check", "check_module", "check_entry_points", "check_polar_env", "env_ids"]
 
@@ -50,7 +50,11 @@ def check_module(obj, *, n_bad=None, isolate=True):
     subject = Subject(obj)
     for cname, fn in module_checks(subject.tags):
         yield Check(f"{subject.name}:{cname}", functools.partial(fn, subject))
-    yield from check_entry_points(subject.name, n_bad=n_bad, isolate=isolate)
+    cls = type(obj)
+    path = f"{cls.__module__}:{cls.__qualname__}"
+    n = 200 if n_bad is None else n_bad
+    for entry in entry_points_of(subject.name if _module_class(subject.name) is cls else path):
+        yield Check(f"{subject.name}:hostile[{entry}]", _hostile_check(entry, n, isolate))
 
 
 def check_entry_points(name, *, n_bad=None, isolate=True):

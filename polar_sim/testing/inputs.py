@@ -183,7 +183,7 @@ def _choice_families(arg, v):
 def bad_inputs(kind, valid, arg, rng, *, tmp=None):
     """Hostile inputs (list of :class:`BadInput`) for argument ``arg`` of ``kind`` whose valid value
     is ``valid``. Kinds: ``points``, ``angles``, ``ranges``, ``depth``, ``image``, ``mask``,
-    ``pose``, ``poses``, ``pose2d``, ``K``, ``vector``, ``lengths``, ``float``, ``float+``,
+    ``pose``, ``poses``, ``pose2d``, ``K``, ``grid`` (an occupancy array of any size), ``vector``, ``lengths``, ``float``, ``float+``,
     ``unit``, ``int+``, ``int0``, ``seed``, ``bool``, ``choice``, ``name``, ``path_in``,
     ``path_out``, ``frame`` (a recording frame dict), ``scan2d`` (an (angles, ranges) pair),
     ``object``."""
@@ -203,6 +203,10 @@ def bad_inputs(kind, valid, arg, rng, *, tmp=None):
         out.append(BadInput(arg, "dtype:float16", v.astype(np.float16), "either"))
         out.append(BadInput(arg, "zeros", np.zeros_like(v), "either"))
         return out
+    if kind == "grid":   # a whole occupancy array: any size with the same number of axes is a valid grid
+        out = c + _array_families(arg, valid, rng, empty="refuse", length="either")
+        return [dataclasses.replace(b, expect="either") if b.label in ("shape:last-axis", "shape:transposed") else b
+                for b in out if b.label != "dtype:bool"]
     if kind in ("image", "mask"):
         v = np.asarray(valid)
         out = [b for b in c + _array_families(arg, v, rng, empty="refuse", length="either" if kind == "image" else "refuse")
