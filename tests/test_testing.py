@@ -111,3 +111,32 @@ def test_check_module_takes_an_instance(bad):
 
     with pytest.raises(TypeError, match="obj"):
         next(check_module(bad))
+
+
+# --- entry points derived from a class's signature and TAGS -------------------------------------------
+# Kinds come from the naming convention, else from the valid value; the derived list covers the
+# constructor, the per-frame method, the query and save/load, and nothing is hand-written.
+def test_entry_points_are_derived():
+    from polar_sim.testing import ENTRY_POINTS, entry_points_of
+
+    assert entry_points_of("GPISMap2D") == ["GPISMap2D", "GPISMap2D.update", "GPISMap2D.query", "GPISMap2D.save",
+                                            "GPISMap2D.load"]
+    assert entry_points_of("OccupancyGrid2D") == ["OccupancyGrid2D", "OccupancyGrid2D.update",
+                                                  "OccupancyGrid2D.probability"]
+    assert ENTRY_POINTS["GPISMap3D.update"]().kinds == {"depth": "depth", "K": "K", "T_world_cam": "pose"}
+    assert ENTRY_POINTS["ICPLocalizer.localize"]().kinds == {"scan": "scan2d", "initial_pose": "pose2d"}
+    kinds = ENTRY_POINTS["GroundVO"]().kinds
+    assert kinds["camera_height"] == "float+" and kinds["seed"] == "seed" and kinds["model"] == "choice"
+    assert kinds["tracking"] == "object"
+
+
+# A class outside MODULE_CLASSES is reached by its path, also in a worker process; the derived
+# constructor battery finds the parameters the class never checks (scale meets x in update; seed is unused).
+def test_derived_battery_of_an_unregistered_class(dummies):
+    from polar_sim.testing import entry_points_of
+
+    assert entry_points_of("battery_dummies:Sum") == [   # update(x): nothing to attack
+        "battery_dummies:Sum", "battery_dummies:Sum.save", "battery_dummies:Sum.load"]   # value(): no arguments
+    res = run_battery("battery_dummies:Sum", n=20, isolate=True, setup_timeout=120)
+    assert res.n == 20 and not res.ok
+    assert {f[1] for f in res.failures} == {"scale", "seed"}, res.report()   # seed: never read

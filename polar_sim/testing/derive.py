@@ -31,8 +31,9 @@ ARG_KINDS = {
     "t": "float", "points": "points", "model_points": "points", "scan": "scan2d",
     "occupied": "grid", "origin": "vector", "camera_height": "float+", "fps": "float+", "cell_size": "float+",
 }
-#: Other names an error about an argument may use (a scan's error names its angles or ranges).
-ARG_ALIASES = {"scan": ("angles", "ranges")}
+#: Other names an error about an argument may use: a scan's error names its angles or ranges; model
+#: points and normals that disagree in length may be reported as either.
+ARG_ALIASES = {"scan": ("angles", "ranges"), "model_points": ("model_normals",)}
 #: Seconds one hostile call may take before it counts as a hang (a tracker's frame takes seconds).
 _TIMEOUT = 120.0
 
