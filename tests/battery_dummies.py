@@ -89,7 +89,7 @@ class Sum(Parameterised):
     def update(self, x):
         if not hasattr(self, "total_"):
             self.total_ = np.zeros(3)
-        noise = {"seed": np.random.default_rng().random(), "process": hash("polar") % 7}.get(self.flaw, 0.0)
+        noise = {"seed": np.random.default_rng().random(), "process": float(hash("polar"))}.get(self.flaw, 0.0)
         self.total_ += self.scale * x + noise
         return x if self.flaw == "alias" else self.total_.copy()
 
