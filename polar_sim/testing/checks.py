@@ -107,7 +107,7 @@ def check_polar_env(env_id, *, n_steps=5, n_bad=None, isolate=True):
         assert same_output(_rollout(env_id, 7, n_steps), _rollout(env_id, 7, n_steps)), "same seed, different rollouts"
 
     def across_processes():
-        code = (f"from polar_sim.testing.checks import _digest, _rollout; "
+        code = (f"from polar_sim.testing.checks import _rollout; from polar_sim.testing.digest import output_digest; "
                 f"print(output_digest(_rollout({env_id!r}, 7, {n_steps})))")
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
         assert r.returncode == 0, r.stderr[-2000:]
