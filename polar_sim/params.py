@@ -1,6 +1,7 @@
 """One module contract, after scikit-learn's estimators.
 
-Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) follows it:
+Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) and every baseline
+(``polar_sim.baselines``) follows it:
 
 - the constructor only stores its documented parameters, under their own names;
 - :meth:`~Parameterised.get_params` / :meth:`~Parameterised.set_params` read and change them
