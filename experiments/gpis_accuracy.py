@@ -36,21 +36,9 @@ M3D = ["object", "sdf_rmse_m", "sdf_median_abs_m", "chamfer_m", "surface_to_mesh
 
 
 def _scan2d(scene, method, seed, ctx):
-    from polar_sim.metrics.maps import ObservedArea, map_scores_2d
-    from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
-
     every = ctx.params["every_steps"]
-    d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_steps=every, **C.ROUTE)])
-    m = C.make("mapper2d", method, seed=seed)
-    cpu = C.fuse(m, d.angles, d.poses, d.ranges)
-    w = C.truth_world(scene, seed)
-    obs = ObservedArea(d.angles, d.poses, d.clean)
     k10 = int(np.ceil(10 / every))        # scans over 1 m of the drive: "seen by 10 scans" at 10 Hz
-    row, arr = map_scores_2d(m.query, C.surface_points(m), w.sdf, obs, section_corners(w),
-                             n_eval=ctx.params["n_eval_2d"], seed=seed, well_k=k10, sparse_k=k10)
-    w.close()
-    ctx.save_arrays(path=d.poses[:, :2], hits=obs.hits[::7], **arr)
-    return {**row, "n_scans": len(d.poses), "travelled_m": float(d.travelled[-1]), **C.cpu_stats(cpu), "load": C.load_now()}
+    return C.drive_trial(scene, method, seed, ctx, dict(every_steps=every), ctx.params["n_eval_2d"], k10, hits_every=7)
 
 
 def _orbit(method, seed, ctx):
@@ -112,23 +100,18 @@ def summarize(table, ctx):
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     parts = []
     for scene in C.SCENES_2D:
         rows = sorted([r for r in table if r["scene"] == scene], key=lambda r: (r["method"], r["seed"]))
         if not rows:
             continue
         write_csv_table(rows, ["method", "seed"] + M2D + ["load"], ctx.out_dir / f"gpis_accuracy_{scene}.csv")
-        means = [{"method": k, "seeds": len(rs), **{c: C.mean(rs, c) for c in M2D}}
-                 for k in sorted({r["method"] for r in rows}) for rs in [[r for r in rows if r["method"] == k]]]
+        means = C.group_means(rows, ["method"], M2D)
         parts += [f"### {scene} ({ctx.split} split; 60 s drive, 2D lidar at {10 / ctx.params['every_steps']:.3g} Hz, "
                   "sigma 1 cm)", "", "Means over seeds:", "",
                   markdown_table(means, ["method", "seeds"] + M2D), "", "Per seed:", "",
                   markdown_table(rows, ["method", "seed"] + M2D[:10]), ""]
-        r0 = rows[0]
-        fig, ax = plt.subplots(1, 2, figsize=(15, 7.2))
-        C.error_figure(ax, ctx.arrays(r0), r0, scene)
+        fig = C.error_rows_figure([ctx.arrays(rows[0])], rows[:1], scene, height=7.2)
         parts.append(savefig(fig, ctx.out_dir, f"gpis_accuracy_{scene}"))
     orb = sorted([r for r in table if r["scene"] == "object_orbit"], key=lambda r: (r["method"], r["seed"]))
     if orb:

@@ -19,6 +19,7 @@ from tqdm.auto import tqdm
 from polar_sim.envs.action_maps import wrap_action
 from polar_sim.envs.evaluate import evaluate
 from polar_sim.envs.imitation import TRAIN_SEEDS, DAggerConfig, train_dagger
+from polar_sim.envs.imitation_map import MapDAggerConfig, train_dagger_map
 from polar_sim.envs.learning import (FeatureObservation, ObsNormaliser, SB3Policy, export_mlp, load_mlp_into,
                                      make_model, ppo_recipe, sb3_recipe)
 
@@ -83,6 +84,23 @@ def _dagger(env_id, p, seed, curve, progress, clock=None):
     policy, hist = train_dagger(env_id, expert=p["expert"], config=cfg, env_kwargs=_train_env_kwargs(p),
                                 policy_env_kwargs=dict(p["env_kwargs"]), recipe=recipe,
                                 progress=progress, callback=after_round)
+    return policy, hist[-1]["steps"]
+
+
+def _dagger_map(env_id, p, seed, curve, progress):
+    clock = _Clock()
+    cfg = MapDAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
+                          hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
+                          batch_size=p["batch_size"], lr=p["lr"], seed=seed)
+
+    def after_round(k, policy, row):
+        if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
+            _score(env_id, policy, p, curve, clock, row["steps"])
+
+    recipe = {"name": "dagger_map", "params": p, "seed": seed, "train_seeds": list(TRAIN_SEEDS)}
+    policy, hist = train_dagger_map(env_id, config=cfg, env_kwargs=_train_env_kwargs(p),
+                                    policy_env_kwargs=dict(p["env_kwargs"]), recipe=recipe, progress=progress,
+                                    callback=after_round)
     return policy, hist[-1]["steps"]
 
 
@@ -219,6 +237,6 @@ def _sb3(env_id, p, seed, curve, progress, name):
     return policy, model.num_timesteps
 
 
-RUNNERS = {"dagger": _dagger, "dagger_ppo": _dagger_ppo, "ppo": _ppo,
+RUNNERS = {"dagger": _dagger, "dagger_map": _dagger_map, "dagger_ppo": _dagger_ppo, "ppo": _ppo,
            "recurrent_ppo": lambda *a: _sb3(*a, name="recurrent_ppo"),
            "sac": lambda *a: _sb3(*a, name="sac"), "tqc": lambda *a: _sb3(*a, name="tqc")}

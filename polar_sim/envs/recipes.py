@@ -11,6 +11,7 @@ and writes ``policy.npz``, ``curve.csv`` and ``summary.json`` to ``out``.
 | recipe | what | policy file |
 |---|---|---|
 | ``dagger`` | behaviour cloning + DAgger rounds from a scripted expert (:mod:`polar_sim.envs.imitation`) | numpy MLP |
+| ``dagger_map`` | DAgger of ``SDFNavigator`` for a learner with a map memory (:mod:`polar_sim.envs.imitation_map`) | numpy map CNN |
 | ``dagger_ppo`` | ``dagger``, then PPO fine-tuning from its weights (critic warm-up first) | numpy MLP |
 | ``ppo`` | PPO from scratch, stencil MLP (or ``obs_mode="grid"``: the grid CNN) | numpy MLP (grid: SB3) |
 | ``recurrent_ppo`` | sb3-contrib RecurrentPPO, an LSTM policy | SB3 |
@@ -50,6 +51,8 @@ _PPO = {"steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "obs_keys": STENCI
 #: Recipe name -> its parameters' defaults (every parameter a recipe takes is here).
 RECIPES = {
     "dagger": {**_COMMON, **_DAGGER},
+    "dagger_map": {**_COMMON, "train_pose_source": "slam", "rounds": 3, "steps_per_round": 3000, "beta_decay": 0.5,
+                   "hidden": [256, 256], "activation": "tanh", "epochs": 15, "batch_size": 256, "lr": 1e-3},
     "dagger_ppo": {**_COMMON, **_DAGGER, "finetune_steps": 50_000, "n_envs": 4, "learning_rate": 5e-5,
                    "n_steps": 512, "batch_size": 256, "n_epochs": 5, "gamma": 0.99, "gae_lambda": 0.95,
                    "clip_range": 0.1, "ent_coef": 0.0, "log_std_init": -2.0, "critic_warmup_steps": 10_000},

@@ -8,13 +8,15 @@ dimension-specific constants. Everything else (fusion, tree updates, training, q
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import math
 
 import numpy as np
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
-from polar_sim.params import Parameterised
+from polar_sim.gpis.config import SWITCHES
+from polar_sim.params import Parameterised, check_fields, replace_fields, split_nested
 from polar_sim.gpis import _io
 from polar_sim.gpis import _icp, _kernels  # noqa: F401  (their kernels, called through K)
 from polar_sim.gpis._distance import FreeSpace, far_field, far_weights
@@ -76,20 +78,12 @@ class GPISMapBase(Parameterised):
 
     The module contract is :class:`polar_sim.params.Parameterised`'s: ``get_params()``,
     ``set_params()`` (checked, the map unchanged on a bad value), ``reset()``, and the published
-    behaviour as a named preset, ``published(**overrides)``, built from ``PUBLISHED``.
+    behaviour as a named preset, ``published(**overrides)``: every stage config's ``published()``
+    (:mod:`polar_sim.gpis.config`).
     """
 
-    #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
-    #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
-    PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                 "fusion": "published", "query_mode": "published"}
-    #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
-    _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                         "fusion": "published", "query_mode": "published", "scan_model": "published"}
-    #: Allowed values of the behaviour parameters, the default first.
-    CHOICES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
-               "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
-               "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
+    #: Stage name -> config class (each map's dimension's variant), in constructor order.
+    _STAGES: dict = {}
 
     dim = 0
     _T_BLEND = 0.4          # query blending threshold (spec §9.1)
@@ -112,11 +106,57 @@ class GPISMapBase(Parameterised):
 
     # -- lifecycle -----------------------------------------------------------------------------
     def _pub(self, name):
-        """True when behaviour ``name`` is the published one (its parameter, or ``legacy``)."""
-        return bool(self.legacy) or getattr(self, name) == self._PUBLISHED_CHOICE[name]
+        """True when behaviour switch ``name`` (a field of one stage config) is the published one."""
+        for stage in self._STAGES:
+            cfg = getattr(self, stage)
+            if hasattr(cfg, name):
+                return getattr(cfg, name) == SWITCHES[name][1]
+        raise KeyError(name)
+
+    @classmethod
+    def published(cls, **overrides):
+        """A map with the published C++'s behaviour (GPisMap v2, quirks and bugs included, spec
+        [quirk]/[bug]): every stage config's ``published()``. ``overrides`` are parameters
+        (``sensor_offset=(0.08, 0)``, a whole stage config, used as given) or stage fields
+        (``local_gp__map_scale=1.0``, on top of the stage's published config). The laser offset
+        is not part of the preset: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses."""
+        flat, nested = split_nested(overrides)
+        names = cls._param_names()
+        unknown = sorted(set(flat) - set(names)) + sorted(f"{s}__{f}" for s, fs in nested.items()
+                                                          if s not in cls._STAGES for f in fs)
+        if unknown:
+            raise ValueError(f"{unknown[0]}: unknown parameter of {cls.__name__}; valid: {', '.join(names)}")
+        for stage, config in cls._STAGES.items():
+            fields = nested.get(stage, {})
+            if stage in flat:
+                flat[stage] = replace_fields(flat[stage], stage, fields) if fields else flat[stage]
+            else:
+                check_fields(config, stage, fields)
+                try:
+                    flat[stage] = config.published(**fields)
+                except (TypeError, ValueError) as exc:
+                    raise type(exc)(f"{stage}__{exc}") from None
+        return cls(**flat)
 
     def _check_params(self):
         return self._checked_params()
+
+    def _checked_params(self):
+        """The checked parameters as one dict of clean values, the stage fields flattened
+        (``{"min_range": 0.2, ..., "map_scale": 1.2, ...}``); raises ``ValueError``/``TypeError``
+        naming a bad parameter. The stage configs checked their own fields when they were made."""
+        for stage, config in self._STAGES.items():
+            cfg = getattr(self, stage)
+            if type(cfg) is not config:
+                raise TypeError(f"{stage}: expected a {config.__name__}, got {type(cfg).__name__}")
+        p = self._check_sensor()
+        for stage in self._STAGES:
+            cfg = getattr(self, stage)
+            for f in dataclasses.fields(cfg):
+                v = getattr(cfg, f.name)
+                p[f.name] = v if v is None or isinstance(v, str) else (
+                    int(v) if f.name == "train_cap" else float(v))
+        return p
 
     def set_params(self, **params):
         """Change parameters (checked; the map unchanged on a bad value).
@@ -249,7 +289,7 @@ class GPISMapBase(Parameterised):
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
             new = K.apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
-            # which changes the trained GPs must see (all of them in legacy mode)
+            # which changes the trained GPs must see (all of them with the published retraining)
             ch, kept = K.reeval_changes(cand, action, new, tr.pos, tr.nrm, tr.sp, tr.sg, tr.pos_t,
                                       tr.nrm_t, tr.sp_t, tr.sg_t, self._retrain_tol(),
                                       bool(self._pub("retrain") or self._retrain_tol() <= 0))
@@ -315,7 +355,7 @@ class GPISMapBase(Parameterised):
         slots = slots[nonempty]
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
         self._sync_slot_arrays()
-        self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
+        self.gps_.train(slots, ptr, idx, tr, float(self.local_gp.map_scale), float(self.local_gp.fbias),
                         self._pub("gp_noise") and self.dim == 2,
                         NOGRAD_VALUE_NOISE if self._pub("gp_noise") else self._NOGRAD_NOISE,
                         0.0 if self._pub("gp_noise") else self._VALUE_FLOOR)
@@ -349,7 +389,8 @@ class GPISMapBase(Parameterised):
 
     def _train_cap(self):
         """Samples per local GP at most (0: no cap; the published retraining has none)."""
-        return 0 if (self.train_cap is None or self._pub("retrain")) else int(self.train_cap)
+        cap = self.local_gp.train_cap
+        return 0 if (cap is None or self._pub("retrain")) else int(cap)
 
     # -- query ----------------------------------------------------------------------------------
     def _gp_query(self, pts):
@@ -357,11 +398,11 @@ class GPISMapBase(Parameterised):
         tr, g = self.tree_, self.gps_
         self._sync_slot_arrays()
         out = np.empty((len(pts), 2 * self.dim + 2))
-        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
-        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.local_gp.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.local_gp.map_scale))
         mmax = g.m_max
-        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.map_scale), v0, g0,
-                 1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
+        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.local_gp.map_scale), v0, g0,
+                 1.0 + float(self.noise.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
                  tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                  g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(mmax, 1), out)
         return out
@@ -378,7 +419,7 @@ class GPISMapBase(Parameterised):
         -------
         sdf : ndarray of shape (n,)
             Signed distance in metres: positive in free space, negative behind surfaces.
-            Legacy mode returns the published ``f + fbias``.
+            ``distance.query_mode="published"`` returns the published ``f + fbias``.
         grad : ndarray of shape (n, dim)
             Gradient of the distance (unit outward normal near surfaces).
         var : ndarray of shape (n,)
@@ -406,7 +447,7 @@ class GPISMapBase(Parameterised):
             return self._far_prior(pts, np.abs(pts).max(1) > FAR_COORD)
         if self._pub("query_mode"):
             out = self._gp_query(pts)
-            return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
+            return out[:, 0] + self.local_gp.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
         return self._faithful(pts)
 
     def _far_prior(self, pts, far):
@@ -426,7 +467,7 @@ class GPISMapBase(Parameterised):
         nu = np.linalg.norm(u, axis=1)
         dist[far] = s * nu
         grad[far] = u / nu[:, None]
-        var[far] = 1.0 + float(self.map_noise)
+        var[far] = 1.0 + float(self.noise.map_noise)
         return dist, grad, var
 
     def _kd(self):
@@ -448,7 +489,7 @@ class GPISMapBase(Parameterised):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
         tr = self.tree_
         sptr, sidx = self._sample_index_
-        var_unobs = 1.0 + float(self.map_noise)
+        var_unobs = 1.0 + float(self.noise.map_noise)
         n, d = pts.shape
         if len(sidx) == 0:
             return far_field(pts, None, tr.pos, tr.nrm, tr.sp, tr.sg, self._surfel_radius(),
@@ -466,7 +507,7 @@ class GPISMapBase(Parameterised):
             sel = np.flatnonzero(w > 0)
             if len(sel):
                 out = self._gp_query(pts[sel])
-                K.blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
+                K.blend_gp(sel, out, w, float(self.local_gp.fbias), var_unobs - 1e-12, dist, grad, var,
                          t_info)
             return dist, grad, var
         dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
@@ -478,14 +519,14 @@ class GPISMapBase(Parameterised):
         tr, g, fr = self.tree_, self.gps_, self.free_
         sptr, sidx = self._sample_index_
         self._sync_slot_arrays()
-        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
-        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.local_gp.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.local_gp.map_scale))
         near, far = self._blend_band()
         return (min(4, len(sidx)), sptr, sidx, tr.pos, tr.nrm, tr.sp, tr.sg, float(self._SIGN_GATE),
                 bool(np.isfinite(self._SIGN_GATE)), float(self._surfel_radius()), fr.grid, fr.gshape,
-                fr.goff, float(fr.res), 1.0 + float(self.map_noise), float(near), float(far),
+                fr.goff, float(fr.res), 1.0 + float(self.noise.map_noise), float(near), float(far),
                 float(self._sign_width()), float(self._BEHIND), float(W), self._T_BLEND, False,
-                float(self.map_scale), v0, g0, float(self.fbias),
+                float(self.local_gp.map_scale), v0, g0, float(self.local_gp.fbias),
                 self._T_BLEND if self._VAR_BLEND else 0.0, tr.geo, tr.cgrid, tr.gshape, tr.goff,
                 tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                 g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(g.m_max, 1))

@@ -144,7 +144,7 @@ def test_tiled_office_is_drivable():
     w = World("office2d", seed=0, kinematic=True, tiles=2)
     one = World("office2d", seed=0, kinematic=True)
     try:
-        assert w.meta["bounds"] == (-15.0, 45.0, -15.0, 45.0) and "tiles" not in one.meta
+        assert w.meta.bounds == (-15.0, 45.0, -15.0, 45.0) and one.meta.tiles == 1
         path = snake_route(2)
         assert w.sdf(path).min() > 0.35                     # doors between tiles, furniture-free lanes
         assert one.sdf(path[path[:, 0] < 14.5][:10]).min() > 0.5
