@@ -16,6 +16,7 @@ from polar_sim.gpis._linesearch import TOL
 from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
 from polar_sim.gpis._scan2d import line_search, new_samples, occupancy
+from polar_sim.params import Tags
 
 __all__ = ["GPISMap2D"]
 
@@ -71,6 +72,7 @@ class GPISMap2D(GPISMapBase):
     """
 
     dim = 2
+    TAGS = Tags(update="update", query="query", saves=True, data="polar_sim.gpis.synthetic:check_data_2d")
     _STAGES = {"observation": ObservationConfig2D, "noise": NoiseConfig2D, "tree": TreeConfig2D,
                "local_gp": LocalGPConfig2D, "distance": DistanceConfig2D}
     # the two faces of a wall thinner than the sample spacing (office walls are 15 cm) both

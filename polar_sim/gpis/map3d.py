@@ -15,6 +15,7 @@ from polar_sim.gpis._fusion import fuse, normal_noise
 from polar_sim.gpis._native import K
 from polar_sim.gpis._linesearch import line_search
 from polar_sim.gpis._obsgp import ObsGP2D
+from polar_sim.params import Tags
 
 __all__ = ["GPISMap3D", "MAX_OBS_SKIP"]
 
@@ -58,6 +59,7 @@ class GPISMap3D(GPISMapBase):
     """
 
     dim = 3
+    TAGS = Tags(update="update", query="query", saves=True, data="polar_sim.gpis.synthetic:check_data_3d")
     _T_BLEND = 0.5
     _OC_SKIP = -0.02
     _TRAIN_R = 2.0

@@ -318,3 +318,13 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
                 speed=speed, yaw_rate=yaw_rate, pitch=pitch, speeds=speeds)
+
+
+def check_data():
+    """:class:`polar_sim.params.CheckData` of :class:`polar_sim.ground.GroundVO`: four 160x120
+    frames of a curving drive (3 m/s, 0.05 rad/s), and the intrinsics and camera height they need."""
+    from polar_sim.params import CheckData
+
+    s = make_sequence(4, width=160, height=120, speed=3.0, yaw_rate=0.05, camera_height=1.0, seed=0)
+    return CheckData(init={"K": s["K"], "camera_height": s["camera_height"]},
+                     frames=tuple((s["rgb"][i], float(s["times"][i])) for i in range(len(s["rgb"]))))

@@ -32,7 +32,7 @@ from polar_sim.ground.image import grey, hsv216, reduce2x
 from polar_sim.ground.integration import motion_step
 from polar_sim.ground.models import GROUND_MODELS, fit_ground
 from polar_sim.ground.motion import estimate_motion
-from polar_sim.params import Parameterised, check_fields, replace_fields, split_nested
+from polar_sim.params import Parameterised, Tags, check_fields, replace_fields, split_nested
 
 __all__ = ["GroundVO", "GroundEstimate", "STATUSES", "STAGE_CONFIGS"]
 
@@ -173,6 +173,8 @@ class GroundVO(Parameterised):
         Dense alignment of the ground between images, its fusion with the RANSAC speed, its ground
         self-labels and the aliasing guards (not in the published method).
     """
+
+    TAGS = Tags(update="process", query="trajectory", requires_update=False, random_state="seed", data="polar_sim.ground.synthetic:check_data")
 
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", seed=0, downsample=2,
                  integration="planar", camera_pitch=0.0, tracking=TrackingConfig(), motion=MotionConfig(),
