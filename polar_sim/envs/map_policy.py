@@ -11,7 +11,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from polar_sim.envs.action_maps import env_action
 from polar_sim.envs.features import stencil_vector
 from polar_sim.envs.map_memory import MAP_CHANNELS, MapMemory
-from polar_sim.envs.mlp_policy import ACTIVATIONS
+from polar_sim.envs.mlp_policy import ACTIVATIONS, check_dense, dense_forward
 from polar_sim.envs.observers import SDFStencil
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
@@ -97,19 +97,7 @@ class MapCNNPolicy:
             if not (np.isfinite(w).all() and np.isfinite(b).all()):
                 raise ValueError(f"convs: layer {i} holds NaN or inf")
             c, h = w.shape[0], -(-h // s)
-        fan_in = c * h * h + n_vec
-        if not self.weights or len(self.weights) != len(self.biases):
-            raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
-                             f"{len(self.weights)} and {len(self.biases)}")
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
-                raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
-                                 f"and b (out,)")
-            if not (np.isfinite(w).all() and np.isfinite(b).all()):
-                raise ValueError(f"weights: layer {i} holds NaN or inf")
-            fan_in = w.shape[0]
-        if fan_in != 2:
-            raise ValueError(f"weights: the last layer outputs {fan_in} values, expected 2 (v, omega)")
+        check_dense(self.weights, self.biases, c * h * h + n_vec)
 
     # -- acting ----------------------------------------------------------------------------
     def observe(self, obs):
@@ -130,12 +118,7 @@ class MapCNNPolicy:
         for w, b, s in self.convs:
             h = np.maximum(conv2d(h, w, b, s), 0.0)
         h = np.concatenate([h.reshape(-1), np.asarray(vector, np.float64)])
-        act = ACTIVATIONS[self.activation]
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < len(self.weights) - 1:
-                h = act(h)
-        return env_action(None, h)
+        return env_action(None, dense_forward(self.weights, self.biases, self.activation, h))
 
     def __call__(self, obs):
         return self.act(*self.observe(obs))

@@ -9,10 +9,38 @@ from polar_sim.envs.action_maps import check_action, env_action
 from polar_sim.envs.features import stencil_vector
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
-__all__ = ["MLPPolicy", "ACTIVATIONS"]
+__all__ = ["MLPPolicy", "ACTIVATIONS", "check_dense", "dense_forward"]
 
 ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, 0.0)}
 
+
+
+def check_dense(weights, biases, fan_in):
+    """Check a stack of dense layers: W_i (out_i, in_i) and b_i (out_i,) finite, in_0 = ``fan_in``,
+    each layer feeding the next, and 2 outputs (v, omega); ``ValueError`` naming the layer."""
+    if not weights or len(weights) != len(biases):
+        raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
+                         f"{len(weights)} and {len(biases)}")
+    for i, (w, b) in enumerate(zip(weights, biases)):
+        if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
+            raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
+                             f"and b (out,)")
+        if not (np.isfinite(w).all() and np.isfinite(b).all()):
+            raise ValueError(f"weights: layer {i} holds NaN or inf")
+        fan_in = w.shape[0]
+    if fan_in != 2:
+        raise ValueError(f"weights: the last layer outputs {fan_in} values, expected 2 (v, omega)")
+
+
+def dense_forward(weights, biases, activation, h):
+    """The output of the dense stack on input ``h`` (in_0,): ``activation`` (a name of
+    :data:`ACTIVATIONS`) after every layer but the last."""
+    act = ACTIVATIONS[activation]
+    for i, (w, b) in enumerate(zip(weights, biases)):
+        h = w @ h + b
+        if i < len(weights) - 1:
+            h = act(h)
+    return h
 
 class MLPPolicy:
     """``policy(obs) -> action``: the observation keys ``obs_keys`` flattened and concatenated,
@@ -73,19 +101,7 @@ class MLPPolicy:
         if self.mean.shape != (n,) or self.std.shape != (n,) or not (self.std > 0).all():
             raise ValueError(f"mean, std: expected shape ({n},) (the features of {self.obs_keys}) and std > 0, "
                              f"got {self.mean.shape} and {self.std.shape}")
-        if not self.weights or len(self.weights) != len(self.biases):
-            raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
-                             f"{len(self.weights)} and {len(self.biases)}")
-        fan_in = n
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
-                raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
-                                 f"and b (out,)")
-            if not (np.isfinite(w).all() and np.isfinite(b).all()):
-                raise ValueError(f"weights: layer {i} holds NaN or inf")
-            fan_in = w.shape[0]
-        if fan_in != 2:
-            raise ValueError(f"weights: the last layer outputs {fan_in} values, expected 2 (v, omega)")
+        check_dense(self.weights, self.biases, n)
 
     def features(self, obs):
         """The normalised feature vector (n_features,) of one observation dict."""
@@ -99,13 +115,7 @@ class MLPPolicy:
 
     def raw_output(self, obs):
         """The last layer's output (2,) before the action map."""
-        h = self.features(obs)
-        act = ACTIVATIONS[self.activation]
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < len(self.weights) - 1:
-                h = act(h)
-        return h
+        return dense_forward(self.weights, self.biases, self.activation, self.features(obs))
 
     def __call__(self, obs):
         return env_action(self.action, self.raw_output(obs))
