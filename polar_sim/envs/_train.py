@@ -81,7 +81,8 @@ def _dagger(env_id, p, seed, curve, progress, clock=None):
     cfg = DAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
                        hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
                        batch_size=p["batch_size"], lr=p["lr"], obs_keys=tuple(p["obs_keys"]), seed=seed,
-                       known_var=p["known_var"], head=BINS if p.get("head") == "bins" else None)
+                       known_var=p["known_var"], head=BINS if p.get("head") == "bins" else None,
+                       near_weight=p.get("near_weight", 1.0))
 
     def after_round(k, policy, row):
         if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
@@ -98,7 +99,8 @@ def _dagger_map(env_id, p, seed, curve, progress):
     clock = _Clock()
     cfg = MapDAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
                           hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
-                          batch_size=p["batch_size"], lr=p["lr"], seed=seed, head=BINS if p["head"] == "bins" else None)
+                          batch_size=p["batch_size"], lr=p["lr"], seed=seed, head=BINS if p["head"] == "bins" else None,
+                          near_weight=p["near_weight"])
 
     def after_round(k, policy, row):
         if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:

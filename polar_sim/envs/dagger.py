@@ -28,7 +28,8 @@ from tqdm.auto import tqdm
 from polar_sim._validation import as_float, as_int
 from polar_sim.envs.action_head import check_head, head_outputs, two_hot
 
-__all__ = ["TRAIN_SEEDS", "training_seeds", "rollout", "run_dagger", "fit_net", "TorchLearner", "check_fit"]
+__all__ = ["TRAIN_SEEDS", "training_seeds", "rollout", "run_dagger", "fit_net", "TorchLearner", "check_fit",
+           "key_columns"]
 
 #: The training worlds: episode seeds cycle through this range (dev worlds start at 1000, held-out at 10,000).
 TRAIN_SEEDS = (0, 1000)
@@ -107,9 +108,12 @@ def run_dagger(env, expert, learner, *, rounds, steps_per_round, beta_decay, see
     return policy, history
 
 
-def fit_net(net, inputs, targets, loss_fn, *, epochs, batch_size, lr, generator):
+def fit_net(net, inputs, targets, loss_fn, *, epochs, batch_size, lr, generator, weights=None):
     """Adam on ``loss_fn(net(*batch), target)`` over shuffled minibatches of ``inputs`` (tensors,
-    converted to float32 per batch) and ``targets``, ``epochs`` passes; returns the last pass's mean loss."""
+    converted to float32 per batch) and ``targets``, ``epochs`` passes; returns the last pass's mean loss.
+
+    With ``weights`` (n,), ``loss_fn`` returns per-sample losses and a batch's loss is their
+    ``weights``-weighted mean."""
     opt = torch.optim.Adam(net.parameters(), lr=lr)
     n = len(targets)
     loss_sum = 0.0
@@ -119,6 +123,8 @@ def fit_net(net, inputs, targets, loss_fn, *, epochs, batch_size, lr, generator)
         for i in range(0, n, batch_size):
             idx = perm[i:i + batch_size]
             loss = loss_fn(net(*(x[idx].float() for x in inputs)), targets[idx])
+            if weights is not None:
+                loss = (loss * weights[idx]).sum() / weights[idx].sum()
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -130,11 +136,32 @@ def _soft_cross_entropy(logits, target):
     return -(target * torch.log_softmax(logits, 1)).sum(1).mean()
 
 
-def check_fit(epochs, batch_size, lr, head):
+def _per_sample(loss_fn):
+    """``loss_fn``'s per-sample twin (n,): the mean over a sample's outputs, or its cross-entropy."""
+    if loss_fn is nn.functional.mse_loss:
+        return lambda pred, y: ((pred - y) ** 2).mean(1)
+    return lambda logits, y: -(y * torch.log_softmax(logits, 1)).sum(1)
+
+
+def key_columns(keys, space, key="sdf"):
+    """The slice of ``key`` in the feature vector of ``keys`` (flattened and concatenated in order)
+    of the ``Dict`` observation ``space``; an empty slice if ``key`` is not read."""
+    start = 0
+    for k in keys:
+        n = int(np.prod(space[k].shape))
+        if k == key:
+            return slice(start, start + n)
+        start += n
+    return slice(0, 0)
+
+
+def check_fit(epochs, batch_size, lr, head, near_weight=1.0, near_distance=0.5):
     """Check the fit's parameters (``ValueError`` naming the bad one); returns the checked ``head``."""
     as_int(epochs, "epochs", minimum=1, maximum=10_000)
     as_int(batch_size, "batch_size", minimum=1, maximum=1_000_000)
     as_float(lr, "lr", minimum=0.0, maximum=1.0, exclusive_minimum=True)
+    as_float(near_weight, "near_weight", minimum=1.0, maximum=1000.0)
+    as_float(near_distance, "near_distance", minimum=0.0, maximum=10.0, exclusive_minimum=True)
     return check_head(head)
 
 
@@ -143,13 +170,19 @@ class TorchLearner:
     normalised by the mean and std of the first round's data (the expert's own, fixed from then on),
     the targets are the expert's actions (regression, mean squared error) or their two-hot bins
     (``head``, soft cross-entropy). Subclasses give ``observe``, ``make_net(data)``, ``inputs``
-    (the policy's inputs of a sample) and ``export``; the net is made at the first fit."""
+    (the policy's inputs of a sample), ``export`` and ``sdf_columns`` (where the stencil's
+    distances are in the features); the net is made at the first fit.
+
+    ``near_weight`` > 1 weighs the samples near an obstacle (a known stencil distance below
+    ``near_distance`` m) that much more in the loss: the states where a wrong action collides."""
 
     dtypes = ()
+    sdf_columns = slice(0, 0)
 
-    def __init__(self, *, epochs, batch_size, lr, head=None):
-        self.head = check_fit(epochs, batch_size, lr, head)
+    def __init__(self, *, epochs, batch_size, lr, head=None, near_weight=1.0, near_distance=0.5):
+        self.head = check_fit(epochs, batch_size, lr, head, near_weight, near_distance)
         self.epochs, self.batch_size, self.lr = int(epochs), int(batch_size), float(lr)
+        self.near_weight, self.near_distance = float(near_weight), float(near_distance)
         self.net = self.mean = self.std = self.policy = None
         self.n_out = head_outputs(self.head)
 
@@ -174,7 +207,12 @@ class TorchLearner:
             targets, loss_fn = torch.as_tensor(actions, dtype=torch.float32), nn.functional.mse_loss
         else:
             targets, loss_fn = torch.as_tensor(two_hot(self.head, actions), dtype=torch.float32), _soft_cross_entropy
+        weights = None
+        if self.near_weight != 1.0:
+            near = data[-1][:, self.sdf_columns].min(1) < self.near_distance
+            weights = torch.as_tensor(np.where(near, self.near_weight, 1.0), dtype=torch.float32)
+            loss_fn = _per_sample(loss_fn)
         loss = fit_net(self.net, inputs, targets, loss_fn, epochs=self.epochs, batch_size=self.batch_size,
-                       lr=self.lr, generator=generator)
+                       lr=self.lr, generator=generator, weights=weights)
         self.policy = self.export()
         return loss

@@ -21,7 +21,7 @@ import numpy as np
 from torch import nn
 
 from polar_sim._validation import as_float, as_int, check_choice
-from polar_sim.envs.dagger import TRAIN_SEEDS, TorchLearner, check_fit, run_dagger
+from polar_sim.envs.dagger import key_columns, TRAIN_SEEDS, TorchLearner, check_fit, run_dagger
 from polar_sim.envs.features import KNOWN_VAR, MASKED_KEYS, stencil_vector
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
@@ -66,6 +66,10 @@ class DAggerConfig:
     head : dict or None, default=None
         The action head (:mod:`polar_sim.envs.action_head`): None regresses (v, omega) by mean
         squared error; ``action_head.BINS`` classifies over action bins (soft cross-entropy).
+    near_weight : float, default=1.0
+        The loss weight of a sample near an obstacle (a known stencil distance below
+        ``near_distance`` m) relative to the others (1: all alike).
+    near_distance : float, default=0.5
     """
 
     rounds: int = 4
@@ -80,6 +84,8 @@ class DAggerConfig:
     seed: int = 0
     known_var: float | None = KNOWN_VAR
     head: dict | None = None
+    near_weight: float = 1.0
+    near_distance: float = 0.5
 
     def __post_init__(self):
         as_int(self.rounds, "rounds", minimum=1, maximum=100)
@@ -90,7 +96,8 @@ class DAggerConfig:
         for h in self.hidden:
             as_int(h, "hidden", minimum=1, maximum=4096)
         check_choice(self.activation, ("tanh", "relu"), "activation")
-        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head))
+        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head,
+                                                           self.near_weight, self.near_distance))
         if not isinstance(self.obs_keys, (tuple, list)) or not self.obs_keys \
                 or not all(isinstance(k, str) for k in self.obs_keys):
             raise ValueError(f"obs_keys: expected a non-empty tuple of observation keys, got {self.obs_keys!r}")
@@ -140,7 +147,11 @@ class MLPLearner(TorchLearner):
     dtypes = (np.float32,)
 
     def __init__(self, env, config, env_id, env_kwargs, recipe):
-        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head)
+        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head,
+                         near_weight=config.near_weight, near_distance=config.near_distance)
+        self.sdf_columns = key_columns(config.obs_keys, env.observation_space)
+        if config.near_weight != 1.0 and self.sdf_columns.stop == 0:
+            raise ValueError("near_weight: weighing the samples near obstacles needs 'sdf' among the features")
         self.env, self.config, self.env_id, self.env_kwargs, self.recipe = env, config, env_id, env_kwargs, recipe
 
     def observe(self, obs):

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from polar_sim._validation import as_float, as_int, check_choice
-from polar_sim.envs.dagger import TorchLearner, check_fit, run_dagger
+from polar_sim.envs.dagger import key_columns, TorchLearner, check_fit, run_dagger
 from polar_sim.envs.features import KNOWN_VAR, MASKED_KEYS, stencil_vector
 from polar_sim.envs.imitation import make_expert
 from polar_sim.envs.map_memory import DEFAULT_SCALES, MAP_CHANNELS, MapMemory
@@ -49,6 +49,10 @@ class MapDAggerConfig:
         Seeds torch, the mixture's coin and the first training world.
     head : dict or None, default=None
         The action head (:mod:`polar_sim.envs.action_head`; None: regression by mean squared error).
+    near_weight : float, default=1.0
+        The loss weight of a sample near an obstacle (a known stencil distance below
+        ``near_distance`` m) relative to the others (1: all alike).
+    near_distance : float, default=0.5
     """
 
     rounds: int = 3
@@ -63,6 +67,8 @@ class MapDAggerConfig:
     scales: tuple = DEFAULT_SCALES
     seed: int = 0
     head: dict | None = None
+    near_weight: float = 1.0
+    near_distance: float = 0.5
 
     def __post_init__(self):
         as_int(self.rounds, "rounds", minimum=1, maximum=100)
@@ -79,7 +85,8 @@ class MapDAggerConfig:
         for h in self.hidden:
             as_int(h, "hidden", minimum=1, maximum=4096)
         check_choice(self.activation, ("tanh", "relu"), "activation")
-        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head))
+        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head,
+                                                           self.near_weight, self.near_distance))
         as_int(self.seed, "seed", minimum=0)
         MapMemory(np.zeros((1, 2)), scales=self.scales)  # checks the scales
         object.__setattr__(self, "convs", tuple((int(c), int(s)) for c, s in self.convs))
@@ -128,7 +135,11 @@ class MapLearner(TorchLearner):
     dtypes = (np.float16, np.float32)
 
     def __init__(self, env, config, env_id, env_kwargs, recipe):
-        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head)
+        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head,
+                         near_weight=config.near_weight, near_distance=config.near_distance)
+        self.sdf_columns = key_columns(MASKED_KEYS, env.observation_space)
+        if config.near_weight != 1.0 and self.sdf_columns.stop == 0:
+            raise ValueError("near_weight: weighing the samples near obstacles needs 'sdf' among the features")
         stencil = env.unwrapped._stencil
         self.memory_params = {"half": 18.0, "cell": 0.2, "max_var": 0.5, "scales": [list(s) for s in config.scales],
                               "stencil_rays": int(stencil.n_rays),

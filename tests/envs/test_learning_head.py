@@ -120,3 +120,29 @@ def test_dagger_with_bins_head_trains_saves_loads_and_repeats(tmp_path):
     with pytest.raises(ValueError, match="head"):
         recipes.check_recipe("dagger", {"head": "gauss"}, ROOM)
     env.close()
+
+
+# The near-obstacle weighting: equal weights are the unweighted fit (the weighted mean of equal
+# weights is the mean), and the sdf columns are where the stencil's distances sit in the features.
+def test_weighted_fit_and_sdf_columns():
+    from polar_sim.envs.dagger import _per_sample, fit_net, key_columns
+
+    rng = np.random.default_rng(0)
+    x, y = torch.as_tensor(rng.normal(size=(64, 5)), dtype=torch.float32), torch.as_tensor(rng.normal(size=(64, 2)),
+                                                                                           dtype=torch.float32)
+    nets = []
+    for weights in (None, torch.full((64,), 3.0)):
+        torch.manual_seed(0)
+        net = torch.nn.Linear(5, 2)
+        loss_fn = torch.nn.functional.mse_loss if weights is None else _per_sample(torch.nn.functional.mse_loss)
+        fit_net(net, [x], y, loss_fn, epochs=3, batch_size=16, lr=1e-2, generator=torch.Generator().manual_seed(1),
+                weights=weights)
+        nets.append(net)
+    for a, b in zip(nets[0].parameters(), nets[1].parameters()):
+        np.testing.assert_allclose(a.detach().numpy(), b.detach().numpy(), rtol=0, atol=1e-6)
+    space = gym.spaces.Dict({"goal": gym.spaces.Box(-1, 1, (2,)), "sdf": gym.spaces.Box(-1, 1, (64,)),
+                             "twist": gym.spaces.Box(-1, 1, (2,))})
+    assert key_columns(("goal", "sdf", "twist"), space) == slice(2, 66)
+    assert key_columns(("goal", "twist"), space) == slice(0, 0)
+    with pytest.raises(ValueError, match="near_weight"):
+        DAggerConfig(near_weight=0.5)
