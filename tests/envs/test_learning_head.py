@@ -80,7 +80,7 @@ def test_policies_with_a_head_match_torch_and_round_trip(tmp_path):
         MLPPolicy(pol.weights, pol.biases, obs_keys=pol.obs_keys, obs_shapes=pol.obs_shapes, mean=mean, std=std,
                   known_var=pol.known_var)
     mcfg = MapDAggerConfig(convs=((4, 2),), hidden=(8,), head=BINS)
-    mnet = MapNet((8, 16, 16), n, mcfg, 36)
+    mnet = MapNet((8, 16, 16), n, mcfg)
     memory = {"half": 18.0, "cell": 0.2, "max_var": 0.5, "scales": [[16, 0.3], [16, 1.2]], "stencil_rays": 16,
               "stencil_radii": [0.5, 1.0, 2.0, 3.0]}
     mpol = _to_policy(mnet, mean, std, memory, mcfg, env, ROOM, {}, {})
