@@ -211,6 +211,9 @@ def _initial_policy(env_id, p, seed, curve, progress, clock):
         from polar_sim.envs.shipped import pretrained
 
         policy = pretrained(env_id)
+        if not isinstance(policy, MLPPolicy):
+            raise ValueError(f"init_policy: the policy shipped for {env_id} is a {type(policy).__name__}; PPO "
+                             f"fine-tunes an MLP imitation policy (a v1 tier's, or a .npz of the dagger recipe)")
     else:
         policy = MLPPolicy.load(p["init_policy"], name="init_policy")
     if policy.action is not None or policy.env_id != env_id:
