@@ -31,7 +31,8 @@ __all__ = ["MapDAggerConfig", "MapLearner", "train_dagger_map", "MapNet"]
 class MapDAggerConfig:
     """The ``dagger_map`` recipe's parameters: those of the shipped ``GPISNav-Rooms2-v2`` and ``GPISNav-v2`` policies
     (the discrete action head, 6 rounds of 5,000 steps, 30 epochs; 82 % and 74 % of 50 dev worlds; the shipped
-    ``GPISNav-Room-v2`` policy is ``rounds=3``, 90 % of 50 dev worlds; benchmarks/RESULTS.md, fourth push).
+    ``GPISNav-Room-v2`` policy is ``rounds=3, steps_per_round=7000``, 92 % of 50 dev worlds; benchmarks/RESULTS.md,
+    fourth push).
 
     Attributes
     ----------

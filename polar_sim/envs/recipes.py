@@ -64,8 +64,8 @@ _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_r
 #: Recipe name -> its parameters' defaults (every parameter a recipe takes is here).
 RECIPES = {
     "dagger": {**_COMMON, **_DAGGER, "head": "regress", "near_weight": 1.0},
-    # The shipped Rooms2-v2 and 3x3 policies' recipe (Room-v2: rounds 3), chosen on dev worlds 1000-1049
-    # (benchmarks/RESULTS.md, "A discrete action head: fourth push").
+    # The shipped Rooms2-v2 and 3x3 policies' recipe (Room-v2: rounds 3, steps_per_round 7000), chosen on dev
+    # worlds 1000-1049 (benchmarks/RESULTS.md, "A discrete action head: fourth push").
     "dagger_map": {**_COMMON, "train_pose_source": "slam", "rounds": 6, "steps_per_round": 5000, "beta_decay": 0.5,
                    "hidden": [256, 256], "activation": "tanh", "epochs": 30, "batch_size": 256, "lr": 1e-3,
                    "head": "bins", "near_weight": 1.0},
