@@ -16,6 +16,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
+from polar_sim.envs.action_head import BINS
 from polar_sim.envs.action_maps import wrap_action
 from polar_sim.envs.curriculum import ClutterCurriculum, Ramp
 from polar_sim.envs.evaluate import evaluate
@@ -80,7 +81,8 @@ def _dagger(env_id, p, seed, curve, progress, clock=None):
     cfg = DAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
                        hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
                        batch_size=p["batch_size"], lr=p["lr"], obs_keys=tuple(p["obs_keys"]), seed=seed,
-                       known_var=p["known_var"])
+                       known_var=p["known_var"], head=BINS if p.get("head") == "bins" else None,
+                       near_weight=p.get("near_weight", 1.0))
 
     def after_round(k, policy, row):
         if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
@@ -97,7 +99,8 @@ def _dagger_map(env_id, p, seed, curve, progress):
     clock = _Clock()
     cfg = MapDAggerConfig(rounds=p["rounds"], steps_per_round=p["steps_per_round"], beta_decay=p["beta_decay"],
                           hidden=tuple(p["hidden"]), activation=p["activation"], epochs=p["epochs"],
-                          batch_size=p["batch_size"], lr=p["lr"], seed=seed)
+                          batch_size=p["batch_size"], lr=p["lr"], seed=seed, head=BINS if p["head"] == "bins" else None,
+                          near_weight=p["near_weight"])
 
     def after_round(k, policy, row):
         if p["eval_every"] and ((k + 1) * p["steps_per_round"]) % p["eval_every"] < p["steps_per_round"]:
@@ -208,6 +211,9 @@ def _initial_policy(env_id, p, seed, curve, progress, clock):
         from polar_sim.envs.shipped import pretrained
 
         policy = pretrained(env_id)
+        if not isinstance(policy, MLPPolicy):
+            raise ValueError(f"init_policy: the policy shipped for {env_id} is a {type(policy).__name__}; PPO "
+                             f"fine-tunes an MLP imitation policy (a v1 tier's, or a .npz of the dagger recipe)")
     else:
         policy = MLPPolicy.load(p["init_policy"], name="init_policy")
     if policy.action is not None or policy.env_id != env_id:

@@ -2,37 +2,37 @@
 map that ``SDFNavigator`` plans on, imitating ``SDFNavigator``; the result is a numpy
 :class:`~polar_sim.envs.map_policy.MapCNNPolicy`.
 
-Round 0 rolls out the expert and fits the learner to its actions (behaviour cloning); round k >= 1
-executes the expert's action with probability ``beta_decay ** k`` and the learner's otherwise,
-labels every visited state with the expert's action, aggregates, and refits (warm-started). The
-expert and the learner's memory both see every observation of the trajectory driven, whoever
-acts, so the expert's label and the learner's input describe the same history.
+The loop is :func:`polar_sim.envs.dagger.run_dagger`, shared with the memoryless learner; the
+learner's memory sees every observation of the trajectory driven, whoever acts, so the expert's
+label and the learner's input describe the same history.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
-from tqdm.auto import tqdm
 
 from polar_sim._validation import as_float, as_int, check_choice
+from polar_sim.envs.action_head import BINS, head_outputs
+from polar_sim.envs.dagger import key_columns, TorchLearner, check_fit, run_dagger
 from polar_sim.envs.features import KNOWN_VAR, MASKED_KEYS, stencil_vector
-from polar_sim.envs.imitation import TRAIN_SEEDS, make_expert
+from polar_sim.envs.imitation import make_expert
 from polar_sim.envs.map_memory import DEFAULT_SCALES, MAP_CHANNELS, MapMemory
 from polar_sim.envs.map_policy import MapCNNPolicy
 
-__all__ = ["MapDAggerConfig", "train_dagger_map", "MapNet"]
+__all__ = ["MapDAggerConfig", "MapLearner", "train_dagger_map", "MapNet"]
 
 
 @dataclasses.dataclass(frozen=True)
 class MapDAggerConfig:
-    """The ``dagger_map`` recipe's parameters: those of the shipped ``GPISNav-Rooms2-v2`` policy (70 % of 10 dev
-    worlds; a longer run, 4 x 5,000 steps with 20 epochs, scored 60 % of 20 on ``GPISNav-Room-v2``; benchmarks/RESULTS.md).
+    """The ``dagger_map`` recipe's parameters: those of the shipped ``GPISNav-Rooms2-v2`` and ``GPISNav-v2`` policies
+    (the discrete action head, 6 rounds of 5,000 steps, 30 epochs; 82 % and 74 % of 50 dev worlds; the shipped
+    ``GPISNav-Room-v2`` policy is ``rounds=3, steps_per_round=7000``, 92 % of 50 dev worlds; benchmarks/RESULTS.md,
+    fourth push).
 
     Attributes
     ----------
@@ -45,24 +45,33 @@ class MapDAggerConfig:
     activation : {"tanh", "relu"}
         Between the dense layers.
     epochs, batch_size, lr
-        The fit after each round (Adam, mean squared error, warm-started).
+        The fit after each round (Adam, warm-started).
     scales : tuple of (int, float)
         The memory's crops (:class:`~polar_sim.envs.map_memory.MapMemory`).
     seed : int
         Seeds torch, the mixture's coin and the first training world.
+    head : dict or None, default=action_head.BINS
+        The action head (:mod:`polar_sim.envs.action_head`; None: regression by mean squared error).
+    near_weight : float, default=1.0
+        The loss weight of a sample near an obstacle (a known stencil distance below
+        ``near_distance`` m) relative to the others (1: all alike).
+    near_distance : float, default=0.5
     """
 
-    rounds: int = 3
-    steps_per_round: int = 3000
+    rounds: int = 6
+    steps_per_round: int = 5000
     beta_decay: float = 0.5
     convs: tuple = ((16, 1), (32, 2), (32, 2))
     hidden: tuple = (256, 256)
     activation: str = "tanh"
-    epochs: int = 15
+    epochs: int = 30
     batch_size: int = 256
     lr: float = 1e-3
     scales: tuple = DEFAULT_SCALES
     seed: int = 0
+    head: dict | None = dataclasses.field(default_factory=lambda: dict(BINS))
+    near_weight: float = 1.0
+    near_distance: float = 0.5
 
     def __post_init__(self):
         as_int(self.rounds, "rounds", minimum=1, maximum=100)
@@ -79,9 +88,8 @@ class MapDAggerConfig:
         for h in self.hidden:
             as_int(h, "hidden", minimum=1, maximum=4096)
         check_choice(self.activation, ("tanh", "relu"), "activation")
-        as_int(self.epochs, "epochs", minimum=1, maximum=10_000)
-        as_int(self.batch_size, "batch_size", minimum=1, maximum=1_000_000)
-        as_float(self.lr, "lr", minimum=0.0, maximum=1.0, exclusive_minimum=True)
+        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head,
+                                                           self.near_weight, self.near_distance))
         as_int(self.seed, "seed", minimum=0)
         MapMemory(np.zeros((1, 2)), scales=self.scales)  # checks the scales
         object.__setattr__(self, "convs", tuple((int(c), int(s)) for c, s in self.convs))
@@ -105,65 +113,10 @@ class MapNet(nn.Module):
         for width in config.hidden:
             layers += [nn.Linear(fan, width), act()]
             fan = width
-        self.head = nn.Sequential(*layers, nn.Linear(fan, 2))
+        self.head = nn.Sequential(*layers, nn.Linear(fan, head_outputs(config.head)))
 
     def forward(self, image, vector):
         return self.head(torch.cat([self.convs(image).flatten(1), vector], 1))
-
-
-def _rollout(env, expert, memory, learner, *, beta, steps, rng, seeds, bar):
-    """``steps`` env steps of the beta-mixture; returns the crops (steps, C, n, n) float16, the raw
-    stencil features (steps, n_vec), the expert's actions (steps, 2) and the finished episodes'
-    outcomes."""
-    images, vectors, actions = [], [], []
-    out = {"episodes": 0, "success": 0, "collision": 0}
-
-    def start():
-        obs, _ = env.reset(seed=next(seeds))
-        expert.reset()
-        memory.reset()
-        return obs
-
-    obs = start()
-    for _ in range(steps):
-        a_exp = np.asarray(expert(obs), np.float32)
-        memory.update(obs)
-        img, vec = memory.crops(), stencil_vector(obs, MASKED_KEYS, KNOWN_VAR)
-        images.append(img.astype(np.float16))
-        vectors.append(vec.astype(np.float32))
-        actions.append(a_exp)
-        if learner is None or rng.random() < beta:
-            a = a_exp
-        else:
-            a = learner.act(img, np.clip((vec - learner.mean) / learner.std, -learner.clip, learner.clip))
-        obs, _, term, trunc, info = env.step(a)
-        bar.update(1)
-        if term or trunc:
-            out["episodes"] += 1
-            out["success"] += bool(info.get("is_success"))
-            out["collision"] += bool(info.get("collision"))
-            obs = start()
-    return np.asarray(images), np.asarray(vectors), np.asarray(actions), out
-
-
-def _fit(net, images, vectors, actions, mean, std, config, generator):
-    """Adam on the mean squared error over every sample, ``config.epochs`` passes; the last pass's loss."""
-    img = torch.as_tensor(images)
-    vec = torch.as_tensor(np.clip((vectors - mean) / std, -10, 10), dtype=torch.float32)
-    y = torch.as_tensor(actions, dtype=torch.float32)
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
-    loss_sum = 0.0
-    for _ in range(config.epochs):
-        perm = torch.randperm(len(y), generator=generator)
-        loss_sum = 0.0
-        for i in range(0, len(y), config.batch_size):
-            idx = perm[i:i + config.batch_size]
-            loss = nn.functional.mse_loss(net(img[idx].float(), vec[idx]), y[idx])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            loss_sum += loss.item() * len(idx)
-    return loss_sum / len(y)
 
 
 def _to_policy(net, mean, std, memory_params, config, env, env_id, env_kwargs, recipe):
@@ -175,7 +128,45 @@ def _to_policy(net, mean, std, memory_params, config, env, env_id, env_kwargs, r
                         memory=memory_params, obs_keys=MASKED_KEYS,
                         obs_shapes={k: env.observation_space[k].shape for k in MASKED_KEYS}, mean=mean, std=std,
                         activation=config.activation, known_var=KNOWN_VAR, env_id=env_id, env_kwargs=env_kwargs,
-                        recipe=recipe)
+                        recipe=recipe, head=config.head)
+
+
+class MapLearner(TorchLearner):
+    """The learner with a map memory: a sample is the memory's crops (float16) and the masked
+    stencil features, read by :class:`MapNet` (exported as :class:`MapCNNPolicy`)."""
+
+    dtypes = (np.float16, np.float32)
+
+    def __init__(self, env, config, env_id, env_kwargs, recipe):
+        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head,
+                         near_weight=config.near_weight, near_distance=config.near_distance)
+        self.sdf_columns = key_columns(MASKED_KEYS, env.observation_space)
+        if config.near_weight != 1.0 and self.sdf_columns.stop == 0:
+            raise ValueError("near_weight: weighing the samples near obstacles needs 'sdf' among the features")
+        stencil = env.unwrapped._stencil
+        self.memory_params = {"half": 18.0, "cell": 0.2, "max_var": 0.5, "scales": [list(s) for s in config.scales],
+                              "stencil_rays": int(stencil.n_rays),
+                              "stencil_radii": [float(r) for r in stencil.radii]}
+        self.memory = MapMemory(stencil.points_robot, half=18.0, cell=0.2, max_var=0.5, scales=config.scales)
+        self.image_shape = (len(MAP_CHANNELS) * len(config.scales),) + (config.scales[0][0],) * 2
+        self.env, self.config, self.env_id, self.env_kwargs, self.recipe = env, config, env_id, env_kwargs, recipe
+
+    def reset(self):
+        self.memory.reset()
+
+    def observe(self, obs):
+        self.memory.update(obs)
+        return self.memory.crops(), stencil_vector(obs, MASKED_KEYS, KNOWN_VAR)
+
+    def inputs(self, sample):
+        return sample[0], self.normalised(sample[1])
+
+    def make_net(self, data):
+        return MapNet(self.image_shape, data[-1].shape[1], self.config)
+
+    def export(self):
+        return _to_policy(self.net, self.mean, self.std, self.memory_params, self.config, self.env, self.env_id,
+                          self.env_kwargs, self.recipe)
 
 
 def train_dagger_map(env_id, *, config=MapDAggerConfig(), env_kwargs=None, policy_env_kwargs=None, recipe=None,
@@ -203,43 +194,14 @@ def train_dagger_map(env_id, *, config=MapDAggerConfig(), env_kwargs=None, polic
     if policy_env_kwargs is None:
         policy_env_kwargs = {k: v for k, v in env_kwargs.items() if k != "pose_source"}
     env = gym.make(env_id, **env_kwargs)
-    t_wall, t_cpu = time.perf_counter(), time.process_time()
     try:
         expert = make_expert("navigator", env)
         if "pose" not in env.observation_space.spaces:
             raise ValueError(f"env_id: the map memory reads the estimated pose; {env_id} does not observe it "
                              f"(use a v1 or v2 id)")
-        stencil = env.unwrapped._stencil
-        memory_params = {"half": 18.0, "cell": 0.2, "max_var": 0.5, "scales": [list(s) for s in config.scales],
-                         "stencil_rays": int(stencil.n_rays), "stencil_radii": [float(r) for r in stencil.radii]}
-        memory = MapMemory(stencil.points_robot, half=18.0, cell=0.2, max_var=0.5, scales=config.scales)
-        image_shape = (len(MAP_CHANNELS) * len(config.scales),) + (config.scales[0][0],) * 2
-        rng = np.random.default_rng(config.seed)
-        gen = torch.Generator().manual_seed(config.seed)
-        torch.manual_seed(config.seed)
-        span = TRAIN_SEEDS[1] - TRAIN_SEEDS[0]
-        seeds = (TRAIN_SEEDS[0] + (config.seed * 7919 + i) % span for i in range(10**9))
-        data = None
-        net = mean = std = policy = None
-        history = []
-        with tqdm(total=config.rounds * config.steps_per_round, desc=f"dagger_map {env_id}", unit="step",
-                  disable=None if progress is None else not progress) as bar:
-            for k in range(config.rounds):
-                beta = 1.0 if k == 0 else config.beta_decay ** k
-                *new, out = _rollout(env, expert, memory, policy, beta=beta, steps=config.steps_per_round, rng=rng,
-                                     seeds=seeds, bar=bar)
-                data = new if data is None else [np.concatenate([a, b]) for a, b in zip(data, new)]
-                if net is None:  # the normalisation of the expert's own data, fixed from then on
-                    mean = data[1].mean(0).astype(np.float64)
-                    std = np.maximum(data[1].std(0).astype(np.float64), 1e-3)
-                    net = MapNet(image_shape, len(mean), config)
-                loss = _fit(net, *data, mean, std, config, gen)
-                policy = _to_policy(net, mean, std, memory_params, config, env, env_id, policy_env_kwargs, recipe)
-                row = {"round": k, "beta": beta, "steps": int(len(data[2])), **out, "loss": loss,
-                       "wall_s": time.perf_counter() - t_wall, "cpu_s": time.process_time() - t_cpu}
-                history.append(row)
-                if callback is not None:
-                    callback(k, policy, row)
+        learner = MapLearner(env, config, env_id, policy_env_kwargs, recipe)
+        return run_dagger(env, expert, learner, rounds=config.rounds, steps_per_round=config.steps_per_round,
+                          beta_decay=config.beta_decay, seed=config.seed, desc=f"dagger_map {env_id}",
+                          progress=progress, callback=callback)
     finally:
         env.close()
-    return policy, history

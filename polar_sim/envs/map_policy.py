@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from polar_sim.envs.action_head import check_head, decode, head_outputs
 from polar_sim.envs.action_maps import env_action
 from polar_sim.envs.features import stencil_vector
 from polar_sim.envs.map_memory import MAP_CHANNELS, MapMemory
@@ -33,8 +34,9 @@ class MapCNNPolicy:
     convolutions (3x3, zero padding 1, each with its stride), flattens them, appends the
     normalised masked stencil (``clip((x - mean) / std, -clip, clip)`` of
     :func:`~polar_sim.envs.features.stencil_vector`), and maps the result through dense layers
-    (``activation`` between them, none after the last) to the 2 action values (clipped to the
-    env's ``Box(-1, 1, (2,))``). ``reset()`` clears the memory: call it at every episode start.
+    (``activation`` between them, none after the last) to the 2 action values or the logits of
+    ``head``'s bins, decoded (:mod:`polar_sim.envs.action_head`) and clipped to the env's
+    ``Box(-1, 1, (2,))``. ``reset()`` clears the memory: call it at every episode start.
 
     Parameters
     ----------
@@ -42,17 +44,20 @@ class MapCNNPolicy:
         Per convolution ``W`` (out, in, 3, 3) (torch's ``Conv2d`` layout), ``b`` (out,), stride.
     weights, biases : list of ndarray
         The dense layers, ``W`` (out_i, in_i) and ``b`` (out_i,); the first takes the flattened
-        last convolution followed by the stencil features, the last outputs 2 values.
+        last convolution followed by the stencil features, the last outputs 2 values (or the bins
+        of ``head``).
     memory : dict
         :class:`MapMemory`'s parameters plus ``stencil_rays`` and ``stencil_radii`` (the env's).
     obs_keys, obs_shapes, mean, std, clip, activation, known_var
         The stencil features, as for :class:`~polar_sim.envs.mlp_policy.MLPPolicy`.
     env_id, env_kwargs, recipe
         The env id, the ``gym.make`` arguments it acts with, how it was trained.
+    head : dict or None, default=None
+        The action head (:func:`polar_sim.envs.action_head.check_head`; None: regression).
     """
 
     def __init__(self, convs, weights, biases, *, memory, obs_keys, obs_shapes, mean, std, clip=10.0,
-                 activation="tanh", known_var=0.5, env_id=None, env_kwargs=None, recipe=None):
+                 activation="tanh", known_var=0.5, env_id=None, env_kwargs=None, recipe=None, head=None):
         self.convs = [(np.asarray(w, np.float64), np.asarray(b, np.float64), int(s)) for w, b, s in convs]
         self.weights = [np.asarray(w, np.float64) for w in weights]
         self.biases = [np.asarray(b, np.float64) for b in biases]
@@ -70,6 +75,7 @@ class MapCNNPolicy:
         self.clip, self.activation = float(clip), activation
         self.known_var = None if known_var is None else float(known_var)
         self.env_id, self.env_kwargs, self.recipe = env_id, dict(env_kwargs or {}), dict(recipe or {})
+        self.head = check_head(head)
         self._check()
 
     @property
@@ -97,7 +103,7 @@ class MapCNNPolicy:
             if not (np.isfinite(w).all() and np.isfinite(b).all()):
                 raise ValueError(f"convs: layer {i} holds NaN or inf")
             c, h = w.shape[0], -(-h // s)
-        check_dense(self.weights, self.biases, c * h * h + n_vec)
+        check_dense(self.weights, self.biases, c * h * h + n_vec, head_outputs(self.head))
 
     # -- acting ----------------------------------------------------------------------------
     def observe(self, obs):
@@ -118,7 +124,7 @@ class MapCNNPolicy:
         for w, b, s in self.convs:
             h = np.maximum(conv2d(h, w, b, s), 0.0)
         h = np.concatenate([h.reshape(-1), np.asarray(vector, np.float64)])
-        return env_action(None, dense_forward(self.weights, self.biases, self.activation, h))
+        return env_action(None, decode(self.head, dense_forward(self.weights, self.biases, self.activation, h)))
 
     def __call__(self, obs):
         return self.act(*self.observe(obs))
@@ -140,7 +146,7 @@ class MapCNNPolicy:
         meta = {"kind": "mapcnn", "obs_keys": self.obs_keys, "obs_shapes": self.obs_shapes, "clip": self.clip,
                 "activation": self.activation, "env_id": self.env_id, "env_kwargs": self.env_kwargs,
                 "recipe": self.recipe, "layers": len(self.weights), "strides": [s for _, _, s in self.convs],
-                "known_var": self.known_var, "memory": self.memory_params}
+                "known_var": self.known_var, "memory": self.memory_params, "head": self.head}
         # The weights as float32: torch trains them in float32, so this loses nothing and halves the file.
         def single(a):
             return a.astype(np.float32) if np.array_equal(a.astype(np.float32), a) else a
@@ -171,7 +177,7 @@ class MapCNNPolicy:
                          memory=meta["memory"], obs_keys=meta["obs_keys"], obs_shapes=meta["obs_shapes"],
                          mean=arrays["obs_mean"], std=arrays["obs_std"], clip=meta["clip"],
                          activation=meta["activation"], known_var=meta["known_var"], env_id=meta["env_id"],
-                         env_kwargs=meta["env_kwargs"], recipe=meta["recipe"])
+                         env_kwargs=meta["env_kwargs"], recipe=meta["recipe"], head=meta.get("head"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{name}: the policy file lacks or garbles {exc}") from None
         if env is not None:

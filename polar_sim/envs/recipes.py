@@ -63,9 +63,12 @@ _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_r
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
 #: Recipe name -> its parameters' defaults (every parameter a recipe takes is here).
 RECIPES = {
-    "dagger": {**_COMMON, **_DAGGER},
-    "dagger_map": {**_COMMON, "train_pose_source": "slam", "rounds": 3, "steps_per_round": 3000, "beta_decay": 0.5,
-                   "hidden": [256, 256], "activation": "tanh", "epochs": 15, "batch_size": 256, "lr": 1e-3},
+    "dagger": {**_COMMON, **_DAGGER, "head": "regress", "near_weight": 1.0},
+    # The shipped Rooms2-v2 and 3x3 policies' recipe (Room-v2: rounds 3, steps_per_round 7000), chosen on dev
+    # worlds 1000-1049 (benchmarks/RESULTS.md, "A discrete action head: fourth push").
+    "dagger_map": {**_COMMON, "train_pose_source": "slam", "rounds": 6, "steps_per_round": 5000, "beta_decay": 0.5,
+                   "hidden": [256, 256], "activation": "tanh", "epochs": 30, "batch_size": 256, "lr": 1e-3,
+                   "head": "bins", "near_weight": 1.0},
     "dagger_ppo": {**_COMMON, **_DAGGER, "finetune_steps": 50_000, "n_envs": 4, "learning_rate": 5e-5,
                    "n_steps": 512, "batch_size": 256, "n_epochs": 5, "gamma": 0.99, "gae_lambda": 0.95,
                    "clip_range": 0.1, "ent_coef": 0.0, "log_std_init": -2.0, "critic_warmup_steps": 10_000,
@@ -80,7 +83,7 @@ RECIPES["tqc"] = dict(RECIPES["sac"])
 
 _CHOICES = {"train_pose_source": ("truth", "odometry", "slam"), "train_sdf_source": ("truth", "gpis"),
             "expert": ("reactive", "navigator"),
-            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid")}
+            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid"), "head": ("regress", "bins")}
 _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 

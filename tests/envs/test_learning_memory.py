@@ -123,7 +123,7 @@ def test_conv2d_is_torchs(stride, size):
 
 def _small_policy(env, seed=0):
     torch.manual_seed(seed)
-    cfg = MapDAggerConfig(convs=((4, 1), (4, 2)), hidden=(8,))
+    cfg = MapDAggerConfig(convs=((4, 1), (4, 2)), hidden=(8,), head=None)
     mean = np.random.default_rng(seed).normal(size=260)
     std = np.full(260, 2.0)
     net = MapNet((8, 16, 16), 260, cfg)

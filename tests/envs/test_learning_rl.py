@@ -138,12 +138,15 @@ def test_dagger_ppo_from_the_shipped_policy(tmp_path):
     torch.set_num_threads(1)
     params = {"init_policy": "pretrained", "finetune_steps": 128, "n_envs": 2, "n_steps": 64, "batch_size": 64,
               "n_epochs": 1, "critic_warmup_steps": 128}
-    policy, summary = recipes.train("dagger_ppo", ROOM, params=params, out=tmp_path, progress=False)
-    ref = pretrained(ROOM)
+    with pytest.raises(ValueError, match="init_policy: the policy shipped for .* is a MapCNNPolicy"):
+        recipes.train("dagger_ppo", ROOM, params=params, out=tmp_path, progress=False)  # the v2 tiers ship map CNNs
+    room = "polar_sim/GPISNav-Room-v1"  # ships an MLP
+    policy, summary = recipes.train("dagger_ppo", room, params=params, out=tmp_path, progress=False)
+    ref = pretrained(room)
     assert summary["steps"] == 128 + 128  # warm-up and fine-tuning, no DAgger steps
     assert [w.shape for w in policy.weights] == [w.shape for w in ref.weights] and policy.action is None
-    assert policy.known_var == ref.known_var and policy.env_kwargs == {}
-    env = gym.make(ROOM)
+    assert policy.known_var == ref.known_var and policy.env_kwargs == ref.env_kwargs
+    env = gym.make(room, **policy.env_kwargs)
     obs, _ = env.reset(seed=10_002)
     np.testing.assert_allclose(load_policy(tmp_path / "policy.npz", env)(obs), policy(obs), rtol=0, atol=1e-6)
     env.close()
