@@ -378,8 +378,10 @@ class GPStore:
         m = K._count_obs(csr_ptr, csr_idx, tree.nrm, tree.sg, self.dim)
         tri = m * (m + 1) // 2
         need_o, need_t = int(m.sum()), int(tri.sum())
+        live = self.gp_m > 0
+        live_o = int(self.gp_m[live].sum())
         if self.n_obs + need_o > self.X.shape[0] or self.n_tri + need_t > self.Lbuf.shape[0]:
-            if self.n_obs > int(self.gp_m.sum()):     # dead observations to reclaim
+            if self.n_obs > live_o:
                 self._compact(0, 0)
             # room for a few updates before the next compaction (amortised O(1) per update)
             if 2 * (self.n_obs + need_o) > self.X.shape[0] or \
