@@ -105,13 +105,16 @@ class GPISMapBase(Parameterised):
                             # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
+    def __setattr__(self, name, value):
+        # a parameter (re)bound, by set_params or directly: its checked values are stale (the
+        # stage configs are frozen, so rebinding is the only way they change)
+        if not (name.startswith("_") or name.endswith("_")):
+            self.__dict__.pop("_params", None)
+        object.__setattr__(self, name, value)
+
     def _pub(self, name):
         """True when behaviour switch ``name`` (a field of one stage config) is the published one."""
-        for stage in self._STAGES:
-            cfg = getattr(self, stage)
-            if hasattr(cfg, name):
-                return getattr(cfg, name) == SWITCHES[name][1]
-        raise KeyError(name)
+        return self._checked_params()["pub"][name]
 
     @classmethod
     def published(cls, **overrides):
@@ -143,8 +146,20 @@ class GPISMapBase(Parameterised):
 
     def _checked_params(self):
         """The checked parameters as one dict of clean values, the stage fields flattened
-        (``{"min_range": 0.2, ..., "map_scale": 1.2, ...}``); raises ``ValueError``/``TypeError``
-        naming a bad parameter. The stage configs checked their own fields when they were made."""
+        (``{"min_range": 0.2, ..., "map_scale": 1.2, ...}``), and under ``"pub"`` whether each
+        behaviour switch is the published one; raises ``ValueError``/``TypeError`` naming a bad
+        parameter. The stage configs checked their own fields when they were made.
+
+        Checked once per binding of the parameters (construction, ``set_params``, an assignment)
+        and kept, so that updates do not check them again; the dict is shared: read it only.
+        Array parameters are kept as checked copies: an array changed in place after it was given
+        takes effect at the next ``set_params``."""
+        p = self.__dict__.get("_params")
+        if p is None:
+            p = self._params = self._check_all()
+        return p
+
+    def _check_all(self):
         for stage, config in self._STAGES.items():
             cfg = getattr(self, stage)
             if type(cfg) is not config:
@@ -156,6 +171,7 @@ class GPISMapBase(Parameterised):
                 v = getattr(cfg, f.name)
                 p[f.name] = v if v is None or isinstance(v, str) else (
                     int(v) if f.name == "train_cap" else float(v))
+        p["pub"] = {name: p[name] == SWITCHES[name][1] for name in SWITCHES if name in p}
         return p
 
     def set_params(self, **params):

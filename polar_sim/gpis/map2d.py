@@ -29,6 +29,18 @@ _FLOOR_P = 1e-5     # m^2, floor of the samples' (fused) position variances ((3 
 _KAPPA = 0.5
 
 
+def _median(x):
+    """``float(np.median(x))`` of a non-empty finite 1D array, the same float, without
+    ``np.median``'s overhead (it is called on every scan): the middle element, or the mean of
+    the two middle ones computed as numpy's mean does, their sum over 2."""
+    n = len(x)
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2.0)
+
+
 class GPISMap2D(GPISMapBase):
     """Online Gaussian-process implicit surface in the plane (GPisMap, quadtree).
 
@@ -110,7 +122,7 @@ class GPISMap2D(GPISMapBase):
         self.tree = tree
         self.local_gp = local_gp
         self.distance = distance
-        self._check_params()  # fail early; every update checks again (set_params may change them)
+        self._check_params()  # fail early; kept until a parameter is bound again (set_params)
 
     def _check_sensor(self):
         out = {k: as_vector2(getattr(self, k), k) for k in ("sensor_offset", "angle_obs_limit")}
@@ -190,7 +202,7 @@ class GPISMap2D(GPISMapBase):
         hits = (sp + o) @ R.T + t
         model = None
         if not pub:
-            dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
+            dth = _median(np.diff(phi)) if len(phi) > 1 else 1e-3
             model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         # re-evaluation searches around the base in the published code (spec §2.1); the default
         # searches around the laser, so that a sensor pose and a base pose with the mounting as

@@ -83,7 +83,7 @@ class GPISMap3D(GPISMapBase):
         self.tree = tree
         self.local_gp = local_gp
         self.distance = distance
-        self._check_params()  # fail early; every update checks again (set_params may change them)
+        self._check_params()  # fail early; kept until a parameter is bound again (set_params)
 
     @property
     def _QUERY_W(self):
