@@ -57,7 +57,7 @@ _DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "step
 # half of training (polar_sim.envs.curriculum; curriculum_steps 0 = off). Chosen on dev worlds
 # 1000-1009 (benchmarks/RESULTS.md, "PPO from scratch on GPISNav-Room-v2").
 _RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "far_unknown": True,
-       "curriculum_steps": 150_000, "curriculum_start": 0}
+       "curriculum_steps": 150_000, "curriculum_start": 0, "eval_mode": "slam", "train_reward": {}}
 _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
         "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
@@ -80,7 +80,7 @@ RECIPES["tqc"] = dict(RECIPES["sac"])
 
 _CHOICES = {"train_pose_source": ("truth", "odometry", "slam"), "train_sdf_source": ("truth", "gpis"),
             "expert": ("reactive", "navigator"),
-            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid")}
+            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid"), "eval_mode": ("slam", "train")}
 _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 
@@ -121,6 +121,16 @@ def _check_value(key, value, default):
         if not isinstance(value, (list, tuple)) or not value or not all(isinstance(k, str) for k in value):
             raise ValueError(f"obs_keys: expected a non-empty list of observation keys, got {value!r}")
         return list(value)
+    if key == "train_reward":  # reward weights of the training envs only (scoring: the env's own)
+        from polar_sim.envs.lidar_nav import as_reward_weights
+
+        if not isinstance(value, dict):
+            raise ValueError(f"train_reward: expected a dict of reward weights, got {value!r}")
+        try:
+            full = as_reward_weights(value)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"train_reward: {exc}") from None
+        return {k: full[k] for k in value}
     if key == "env_kwargs":
         if not isinstance(value, dict):
             raise ValueError(f"env_kwargs: expected a dict of gym.make arguments, got {value!r}")
