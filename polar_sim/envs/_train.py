@@ -13,6 +13,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm.auto import tqdm
 
@@ -53,6 +54,8 @@ def _train_env_kwargs(p):
     kw = {**p["env_kwargs"], "pose_source": p["train_pose_source"]}
     if "train_sdf_source" in p:
         kw["sdf_source"] = p["train_sdf_source"]
+    if p.get("train_reward"):
+        kw["reward_weights"] = {**kw.get("reward_weights", {}), **p["train_reward"]}
     return kw
 
 
@@ -67,10 +70,13 @@ class _Clock:
 
 
 def _score(env_id, policy, p, curve, clock, steps):
-    """Append the dev-world success and collision rates of ``policy`` at ``steps`` to ``curve``."""
+    """Append the dev-world success and collision rates of ``policy`` at ``steps`` to ``curve``
+    (in the default slam mode, or with ``eval_mode: "train"`` in the recipe's training mode)."""
     row = clock.row(steps)
-    _, s = evaluate(env_id, policy, episodes=p["eval_episodes"], seed=DEV_SEED, env_kwargs=policy.env_kwargs,
-                    progress=False)
+    kw = dict(policy.env_kwargs)
+    if p.get("eval_mode") == "train":  # the training mode's pose and map, the env's own reward
+        kw.update(pose_source=p["train_pose_source"], sdf_source=p["train_sdf_source"])
+    _, s = evaluate(env_id, policy, episodes=p["eval_episodes"], seed=DEV_SEED, env_kwargs=kw, progress=False)
     row.update(success=s["success_rate"], collision=s["mean_collision"], eval_wall_s=clock.row(steps)["wall_s"]
                - row["wall_s"])
     curve.append(row)
@@ -113,22 +119,49 @@ def _dagger_map(env_id, p, seed, curve, progress):
     return policy, hist[-1]["steps"]
 
 
-class _Progress(BaseCallback):
-    """A tqdm bar over the env steps, a dev-world checkpoint every ``every`` steps, and the
-    curriculum's ``schedule`` (if any) moved to the step count."""
+class _EpisodeTally:
+    """Outcomes of the training episodes that ended since the last :meth:`row`: the learning
+    curve in the training mode itself, at no extra cost (the dev checkpoints score other worlds)."""
 
-    def __init__(self, total, desc, progress, every=0, checkpoint=None, schedule=None):
+    def __init__(self):
+        self.ended = []
+
+    def add(self, dones, infos):
+        for done, info in zip(dones, infos):
+            if done:
+                self.ended.append((bool(info.get("is_success")), bool(info.get("collision")),
+                                   int(info.get("episode", {}).get("l", 0)), float(info.get("episode", {}).get("r", 0))))
+
+    def row(self):
+        """``train_episodes`` and the mean ``train_success``, ``train_collision``, ``train_length``,
+        ``train_return`` (the env's reward, before normalisation) of the episodes since the last call."""
+        e, self.ended = np.array(self.ended, float).reshape(-1, 4), []
+        m = e.mean(0) if len(e) else np.full(4, np.nan)
+        return {"train_episodes": len(e), "train_success": m[0], "train_collision": m[1], "train_length": m[2],
+                "train_return": m[3]}
+
+
+class _Progress(BaseCallback):
+    """A tqdm bar over the env steps, a dev-world checkpoint every ``every`` steps (with ``curve``:
+    the training episodes' outcomes since the last one added to its row), and the curriculum's
+    ``schedule`` (if any) moved to the step count."""
+
+    def __init__(self, total, desc, progress, every=0, checkpoint=None, schedule=None, curve=None):
         super().__init__()
         self.bar = tqdm(total=total, desc=desc, unit="step", disable=bar_disable(progress))
         self.every, self.checkpoint, self.next, self.schedule = every, checkpoint, every, schedule
+        self.curve, self.tally = curve, _EpisodeTally()
 
     def _on_step(self):
         self.bar.update(self.num_timesteps - self.bar.n)
+        self.tally.add(self.locals.get("dones", ()), self.locals.get("infos", ()))
         if self.schedule is not None:
             self.schedule.update(self.num_timesteps)
         if self.every and self.num_timesteps >= self.next:
             self.next += self.every
             self.checkpoint(self.num_timesteps)
+            if self.curve:
+                self.curve[-1].update(self.tally.row())
         return True
 
     def _on_training_end(self):
@@ -142,8 +175,8 @@ def _vec_env(env_id, p, seed, wrapper, wrapper_kwargs):
 
 def _feature_wrapper(env, action, keys, mean=None, std=None, known_var=None, schedule=None, clutter_start=0,
                      far_unknown=False):
-    if schedule is not None:
-        env = ClutterCurriculum(env, schedule, clutter_start)
+    if schedule is not None:  # Monitor outside: the episodes of every clutter level have their length and return
+        env = Monitor(ClutterCurriculum(env, schedule, clutter_start))
     if far_unknown:
         env = FarAsUnknown(env)
     return FeatureObservation(wrap_action(env, action), keys, mean, std, known_var=known_var)
@@ -197,7 +230,7 @@ def _ppo(env_id, p, seed, curve, progress):
         _score(env_id, _mlp_of(model, venv, p, keys, recipe, env_id, known_var=kv), p, curve, clock, n)
 
     model.learn(p["steps"], callback=_Progress(p["steps"], f"ppo {env_id}", progress, p["eval_every"], ckpt,
-                                               schedule))
+                                               schedule, curve))
     policy = _mlp_of(model, venv, p, keys, recipe, env_id, known_var=kv)
     venv.close()
     return policy, model.num_timesteps
@@ -290,7 +323,8 @@ def _sb3(env_id, p, seed, curve, progress, name):
         return SB3Policy(model, ObsNormaliser.from_vecnormalize(venv), recipe, env_id, env_kwargs)
 
     model.learn(p["steps"], callback=_Progress(p["steps"], f"{name} {env_id}", progress, p["eval_every"],
-                                               lambda n: _score(env_id, export(), pp, curve, clock, n), schedule))
+                                               lambda n: _score(env_id, export(), pp, curve, clock, n), schedule,
+                                               curve))
     policy = export()
     venv.close()
     return policy, model.num_timesteps

@@ -55,12 +55,17 @@ _DAGGER = {"train_pose_source": "slam", "expert": "reactive", "rounds": 4, "step
 # unknown (polar_sim.envs.far_mask), trained where a step is cheapest (true pose, exact SDF: about 10x
 # the slam mode's steps per CPU-second) and scored in slam, with a clutter curriculum over the first
 # half of training (polar_sim.envs.curriculum; curriculum_steps 0 = off). Chosen on dev worlds
-# 1000-1009 (benchmarks/RESULTS.md, "PPO from scratch on GPISNav-Room-v2").
+# 1000-1019 (benchmarks/RESULTS.md, "PPO from scratch on GPISNav-Room-v2"). eval_mode "train" scores
+# the dev checkpoints in the training mode (cheap; for recipe search), train_reward reweights the
+# training envs' reward only (e.g. {"collision": 2.5}; scoring keeps the env's own).
 _RL = {"train_sdf_source": "truth", "obs_keys": MASKED_KEYS, "known_var": 0.5, "far_unknown": True,
-       "curriculum_steps": 150_000, "curriculum_start": 0}
+       "curriculum_steps": 150_000, "curriculum_start": 0, "eval_mode": "slam", "train_reward": {}}
+# PPO: an entropy bonus and a wider initial action noise (std 0.61), because without them the
+# policy's noise collapsed (log std -1 -> -1.7 in 150k steps, -2.4 with 4x the updates) while it
+# still drove into clutter (issue 32, branch ppo2, dev worlds).
 _PPO = {**_RL, "steps": 300_000, "n_envs": 4, "obs_mode": "stencil", "learning_rate": 3e-4,
         "n_steps": 512, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95, "clip_range": 0.2,
-        "ent_coef": 0.0, "log_std_init": -1.0, "hidden": [128, 128]}
+        "ent_coef": 0.01, "log_std_init": -0.5, "hidden": [128, 128]}
 #: Recipe name -> its parameters' defaults (every parameter a recipe takes is here).
 RECIPES = {
     "dagger": {**_COMMON, **_DAGGER, "head": "regress", "near_weight": 1.0},
@@ -75,7 +80,7 @@ RECIPES = {
                    "init_policy": ""},
     "ppo": {**_COMMON, **_PPO},
     "recurrent_ppo": {**_COMMON, **{k: v for k, v in _PPO.items() if k != "hidden"}, "n_steps": 128,
-                      "batch_size": 128},
+                      "batch_size": 128, "ent_coef": 0.0, "log_std_init": -1.0},  # as run in branch ppo
     "sac": {**_COMMON, **_RL, "steps": 100_000, "n_envs": 1, "obs_mode": "stencil", "learning_rate": 3e-4,
             "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256, "gamma": 0.99},
 }
@@ -83,7 +88,8 @@ RECIPES["tqc"] = dict(RECIPES["sac"])
 
 _CHOICES = {"train_pose_source": ("truth", "odometry", "slam"), "train_sdf_source": ("truth", "gpis"),
             "expert": ("reactive", "navigator"),
-            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid"), "head": ("regress", "bins")}
+            "activation": ("tanh", "relu"), "obs_mode": ("stencil", "grid"), "head": ("regress", "bins"),
+            "eval_mode": ("slam", "train")}
 _UNIT = ("beta_decay", "gamma", "gae_lambda", "clip_range")  # floats in [0, 1]
 
 
@@ -124,6 +130,16 @@ def _check_value(key, value, default):
         if not isinstance(value, (list, tuple)) or not value or not all(isinstance(k, str) for k in value):
             raise ValueError(f"obs_keys: expected a non-empty list of observation keys, got {value!r}")
         return list(value)
+    if key == "train_reward":  # reward weights of the training envs only (scoring: the env's own)
+        from polar_sim.envs.lidar_nav import as_reward_weights
+
+        if not isinstance(value, dict):
+            raise ValueError(f"train_reward: expected a dict of reward weights, got {value!r}")
+        try:
+            full = as_reward_weights(value)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"train_reward: {exc}") from None
+        return {k: full[k] for k in value}
     if key == "env_kwargs":
         if not isinstance(value, dict):
             raise ValueError(f"env_kwargs: expected a dict of gym.make arguments, got {value!r}")

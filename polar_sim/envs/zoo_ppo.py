@@ -34,7 +34,8 @@ def _ppo(env_id):
             "env_wrapper": ["polar_sim.envs.action_maps.ForwardDriveAction"]
             + (["polar_sim.envs.far_mask.FarAsUnknown"] if p["far_unknown"] else [])
             + [{"polar_sim.envs.features.FeatureObservation": features}],
-            "env_kwargs": {"pose_source": p["train_pose_source"], "sdf_source": p["train_sdf_source"]},
+            "env_kwargs": {"pose_source": p["train_pose_source"], "sdf_source": p["train_sdf_source"],
+                           **({"reward_weights": dict(p["train_reward"])} if p["train_reward"] else {})},
             **{k: p[k] for k in ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
                                  "clip_range", "ent_coef")},
             "policy_kwargs": {"net_arch": {"pi": list(p["hidden"]), "vf": list(p["hidden"])},

@@ -152,6 +152,51 @@ def test_dagger_ppo_from_the_shipped_policy(tmp_path):
     env.close()
 
 
+# The training episodes' outcomes since the last checkpoint, exactly: means over the ended
+# episodes only (Monitor's length and return), nan when none ended, and a row empties the tally.
+def test_episode_tally_exact():
+    from polar_sim.envs._train import _EpisodeTally
+
+    t = _EpisodeTally()
+    t.add([False, True], [{}, {"is_success": True, "collision": False, "episode": {"l": 40, "r": 9.0}}])
+    t.add([True, True, False], [{"is_success": False, "collision": True, "episode": {"l": 10, "r": -1.0}},
+                                {"is_success": False, "collision": False, "episode": {"l": 300, "r": 1.0}}, {}])
+    assert t.row() == {"train_episodes": 3, "train_success": 1 / 3, "train_collision": 1 / 3,
+                       "train_length": 350 / 3, "train_return": 3.0}
+    empty = t.row()
+    assert empty["train_episodes"] == 0 and np.isnan(empty["train_success"])
+
+
+# train_reward reweights the training envs' reward only (the policy is scored with the env's
+# own), and eval_mode "train" scores the dev checkpoints in the training mode; each checkpoint
+# row carries the training episodes' outcomes.
+def test_train_reward_and_eval_mode(tmp_path, monkeypatch):
+    torch.set_num_threads(1)
+    made = []
+    real_make = gym.make
+
+    def spy(*a, **k):
+        made.append(k)
+        return real_make(*a, **k)
+
+    monkeypatch.setattr(gym, "make", spy)
+    weights = {"collision": 2.5, "proximity": 0.1, "proximity_radius": 0.5}
+    params = {"steps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "eval_every": 128,
+              "eval_episodes": 1, "eval_mode": "train", "train_reward": weights}
+    policy, summary = recipes.train("ppo", ROOM, params=params, out=tmp_path, progress=False)
+    train_kw = [k for k in made if "reward_weights" in k]
+    assert train_kw and all(k["reward_weights"] == weights and k["pose_source"] == "truth" for k in train_kw)
+    assert policy.env_kwargs == {"obs_mode": "stencil"}  # scored with the env's own reward
+    eval_kw = [k for k in made if "reward_weights" not in k]
+    assert eval_kw and all(k.get("pose_source") == "truth" and k.get("sdf_source") == "truth" for k in eval_kw)
+    assert [r["steps"] for r in summary["curve"]] == [128, 256]
+    assert all(r["train_episodes"] >= 0 and set(r) >= {"train_success", "train_collision"} for r in summary["curve"])
+    with pytest.raises(ValueError, match="train_reward"):
+        recipes.check_recipe("ppo", {"train_reward": {"collision": -1.0}})
+    with pytest.raises(ValueError, match="eval_mode"):
+        recipes.check_recipe("ppo", {"eval_mode": "odometry"})
+
+
 # Wrong RL parameters are refused with a ValueError naming them, before any env is built.
 @pytest.mark.parametrize("name,params,match", [
     ("ppo", {"train_sdf_source": "slam"}, "train_sdf_source"),

@@ -44,8 +44,10 @@ def test_zoo_hyperparameters_are_the_recipes():
     p = RECIPES["ppo"]
     for h in hyperparams.values():
         assert h["policy"] == "MlpPolicy" and h["normalize"] and h["n_envs"] == p["n_envs"]
-        assert all(h[k] == p[k] for k in ("n_steps", "batch_size", "n_epochs", "learning_rate", "clip_range"))
+        assert all(h[k] == p[k] for k in ("n_steps", "batch_size", "n_epochs", "learning_rate", "clip_range",
+                                          "ent_coef", "gamma", "gae_lambda"))
         assert h["policy_kwargs"]["net_arch"]["pi"] == p["hidden"]
+        assert h["policy_kwargs"]["log_std_init"] == p["log_std_init"]
         assert h["env_wrapper"] == ["polar_sim.envs.action_maps.ForwardDriveAction",
                                     "polar_sim.envs.far_mask.FarAsUnknown",
                                     {"polar_sim.envs.features.FeatureObservation":
