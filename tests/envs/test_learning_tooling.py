@@ -72,7 +72,12 @@ def test_rllib_one_iteration_on_local_ray():
     try:
         algo = rllib_config(ROOM, num_env_runners=1, train_batch_size=128, minibatch_size=64, num_epochs=1).build_algo()
         result = algo.train()
-        assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 128
+        # The learner (in this process) trained on the batch the env runner sampled. The env
+        # runners' own metrics are fetched with a timeout and may be absent on a loaded machine.
+        assert result["training_iteration"] == 1
+        assert result["learners"]["__all_modules__"]["num_env_steps_trained_lifetime"] >= 128
+        if "env_runners" in result:
+            assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 128
         algo.stop()
     finally:
         ray.shutdown()
