@@ -71,11 +71,16 @@ def test_rllib_one_iteration_on_local_ray():
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
     try:
         algo = rllib_config(ROOM, num_env_runners=1, train_batch_size=128, minibatch_size=64, num_epochs=1).build_algo()
-        result = algo.train()
-        # The learner (in this process) trained on the batch the env runner sampled. The env
-        # runners' own metrics are fetched with a timeout and may be absent on a loaded machine.
-        assert result["training_iteration"] == 1
+        # The env runner's first sample can outlast RLlib's sample timeout (a fresh install
+        # compiles the env's numba kernels inside the Ray worker): such an iteration returns
+        # without training, so train until the learner reports, at most 5 iterations.
+        for _ in range(5):
+            result = algo.train()
+            if "learners" in result:
+                break
+        assert "learners" in result, f"no training step in {result['training_iteration']} iterations"
         assert result["learners"]["__all_modules__"]["num_env_steps_trained_lifetime"] >= 128
+        # The env runners' own metrics are fetched with a timeout and may be absent under load.
         if "env_runners" in result:
             assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 128
         algo.stop()
