@@ -59,11 +59,9 @@ def test_clutter_curriculum_follows_the_ramp_deterministically():
         ClutterCurriculum(gym.make(ROOM, **FAST), ramp, start=7)
 
 
-# PPO from scratch trains with the true pose and the exact SDF, on the masked stencil, with a
-# curriculum, and its policy file is made for the default slam mode and reads the same vector
-# (without the far mask: the numpy MLP file).
-def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
-    torch.set_num_threads(1)
+@pytest.fixture
+def made_kwargs(monkeypatch):
+    """The keyword arguments of every ``gym.make`` call the test makes, in order."""
     made = []
     real_make = gym.make
 
@@ -72,6 +70,15 @@ def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
         return real_make(*a, **k)
 
     monkeypatch.setattr(gym, "make", spy)
+    return made
+
+
+# PPO from scratch trains with the true pose and the exact SDF, on the masked stencil, with a
+# curriculum, and its policy file is made for the default slam mode and reads the same vector
+# (without the far mask: the numpy MLP file).
+def test_ppo_from_scratch_masked_stencil_loop(tmp_path, made_kwargs):
+    torch.set_num_threads(1)
+    made = made_kwargs
     params = {"steps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "eval_every": 256,
               "eval_episodes": 1, "curriculum_steps": 128, "curriculum_start": 2, "far_unknown": False}
     policy, summary = recipes.train("ppo", ROOM, params=params, out=tmp_path, progress=False)
@@ -79,7 +86,7 @@ def test_ppo_from_scratch_masked_stencil_loop(tmp_path, monkeypatch):
     assert policy.env_kwargs == {} and policy.known_var == 0.5
     assert list(policy.obs_keys) == ["goal", "sdf", "sdf_grad", "sdf_var", "twist"]
     assert summary["steps"] == 256 and len(summary["curve"]) == 1
-    env = real_make(ROOM)
+    env = gym.make(ROOM)
     loaded = load_policy(tmp_path / "policy.npz", env)
     obs, _ = env.reset(seed=10_000)
     for _ in range(3):
@@ -170,16 +177,9 @@ def test_episode_tally_exact():
 # train_reward reweights the training envs' reward only (the policy is scored with the env's
 # own), and eval_mode "train" scores the dev checkpoints in the training mode; each checkpoint
 # row carries the training episodes' outcomes.
-def test_train_reward_and_eval_mode(tmp_path, monkeypatch):
+def test_train_reward_and_eval_mode(tmp_path, made_kwargs):
     torch.set_num_threads(1)
-    made = []
-    real_make = gym.make
-
-    def spy(*a, **k):
-        made.append(k)
-        return real_make(*a, **k)
-
-    monkeypatch.setattr(gym, "make", spy)
+    made = made_kwargs
     weights = {"collision": 2.5, "proximity": 0.1, "proximity_radius": 0.5}
     params = {"steps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "eval_every": 128,
               "eval_episodes": 1, "eval_mode": "train", "train_reward": weights}
