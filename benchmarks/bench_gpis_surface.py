@@ -174,6 +174,7 @@ def trial(scene, seed, cache, settings, near=True):
         else:                            # the sweep: the same vertices, gated per setting
             g = _surface.gate_args(m, None, kw.get("free_depth"), kw.get("support_radius"), kw.get("min_support"),
                                    kw.get("gate_var"), False, kw.get("face_end"))
+            g.pop("lone")               # the sweep scores the level's own vertices (no lone samples)
             if kw.get("free_depth", 0) is None:
                 g["free_depth"] = None
             sc = level.scores(_surface.gate_2d(m, verts, **g)[0] == 0)

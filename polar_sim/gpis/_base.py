@@ -589,7 +589,11 @@ class GPISMapBase(Parameterised):
             past the end of its face (not between two of them along the face, and farther than
             ``face_end`` from each); or when the map's variance there reaches ``gate_var``
             (defaults ``_surface.FREE_DEPTH`` 0.05 m, ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1,
-            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds).
+            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds). A sample left with no
+            returned vertex within two grid steps (a post a few cm across, whose one or two
+            samples have no trusted normal) is returned as a (1, 2) point at its measured
+            position: the sensor's evidence for a surface there, without the level's guess at
+            its extent.
         free_depth, support_radius, min_support, gate_var, face_end : optional
             The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
             pass ``evidence=False``.

@@ -4,7 +4,9 @@ In 2D (default mode) the zero level is returned only where the map has evidence 
 (:func:`gate_2d`): a vertex is left out when rays observed free space on its inside (the level
 runs on past the end of an observed face, or through a surface that later scans saw through), when
 it lies past the end of its face's samples or no sample of its face has a trusted normal, or when
-the map's variance there is that of a region it knows nothing about.
+the map's variance there is that of a region it knows nothing about. A sample left with no kept
+vertex near it (a post whose normals the beam spacing cannot resolve) is returned as a point at its
+measured position (:func:`_with_lone_samples`).
 """
 
 from __future__ import annotations
@@ -126,13 +128,49 @@ def surface_2d(m, res, band, var_max, gates=None):
             # an object below the grid's resolution (a post a few cm across) is a sample or two whose
             # normals the beam spacing cannot resolve, inside one free-space cell: only the
             # variance gate can judge it
+            lone = gates.pop("lone", False)
             ev = gated_2d(m, out, **gates)
             sv = gated_2d(m, small, **{**gates, "free_depth": None, "min_support": 0})
-            return SurfaceEvidence(*(a + b for a, b in zip(_fields(ev), _fields(sv))))
+            ev = SurfaceEvidence(*(a + b for a, b in zip(_fields(ev), _fields(sv))))
+            return _with_lone_samples(m, ev, LONE_REACH * res, gates) if lone else ev
         out += small
     if gates is not None:
+        gates.pop("lone", None)
         return gated_2d(m, out, **gates)
     return out
+
+
+#: A sample farther than this many grid steps from every kept vertex is returned as a point.
+LONE_REACH = 2
+
+
+def _with_lone_samples(m, ev, reach, gates):
+    """``ev`` with every sample that has no kept vertex within ``reach`` (m) appended as a (1, 2)
+    point at its fused position.
+
+    Such a sample is a surface the sensor measured but whose extent the map cannot vouch for: most
+    often a post or a rack's upright a few cm across, hit by many scans, whose one or two samples
+    have no trusted normal (the beam spacing cannot resolve it), so that the level around it fails
+    the support gate and the post would be missing entirely, metres from any returned point. Its
+    measured position is evidence; the level the GP rounds around it is not. A sample's support is
+    counted as a vertex's is (trusted samples within ``support_radius``, no face test), its sigma is
+    its own fused position noise."""
+    from scipy.spatial import cKDTree
+
+    idx = m.tree_.alive()
+    P = m.tree_.pos[idx]
+    if ev.lines:
+        P, idx = (a[cKDTree(np.vstack(ev.lines)).query(P, distance_upper_bound=reach)[0] > reach]
+                  for a in (P, idx))
+    if not len(P):
+        return ev
+    kd, kidx = m._kd()
+    trusted = m.tree_.sg[kidx] <= _TRUSTED_SG
+    near = kd.query_ball_point(P, gates["support_radius"], return_sorted=False)
+    support = [int(trusted[np.asarray(j, np.int64)].sum()) for j in near]
+    sigma = np.sqrt(m.tree_.sp[idx])
+    return SurfaceEvidence(ev.lines + [p[None].copy() for p in P], ev.support + [np.array([k]) for k in support],
+                           ev.sigma + [np.array([s]) for s in sigma], ev.rejected, ev.reason)
 
 
 def _bubble(line, res):
@@ -272,7 +310,7 @@ def gate_args(m, evidence, free_depth, support_radius, min_support, gate_var, re
     if "face_end" in given:
         gates["face_end"] = as_positive_float(face_end, "face_end")
     if on:
-        return gates
+        return {**gates, "lone": True}
     return dict(_OFF) if return_evidence else None
 
 

@@ -79,15 +79,23 @@ def test_rejected_pieces_say_why(wall_end):
     ev = wall_end.surface(return_evidence=True)
     assert ev.rejected and set(ev.reason) <= {"free", "support", "variance"}
     assert len(ev.reason) == len(ev.rejected)
-    # kept and rejected vertices together are exactly the ungated level's vertices
+    # kept and rejected vertices together are exactly the ungated level's vertices; what else is
+    # returned are lone samples: points at a sample's position, two grid steps from every kept vertex
     raw = np.vstack(wall_end.surface(evidence=False))
-    both = np.vstack(ev.lines + ev.rejected)
+    of_level = [cKDTree(raw).query(ln)[0].max() == 0.0 for ln in ev.lines]
+    level = [ln for ln, k in zip(ev.lines, of_level) if k]
+    both = np.vstack(level + ev.rejected)
     assert cKDTree(both).query(raw)[0].max() == 0.0
     assert cKDTree(raw).query(both)[0].max() == 0.0
-    # the evidence per vertex: trusted samples within the support radius, and a position sigma
-    for ln, s, sg in zip(ev.lines, ev.support, ev.sigma):
+    S = wall_end.samples()
+    for ln, s, sg, k in zip(ev.lines, ev.support, ev.sigma, of_level):
         assert s.shape == sg.shape == (len(ln),)
-        assert (s >= _surface.MIN_SUPPORT).all() and (sg > 0).all() and (sg < 0.05).all()
+        if k:       # the evidence per vertex: trusted samples within the support radius, a position sigma
+            assert (s >= _surface.MIN_SUPPORT).all() and (sg > 0).all() and (sg < 0.05).all()
+        else:       # a lone sample, with its own position sigma
+            d, j = cKDTree(S["points"]).query(ln)
+            assert ln.shape == (1, 2) and d[0] == 0.0 and sg[0] == np.sqrt(S["position_noise"][j[0]])
+            assert cKDTree(np.vstack(level)).query(ln)[0].min() > _surface.LONE_REACH * 0.05
     assert [np.array_equal(a, b) for a, b in zip(ev.lines, wall_end.surface())] == [True] * len(ev.lines)
 
 
@@ -106,10 +114,13 @@ def glimpse():
 
 def test_a_glimpsed_wall_is_not_returned(glimpse):
     # two scans 1 m away give its samples no trusted normal (normal variance above the local GPs'
-    # gate): the zero level there is the GP's guess, not evidence, and is left out
+    # gate): the zero level there is the GP's guess, not evidence, and is left out; only the
+    # measured samples themselves may come back, as lone points on the face
     ev = glimpse.surface(return_evidence=True)
-    L = np.vstack(ev.lines)
+    L = np.vstack([ln for ln in ev.lines if len(ln) > 1])
     assert not (_dist(L, [GLIMPSE[0]]) < 0.05).any()
+    pts = np.vstack([ln for ln in ev.lines if len(ln) == 1] + [np.zeros((0, 2))])
+    assert (_dist(pts, ROOM + GLIMPSE + HIDE) <= 0.05).all()
     out = [r for r, why in zip(ev.rejected, ev.reason) if (_dist(r, [GLIMPSE[0]]) < 0.05).any()]
     assert out and all(why == "support" for r, why in zip(ev.rejected, ev.reason)
                        if (_dist(r, [GLIMPSE[0]]) < 0.05).mean() > 0.5)
@@ -117,13 +128,33 @@ def test_a_glimpsed_wall_is_not_returned(glimpse):
     seen = (np.abs(L[:, 1]) < 0.03) & (L[:, 0] > 3.2) & (L[:, 0] < 5.5)
     assert seen.sum() >= 20
     assert _dist(L, ROOM + GLIMPSE + HIDE).max() <= 0.10
-    assert np.median(np.concatenate(ev.sigma)[seen]) <= 0.01        # the 1 cm range noise, fused
+    sigma = np.concatenate([sg for ln, sg in zip(ev.lines, ev.sigma) if len(ln) > 1])
+    assert np.median(sigma[seen]) <= 0.01        # the 1 cm range noise, fused
 
 
 def test_without_the_gates_the_glimpsed_wall_is_returned(glimpse):
     # the test above can fail: the ungated level has the glimpsed face
     L = np.vstack(glimpse.surface(evidence=False))
     assert (_dist(L, [GLIMPSE[0]]) < 0.05).sum() >= 5
+
+
+# -- a post too thin for a trusted normal -------------------------------------------------------
+# a 10 cm post 10 m down a 20 m hall, hit by all of 30 scans: the 1081-beam lidar puts two or three
+# beams on it, its one sample has no trusted normal, and the level around it fails the support gate
+HALL = [((0, 0), (20, 0)), ((20, 0), (20, 6)), ((20, 6), (0, 6)), ((0, 6), (0, 0))]
+POST = _box(12.0, 3.0, 12.1, 3.1)
+
+
+def test_a_well_seen_post_is_returned():
+    m = _map(HALL + POST, [(1.0 + 0.1 * k, 1.5, 0.0) for k in range(30)])
+    ev = m.surface(return_evidence=True)
+    P = np.vstack(ev.lines)
+    assert _dist(P, POST).min() <= 0.02                    # the post is there, at its measured position
+    assert _dist(P, HALL + POST).max() <= 0.10             # and nothing strays
+    # the level's own vertices leave it out (the cause): it comes back as a lone sample
+    L = np.vstack([ln for ln in ev.lines if len(ln) > 1])
+    assert _dist(L, POST).min() > 1.0
+    assert (_dist(np.vstack(m.surface(evidence=False)), POST) < 0.05).any()
 
 
 # -- a well-seen room ---------------------------------------------------------------------------
