@@ -119,25 +119,22 @@ def surface_2d(m, res, band, var_max, gates=None):
     lines = find_contours(sdf, 0.0, mask=mask)
     x0 = np.array([a[0] for a in axes])
     out = [x0 + c * res for c in lines if len(c) >= 2]
+    small = []
     if not m._pub("query_mode"):
         # closed loops shorter than 4 grid steps enclose at most a cell or two: bubbles of the
         # field's sign (a spurious zero between samples), not a surface the grid can resolve
         out = [ln for ln in out if not _bubble(ln, res)]
         small = _refined(m, out, res)
-        if gates is not None:
-            # an object below the grid's resolution (a post a few cm across) is a sample or two whose
-            # normals the beam spacing cannot resolve, inside one free-space cell: only the
-            # variance gate can judge it
-            lone = gates.pop("lone", False)
-            ev = gated_2d(m, out, **gates)
-            sv = gated_2d(m, small, **{**gates, "free_depth": None, "min_support": 0})
-            ev = SurfaceEvidence(*(a + b for a, b in zip(_fields(ev), _fields(sv))))
-            return _with_lone_samples(m, ev, LONE_REACH * res, gates) if lone else ev
-        out += small
-    if gates is not None:
-        gates.pop("lone", None)
-        return gated_2d(m, out, **gates)
-    return out
+    if gates is None:
+        return out + small
+    # an object below the grid's resolution (a post a few cm across) is a sample or two whose
+    # normals the beam spacing cannot resolve, inside one free-space cell: only the variance gate
+    # can judge it
+    lone = gates.pop("lone", False)
+    ev = gated_2d(m, out, **gates)
+    sv = gated_2d(m, small, **{**gates, "free_depth": None, "min_support": 0})
+    ev = SurfaceEvidence(*(a + b for a, b in zip(_fields(ev), _fields(sv))))
+    return _with_lone_samples(m, ev, LONE_REACH * res, gates) if lone else ev
 
 
 #: A sample farther than this many grid steps from every kept vertex is returned as a point.
