@@ -21,12 +21,13 @@ import time
 import numpy as np
 
 from polar_sim.gpis import GPISMap2D
+from polar_sim.gpis.config import LocalGPConfig2D
 
 
 def _cap(k):
     def make():
-        return GPISMap2D(train_cap=k)
-    make.__doc__ = f"GPISMap2D(train_cap={k})"
+        return GPISMap2D(local_gp=LocalGPConfig2D(train_cap=k))
+    make.__doc__ = f"GPISMap2D(local_gp=LocalGPConfig2D(train_cap={k}))"
     return make
 
 
@@ -38,17 +39,17 @@ def measure(cap, d):
     from polar_sim.metrics import relation_scores
 
     A, P, R = d["angles"], d["poses"], d["ranges"]
-    warm = GPISMap2D(train_cap=cap)             # compile outside the timing
+    warm = GPISMap2D(local_gp=LocalGPConfig2D(train_cap=cap))             # compile outside the timing
     warm.update(A, R[0], P[0])
     warm.query(P[:1, :2])
-    m, cpu = GPISMap2D(train_cap=cap), []
+    m, cpu = GPISMap2D(local_gp=LocalGPConfig2D(train_cap=cap)), []
     for p, r in zip(P, R):
         t0 = time.thread_time()
         m.update(A, r, p)
         cpu.append(time.thread_time() - t0)
     cpu = 1e3 * np.asarray(cpu)
     k = len(cpu) // 10
-    est = scan_to_map_odometry(lambda: GPISMap2D(train_cap=cap), A, R, d["odom"], P[0])
+    est = scan_to_map_odometry(lambda: GPISMap2D(local_gp=LocalGPConfig2D(train_cap=cap)), A, R, d["odom"], P[0])
     rel = relation_scores({"s2m": est}, d["t_abs"], d["benchmark_relations"])
     return {"median": np.median(cpu), "p99": np.percentile(cpu, 99), "late_early": np.median(cpu[-k:]) / np.median(cpu[:k]),
             "mb": m.nbytes() / 1e6, "local": rel["s2m_local_trans_mean_m"], "loop": rel["s2m_loop_trans_mean_m"],

@@ -24,13 +24,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from tqdm import tqdm  # noqa: E402
 
-from polar_sim.testing import ENTRY_POINTS, OUTCOMES, run_battery  # noqa: E402
+from polar_sim.testing import OUTCOMES, entry_point_names, run_battery  # noqa: E402
 
 
 def all_entries():
     from polar_sim.envs import ENV_IDS
 
-    names = list(dict.keys(ENTRY_POINTS))
+    names = entry_point_names()     # the hand-written ones and every module class's, derived
     for env_id in ENV_IDS:
         names += [f"{env_id}.reset", f"{env_id}.step"]
     return names

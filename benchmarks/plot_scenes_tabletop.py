@@ -105,7 +105,7 @@ def appearance_pictures(out_dir):
             for _ in range(n):
                 w.step()
             f = w.camera("rgbd", width=480, height=360)
-            a = w.meta["appearance"]
+            a = w.meta.appearance
             w.close()
             ax = axes[i, j]
             ax.imshow(f.rgb)
@@ -135,7 +135,7 @@ def sequence_stats(width=320, height=240, only=None, split="dev"):
             continue
         t0 = time.time()
         w = sequence_world(name, SPLIT_SEEDS[split][0])
-        tgt = w.meta["target"]
+        tgt = w.meta.target
         occ, contact, held, v, om, phases = [], 0, 0, [], [], []
         p0 = w.truth()["objects"][tgt][:3, 3]
         for k in range(spec.frames):

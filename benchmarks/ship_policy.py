@@ -1,4 +1,4 @@
-"""Copy a trained MLP policy into the package as a tier's shipped policy, with its recipe header.
+"""Copy a trained numpy policy (MLP or map CNN) into the package as a tier's shipped policy, with its recipe header.
 
 Usage::
 
@@ -18,13 +18,13 @@ import gymnasium as gym
 
 import polar_sim.envs
 from polar_sim.envs.imitation import TRAIN_SEEDS
-from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.recipes import check_recipe
+from polar_sim.envs.shipped import load_numpy_policy
 
 
 def main():
     src, env_id, recipe, params, seed, how = sys.argv[1:7]
-    p = MLPPolicy.load(src)
+    p = load_numpy_policy(src)
     params = check_recipe(recipe, json.loads(params), env_id)
     p.env_id = env_id
     p.recipe = {"name": recipe, "params": params, "seed": int(seed), "train_seeds": list(TRAIN_SEEDS),

@@ -14,7 +14,11 @@ IQM and 95 % stratified bootstrap CI of held-out success over seeds) and ``curve
 (dev success against env steps and wall time). ``--ship SEED`` copies that seed's policy (named
 before any held-out score is seen) to ``polar_sim/data/policies/``. ``--only-score`` re-scores
 the policies already in ``--out``. Runs stop and resume per seed (a seed whose ``summary.json``
-exists is not retrained).
+exists is not retrained; a held-out score is kept in the seed's ``heldout.json`` and not re-run for
+the same worlds), so seeds may train in separate processes (``--seeds 1``, ``--seeds 2``) and a last
+``--seeds 0 1 2`` gathers them. ``--train-mode`` also scores each policy, on the same held-out
+worlds, in the mode it trained in (the recipe's ``train_pose_source`` / ``train_sdf_source``): the
+gap between that and the slam score is the train/test observation shift.
 """
 
 import argparse
@@ -25,7 +29,7 @@ import time
 from pathlib import Path
 
 import polar_sim.envs  # noqa: F401
-from polar_sim.envs.evaluate import evaluate
+from polar_sim.envs.evaluate import evaluate, policy_env_kwargs
 from polar_sim.envs.recipes import check_recipe, train
 from polar_sim.envs.rl_report import iqm_with_ci, plot_learning_curves
 
@@ -41,6 +45,25 @@ def score(env_id, policy, episodes, env_kwargs=None):
             "episodes": episodes, "eval_wall_s": time.perf_counter() - t}
 
 
+def cached_score(run, key, env_id, policy, episodes, env_kwargs=None):
+    """``score`` kept in ``run/heldout.json`` under ``key`` (re-run only for other worlds)."""
+    path = run / "heldout.json"
+    cache = json.loads(path.read_text()) if path.exists() else {}
+    if cache.get(key, {}).get("episodes") != episodes:
+        cache[key] = score(env_id, policy, episodes, env_kwargs)
+        path.write_text(json.dumps(cache, indent=2))
+    return cache[key]
+
+
+def train_mode_kwargs(params, policy_env_kwargs):
+    """The ``gym.make`` arguments of the mode a recipe trained in."""
+    kw = dict(policy_env_kwargs)
+    kw["pose_source"] = params["train_pose_source"]
+    if "train_sdf_source" in params:
+        kw["sdf_source"] = params["train_sdf_source"]
+    return kw
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--env", required=True)
@@ -53,6 +76,7 @@ def main():
     ap.add_argument("--ship", type=int, default=None, help="copy this seed's policy into polar_sim/data/policies")
     ap.add_argument("--docs", default=None, help="also copy curves.png here, named after the tier and recipe")
     ap.add_argument("--only-score", action="store_true")
+    ap.add_argument("--train-mode", action="store_true", help="also score each policy in its training mode")
     args = ap.parse_args()
     params = check_recipe(args.recipe, json.loads(args.params), args.env)
     out = Path(args.out)
@@ -67,11 +91,17 @@ def main():
             train(args.recipe, args.env, params=json.loads(args.params), seed=seed, out=run, progress=False)
         summary = json.loads((run / "summary.json").read_text())
         curves.append(summary["curve"])
-        res = score(args.env, str(run / "policy.npz"), args.test_episodes)
+        res = cached_score(run, "slam", args.env, str(run / "policy.npz"), args.test_episodes)
         results["runs"][seed] = {"steps": summary["steps"], "wall_s": summary["wall_s"], "cpu_s": summary["cpu_s"],
                                  "test": res}
+        if args.train_mode:
+            kw = train_mode_kwargs(params, policy_env_kwargs(str(run / "policy.npz"), args.env))
+            results["runs"][seed]["test_train_mode"] = cached_score(run, "train_mode", args.env,
+                                                                    str(run / "policy.npz"), args.test_episodes, kw)
+            results["train_mode_env_kwargs"] = kw
         print(f"seed {seed}: {summary['steps']} steps, {summary['wall_s'] / 60:.1f} min wall, "
-              f"{summary['cpu_s'] / 60:.1f} min CPU; held-out {res}", flush=True)
+              f"{summary['cpu_s'] / 60:.1f} min CPU; held-out {res}; in the training mode "
+              f"{results['runs'][seed].get('test_train_mode')}", flush=True)
         (out / "results.json").write_text(json.dumps(results, indent=2))
     for name in filter(None, args.experts.split(",")):
         results["experts"][name] = score(args.env, EXPERTS[name], args.test_episodes)

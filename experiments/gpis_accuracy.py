@@ -28,7 +28,7 @@ from polar_sim.runner.report import length, markdown_table, number, percent, sav
 from polar_sim.experiments import _gpis_common as C
 
 M2D = ["near_rmse_m", "near_median_abs_m", "near_rmse_wellseen_m", "far_mae_m", "grad_near_median_deg",
-       "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m", "near_coverage95",
+       "grad_far_median_deg", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_m", "surface_rmse_m", "near_coverage95",
        "corner_rmse_m", "corner_coverage95", "sparse_rmse_m", "sparse_coverage95", "wall_rmse_m", "wall_coverage95",
        "worst_corner_share", "worst_sparse_share", "worst_wall_share", "n_scans", "update_cpu_ms_median"]
 M3D = ["object", "sdf_rmse_m", "sdf_median_abs_m", "chamfer_m", "surface_to_mesh_m", "mesh_to_surface_m",
@@ -36,21 +36,9 @@ M3D = ["object", "sdf_rmse_m", "sdf_median_abs_m", "chamfer_m", "surface_to_mesh
 
 
 def _scan2d(scene, method, seed, ctx):
-    from polar_sim.metrics.maps import ObservedArea, map_scores_2d
-    from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
-
     every = ctx.params["every_steps"]
-    d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_steps=every, **C.ROUTE)])
-    m = C.make("mapper2d", method, seed=seed)
-    cpu = C.fuse(m, d.angles, d.poses, d.ranges)
-    w = C.truth_world(scene, seed)
-    obs = ObservedArea(d.angles, d.poses, d.clean)
     k10 = int(np.ceil(10 / every))        # scans over 1 m of the drive: "seen by 10 scans" at 10 Hz
-    row, arr = map_scores_2d(m.query, C.surface_points(m), w.sdf, obs, section_corners(w),
-                             n_eval=ctx.params["n_eval_2d"], seed=seed, well_k=k10, sparse_k=k10)
-    w.close()
-    ctx.save_arrays(path=d.poses[:, :2], hits=obs.hits[::7], **arr)
-    return {**row, "n_scans": len(d.poses), "travelled_m": float(d.travelled[-1]), **C.cpu_stats(cpu), "load": C.load_now()}
+    return C.drive_trial(scene, method, seed, ctx, dict(every_steps=every), ctx.params["n_eval_2d"], k10, hits_every=7)
 
 
 def _orbit(method, seed, ctx):
@@ -75,11 +63,13 @@ TARGETS = [  # (scene, method, metric, bound, op, "worst" | "mean", label, known
     ("office2d", "gpis", "grad_near_median_deg", 5.0, "<=", "worst", "office2d: median gradient angle error <= 5 deg (near)", False),
     ("office2d", "gpis", "grad_far_median_deg", 5.0, "<=", "worst", "office2d: median gradient angle error <= 5 deg (far)", False),
     ("office2d", "gpis", "hausdorff_m", 0.10, "<=", "worst", "office2d: Hausdorff of surface(), observed area <= 10 cm", True),
+    ("office2d", "gpis", "h_est_to_true_m", 0.10, "<=", "worst", "office2d: no point of surface() farther than 10 cm from the true surface", True),
     ("office2d", "gpis", "far_mae_m", 0.05, "<=", "worst", "office2d: MAE in observed free space 0.3-2 m <= 5 cm", False),
     ("office2d", "gpis_legacy", "far_mae_m", 0.05, ">", "best", "office2d: the published (legacy) method's MAE > 5 cm", False),
     ("warehouse2d", "gpis", "near_rmse_m", 0.02, "<=", "mean", "warehouse2d: near-surface SDF RMSE <= 2 cm (mean)", True),
     ("warehouse2d", "gpis", "far_mae_m", 0.05, "<=", "mean", "warehouse2d: free-space MAE (0.3-2 m) <= 5 cm (mean)", False),
     ("warehouse2d", "gpis", "hausdorff_wellseen_m", 0.10, "<=", "mean", "warehouse2d: Hausdorff on surfaces hit by >= 10 scans <= 10 cm (mean)", True),
+    ("warehouse2d", "gpis", "h_est_to_true_m", 0.10, "<=", "worst", "warehouse2d: no point of surface() farther than 10 cm from the true surface", True),
     ("warehouse2d", "gpis", "near_coverage95", (0.90, 0.98), "in", "mean", "warehouse2d: 95 % interval coverage of the SDF in 90-98 % (mean)", True),
     ("object_orbit", "gpis", "sdf_rmse_m", 0.002, "<=", "worst", "object_orbit: SDF RMSE within 1 cm <= 2 mm", False),
     ("object_orbit", "gpis", "chamfer_m", 0.003, "<=", "worst", "object_orbit: Chamfer of surface() <= 3 mm", False),
@@ -112,23 +102,18 @@ def summarize(table, ctx):
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     parts = []
     for scene in C.SCENES_2D:
         rows = sorted([r for r in table if r["scene"] == scene], key=lambda r: (r["method"], r["seed"]))
         if not rows:
             continue
         write_csv_table(rows, ["method", "seed"] + M2D + ["load"], ctx.out_dir / f"gpis_accuracy_{scene}.csv")
-        means = [{"method": k, "seeds": len(rs), **{c: C.mean(rs, c) for c in M2D}}
-                 for k in sorted({r["method"] for r in rows}) for rs in [[r for r in rows if r["method"] == k]]]
+        means = C.group_means(rows, ["method"], M2D)
         parts += [f"### {scene} ({ctx.split} split; 60 s drive, 2D lidar at {10 / ctx.params['every_steps']:.3g} Hz, "
                   "sigma 1 cm)", "", "Means over seeds:", "",
                   markdown_table(means, ["method", "seeds"] + M2D), "", "Per seed:", "",
                   markdown_table(rows, ["method", "seed"] + M2D[:10]), ""]
-        r0 = rows[0]
-        fig, ax = plt.subplots(1, 2, figsize=(15, 7.2))
-        C.error_figure(ax, ctx.arrays(r0), r0, scene)
+        fig = C.error_rows_figure([ctx.arrays(rows[0])], rows[:1], scene, height=7.2)
         parts.append(savefig(fig, ctx.out_dir, f"gpis_accuracy_{scene}"))
     orb = sorted([r for r in table if r["scene"] == "object_orbit"], key=lambda r: (r["method"], r["seed"]))
     if orb:

@@ -18,13 +18,15 @@ import numpy as np
 
 from polar_sim.experiments import _ground_common as G
 from polar_sim.experiments import _ground_pictures as pictures
+from polar_sim.metrics.calibration import pooled_reliability
 from polar_sim.runner import Check, Experiment, get_method
 from polar_sim.runner.report import savefig
 
 TARGET_IOU, TARGET_ECE = 0.85, 0.05
 WARMUP_S, BEFORE_M, AFTER_M = 5.0, 40.0, 10.0
-#: Families whose IoU miss, and splits whose pooled ECE miss, are recorded in RESULTS (full size, issue 35).
-RECORDED_IOU_MISSES, RECORDED_ECE_MISSES = ("stripes", "checker"), ("test",)
+#: Families whose IoU miss, and splits whose pooled ECE miss, are recorded in RESULTS (full size, issue 35,
+#: second pass: stripes 0.932 and the pooled test ECE 0.026 now meet their targets; checker 0.838 does not).
+RECORDED_IOU_MISSES, RECORDED_ECE_MISSES = ("checker",), ()
 DEV_ROUTES = ("terrain_00", "terrain_04", "flat_00", "flat_02") + G.DEV_FAMILY_ROUTES
 OURS = ("w6", "u6", "w6_nocal", "w6_ng6h")  # GroundVO methods: the routes are already at working size
 
@@ -32,7 +34,7 @@ OURS = ("w6", "u6", "w6_nocal", "w6_ng6h")  # GroundVO methods: the routes are a
 def trial(params, seed, ctx):
     G.single_thread()
     from polar_sim.ground.replay import replay
-    from polar_sim.metrics.calibration import pooled_reliability, reliability_counts
+    from polar_sim.metrics.calibration import reliability_counts
     from polar_sim.metrics.ground import class_prob_sums, classifier_iou, iou_summary
     from polar_sim.sim.recorders.rover_sequences import settled_frames
 
@@ -74,8 +76,6 @@ def _families(table, ctx, method):
 
 def _family_rows(fams, m):
     """The per-family summary rows of one method, then its worst family and the pooled ECE."""
-    from polar_sim.metrics.calibration import pooled_reliability
-
     rows = [dict(method=m, family=k, frames=f["frames"], iou_mean=f["iou_mean"], ece=pooled_reliability(*f["bins"]).ece,
                  p_ground=f["p_ground"], p_nonground=f["p_nonground"]) for k, f in fams.items()]
     if rows:
@@ -88,8 +88,6 @@ def _family_rows(fams, m):
 
 
 def summarize(table, ctx):
-    from polar_sim.metrics.calibration import pooled_reliability
-
     lines = [f"Split `{ctx.split}`, size `{ctx.size}`. Settled frames: ≥ {WARMUP_S:.0f} s after the start, outside "
              f"[−{BEFORE_M:.0f} m, +{AFTER_M:.0f} m] of each zone boundary. IoU: P(ground) > 0.5 against the true "
              "ground mask (whole image); ECE: 15 bins, every 2nd pixel of the settled frames. Per family (settled "
@@ -116,8 +114,6 @@ def summarize(table, ctx):
 
 
 def checks(table, ctx):
-    from polar_sim.metrics.calibration import pooled_reliability
-
     fams = _families(table, ctx, "w6")
     if not fams:
         return []

@@ -67,11 +67,8 @@ def trial(params, seed, ctx):
     loc.fit(A, R[used], P[used])
     e, lcpu = relocalise(loc, A, R[held], P[held], np.random.default_rng(np.random.SeedSequence([seed, 1414])))
     lm = getattr(loc, "map_", None)
-    row.update(reloc_median_m=float(np.median(e[:, 0])), reloc_p90_m=float(np.percentile(e[:, 0], 90)),
-               reloc_max_m=float(e[:, 0].max()), reloc_head_median_deg=float(np.median(e[:, 1])),
-               reloc_fail=int((e[:, 0] > 0.5).sum()), reloc_scans=len(held), reloc_cpu_ms_median=float(np.median(lcpu)),
-               loc_map_abs_sdf_median_m=float(np.median(np.abs(lm.query(E)[0]))) if callable(getattr(lm, "query", None))
-               else float("nan"), load=C.load_now())
+    lsdf = float(np.median(np.abs(lm.query(E)[0]))) if callable(getattr(lm, "query", None)) else float("nan")
+    row.update(**C.reloc_scores(e, lcpu), loc_map_abs_sdf_median_m=lsdf, load=C.load_now())
     pic = C.map_picture(full, np.vstack([P[:, :2], hit_points(A, P[::10], R[::10])]), ctx.params["picture_res_m"])
     ctx.save_arrays(cpu_ms=cpu, reloc_err=e, s2m=est, path=P[:, :2], **pic)
     return row

@@ -22,13 +22,8 @@ per step is at least ICP-G's (chosen from the measured times).
 
 from __future__ import annotations
 
-import time
-
-import numpy as np
-
-from polar_sim.metrics import pooled_pose2d_errors
 from polar_sim.runner import Check, Experiment, Finding
-from polar_sim.runner.localise import budget_match, error_cdf_figure, localise_drive, noisy_odometry, perturbed_start
+from polar_sim.runner.localise import budget_match, error_cdf_figure
 from polar_sim.runner.report import duration, length, markdown_table, savefig, write_csv_table
 
 from polar_sim.experiments import _gpis_common as C
@@ -42,39 +37,12 @@ def trial(params, seed, ctx):
     from polar_sim.sim.recorders.drives2d import recorded_drives
 
     scene, p = params["scene"], ctx.params
-    d1, d2 = recorded_drives(scene, seed, [dict(route_seed=seed, n_rooms=5, duration=p["map_s"], every_steps=p["map_every_steps"]),
-                                           dict(route_seed=10_000 + seed, n_rooms=3, duration=p["loc_s"],
-                                                every_steps=p["loc_every_steps"])])
+    d1, d2 = recorded_drives(scene, seed, [
+        dict(route_seed=seed, n_rooms=5, duration=p["map_s"], every_steps=p["map_every_steps"]),
+        dict(route_seed=10_000 + seed, n_rooms=3, duration=p["loc_s"], every_steps=p["loc_every_steps"])])
     w = C.truth_world(scene, seed)
     loc = C.make("localizer2d", params["method"], seed=seed, init_std=(0.1, 0.1, 0.05), exact_sdf=w.sdf)
-    t0 = time.process_time()
-    loc.fit(d1.angles, d1.ranges, d1.poses)
-    fit_cpu = time.process_time() - t0
-    w.close()
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 777]))
-    truth = d2.poses
-    odom = noisy_odometry(truth, rng)
-    r = localise_drive(loc, d2.angles, d2.ranges, truth, odom, perturbed_start(truth[0], rng, offset_m=0.1, offset_deg=2.0))
-    e, cpu = r["err"], r["cpu_ms"]
-    ctx.save_arrays(err=e, truth=truth, odom=odom)
-    st = pooled_pose2d_errors(e, FAIL_M)
-    return {**{k: st[k] for k in ("pos_median_m", "pos_p90_m", "pos_max_m", "head_median_deg", "head_p90_deg", "fail_steps")},
-            "not_ok_steps": int(getattr(loc, "not_ok_", 0)), "cpu_ms_median": float(np.median(cpu)),
-            "cpu_ms_p90": float(np.percentile(cpu, 90)), "wall_ms_median": float(np.median(r["wall_ms"])), "n_steps": len(truth),
-            "map_scans": len(d1.poses), "fit_cpu_s": fit_cpu, "loc_travel_m": float(d2.travelled[-1]),
-            "odom_pos_max_m": float(np.hypot(*(odom[:, :2] - truth[:, :2]).T).max()), "load": C.load_now()}
-
-
-def _stats(table, ctx):
-    out = []
-    for k in sorted({r["method"] for r in table}):
-        rows = [r for r in table if r["method"] == k]
-        e = np.vstack([ctx.arrays(r)["err"] for r in rows])
-        out.append({"method": k, "seeds": len(rows), **pooled_pose2d_errors(e, FAIL_M),
-                    "seeds_with_failure": sum(r["fail_steps"] > 0 for r in rows),
-                    "cpu_ms_median": float(np.median([r["cpu_ms_median"] for r in rows])),
-                    "wall_ms_median": float(np.median([r["wall_ms_median"] for r in rows])), "err": e})
-    return out
+    return C.localise_trial(ctx, loc, d1, d2, seed, FAIL_M, fitted=w.close)
 
 
 def checks(table, ctx):
@@ -87,7 +55,7 @@ def checks(table, ctx):
                  f"{max(r['head_median_deg'] for r in g):.3f} deg"),
            Check("ICP-G: no failures (position error > 0.5 m)", sum(r["fail_steps"] for r in g) == 0,
                  f"{sum(r['fail_steps'] for r in g)} failed steps")]
-    st = _stats(table, ctx)
+    st = C.pooled_by_method(table, ctx, FAIL_M)
     pf, gcpu = budget_match(st)
     if pf is not None:
         gm = next(s for s in st if s["method"] == "icpg")
@@ -107,10 +75,6 @@ def _fig(s):
             f"failed steps, {duration(s['cpu_ms_median'] / 1e3, 'ms', decimals=2)} CPU per step)")
 
 
-def _steps_of(s):
-    return f"steps of {s['seeds']} seed{'s' if s['seeds'] != 1 else ''}"
-
-
 #: The two ICP-D baselines: (method, its map, the claim's words, ours, what differs from the dissertation).
 ICPD_FINDINGS = [
     ("icpd_gt", "a ground-truth discrete SDF", "a ground-truth discrete SDF", "the exact SDF sampled at 5 cm",
@@ -127,17 +91,18 @@ def findings(table, ctx):
     ground-truth discrete SDF and than a particle filter. One row per comparison: ICP-D on the
     ground-truth SDF (its setting), ICP-D on the EDT of a grid from the same scans (what a mapping
     system has), and the PF at ICP-G's compute budget."""
-    st = {s["method"]: s for s in _stats(table, ctx)}
+    st = {s["method"]: s for s in C.pooled_by_method(table, ctx, FAIL_M)}
     if "icpg" not in st:
         return []
     g, out = st["icpg"], []
+    steps_of = f"steps of {g['seeds']} seed{'s' if g['seeds'] != 1 else ''}"
     over = f"median position error over {g['steps']} steps of {g['seeds']} seed(s): ICP-G {_fig(g)}"
     for key, src, claim, theirs, note in ICPD_FINDINGS:
         if key in st:
             out.append(Finding(f"Ch. 7, localisation: ICP-G vs ICP-D on {src}", "ICP-G on the GPIS map localises more "
                                f"accurately than ICP-D on {claim}", f"{over}; ICP-D on {theirs} {_fig(st[key])}",
                                "held" if g["pos_median_m"] < st[key]["pos_median_m"] else "not held", note,
-                               n=int(g["steps"]), n_of=_steps_of(g)))
+                               n=int(g["steps"]), n_of=steps_of))
     pf, gcpu = budget_match(list(st.values()))
     if pf is not None:
         same = pf["cpu_ms_median"] >= gcpu
@@ -149,12 +114,12 @@ def findings(table, ctx):
         out.append(Finding("Ch. 7, localisation: ICP-G vs the particle filter at the same compute budget",
                            "ICP-G on the GPIS map localises more accurately than a particle filter", ours, verdict,
                            note + "; the PFs run MCL on the likelihood field of a 5 cm grid from the same scans",
-                           n=int(g["steps"]), n_of=_steps_of(g)))
+                           n=int(g["steps"]), n_of=steps_of))
     return out
 
 
 def summarize(table, ctx):
-    st = _stats(table, ctx)
+    st = C.pooled_by_method(table, ctx, FAIL_M)
     write_csv_table(st, COLS, ctx.out_dir / "localisation.csv")
     rows = sorted(table, key=lambda r: (r["method"], r["seed"]))
     pcols = ["method", "seed", "n_steps", "pos_median_m", "head_median_deg", "fail_steps", "not_ok_steps", "cpu_ms_median",

@@ -40,7 +40,7 @@ def trial(params, seed, ctx):
     rng = np.random.default_rng(seed)
     lid2, lid3, dep5, dep99, agree, kin = [], [], [], [], [], []
     with World(scene, seed=seed, kinematic=True) as w:
-        x, y, th = w.meta["start_pose2d"]
+        x, y, th = w.meta.start_pose2d
         vmax, wmax = SPEED[scene]
         for k in range(frames):
             for _ in range(10):

@@ -3,7 +3,7 @@
 The kinematic rover drives the seeded 60 s route of ``gpis_accuracy`` (``office2d``, and the
 randomised ``warehouse2d`` worlds; 2D lidar, 1081 beams, sigma = 1 cm); a scan is fed every
 ``spacing_m`` metres of travel (0.1, 0.25, 0.5, 1.0 m) to the ``mapper2d`` method at the true pose:
-``gpis`` (``surface()`` polylines sampled every 1 cm), ``grid5`` / ``grid10`` (occupied cells next
+``gpis`` (its ungated zero level, ``surface(evidence=False)``, as the grids', every 1 cm; ``gpis_accuracy`` scores the gates), ``grid5`` / ``grid10`` (occupied cells next
 to free ones), ``edt5`` (the zero contour of the 5 cm grid's signed EDT), or a plug-in.
 
 Scores (``polar_sim.metrics.maps``): *surface RMSE* (RMS of the exact |SDF| at the estimated surface
@@ -34,32 +34,14 @@ COLS = ["surface_rmse_m", "hausdorff_m", "hausdorff_wellseen_m", "h_est_to_true_
 
 
 def trial(params, seed, ctx):
-    from polar_sim.metrics.maps import ObservedArea, map_scores_2d
-    from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners
-
-    scene, spacing = params["scene"], float(params["spacing_m"])
-    d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_m=spacing, **C.ROUTE)])
-    m = C.make("mapper2d", params["method"], seed=seed)
-    cpu = C.fuse(m, d.angles, d.poses, d.ranges)
-    w = C.truth_world(scene, seed)
-    obs = ObservedArea(d.angles, d.poses, d.clean)
-    k1m = max(2, int(round(1.0 / spacing)))        # scans taken over 1 m of travel
-    row, arr = map_scores_2d(m.query, C.surface_points(m), w.sdf, obs, section_corners(w),
-                             n_eval=ctx.params["n_eval"], seed=seed, well_k=k1m, sparse_k=k1m)
-    w.close()
-    ctx.save_arrays(path=d.poses[:, :2], hits=obs.hits[::5], **arr)
-    return {**row, "n_scans": len(d.poses), "travelled_m": float(d.travelled[-1]), **C.cpu_stats(cpu), "load": C.load_now()}
+    sp = float(params["spacing_m"])            # k: the scans taken over 1 m of travel
+    return C.drive_trial(params["scene"], params["method"], seed, ctx, dict(every_m=sp), ctx.params["n_eval"],
+                         k=max(2, int(round(1.0 / sp))), hits_every=5, ungated=True)
 
 
 def _long(table):
     """One row per (scene, spacing, method): means over seeds (and the worst seed's Hausdorff)."""
-    keys = sorted({(r["scene"], r["spacing_m"], r["method"]) for r in table})
-    out = []
-    for scene, sp, k in keys:
-        rows = [r for r in table if (r["scene"], r["spacing_m"], r["method"]) == (scene, sp, k)]
-        out.append({"scene": scene, "spacing_m": sp, "method": k, "seeds": len(rows),
-                    **{c: C.mean(rows, c) for c in COLS}, "hausdorff_max_m": max(r["hausdorff_m"] for r in rows)})
-    return out
+    return C.group_means(table, ["scene", "spacing_m", "method"], COLS, maxima={"hausdorff_max_m": "hausdorff_m"})
 
 
 def _at(long, scene, sp, k, key):
@@ -136,31 +118,19 @@ def summarize(table, ctx):
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     long = _long(table)
     write_csv_table(long, ["scene", "spacing_m", "method", "seeds", "hausdorff_max_m"] + COLS, ctx.out_dir / "surface_vs_rate.csv")
     write_csv_table(sorted(table, key=lambda r: (r["scene"], r["spacing_m"], r["method"], r["seed"])),
                     ["scene", "spacing_m", "method", "seed"] + COLS, ctx.out_dir / "surface_vs_rate_per_seed.csv")
-    scenes = sorted({r["scene"] for r in table})
-    fig, ax = plt.subplots(len(scenes), 3, figsize=(15, 4.2 * len(scenes)), squeeze=False)
-    for i, scene in enumerate(scenes):
-        for k in sorted({r["method"] for r in long}):
-            rs = [r for r in long if r["scene"] == scene and r["method"] == k]
-            for a, key in zip(ax[i], ["hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m"]):
-                a.plot([r["spacing_m"] for r in rs], [r[key] for r in rs], "o-", label=k)
-                a.set(xlabel="scan spacing (m of travel)", ylabel="m", yscale="log", title=f"{scene}: {key} (mean)")
-                a.grid(alpha=0.3)
-        ax[i, 0].legend()
     parts = [f"Means over seeds, {ctx.split} split (metres):", "",
              markdown_table(long, ["scene", "spacing_m", "method", "seeds", "hausdorff_max_m"] + COLS), "",
-             "Tables: `surface_vs_rate.csv`, `surface_vs_rate_per_seed.csv`.", "", savefig(fig, ctx.out_dir, "structure_surface_vs_rate")]
+             "Tables: `surface_vs_rate.csv`, `surface_vs_rate_per_seed.csv`.", "",
+             savefig(C.spacing_figure(long, ["hausdorff_m", "hausdorff_wellseen_m", "surface_rmse_m"]), ctx.out_dir,
+                     "structure_surface_vs_rate")]
     sp, seed0 = max(r["spacing_m"] for r in table), min(r["seed"] for r in table)
-    for scene in scenes:
+    for scene in sorted({r["scene"] for r in table}):
         rows = sorted([r for r in table if (r["scene"], r["spacing_m"], r["seed"]) == (scene, sp, seed0)], key=lambda r: r["method"])
-        fig, ax = plt.subplots(len(rows), 2, figsize=(15, 6.5 * len(rows)), squeeze=False)
-        for a, r in zip(ax, rows):
-            C.error_figure(a, ctx.arrays(r), r, scene)
+        fig = C.error_rows_figure([ctx.arrays(r) for r in rows], rows, scene, height=6.5)
         parts.append(savefig(fig, ctx.out_dir, f"structure_surfaces_sparsest_{scene}"))
     return "\n".join(parts)
 

@@ -283,13 +283,27 @@ def check_options(options, allowed, name="options"):
     return dict(options)
 
 
+def _number_kind(x):
+    """'bool', 'int' or 'float' for Python and numpy scalars, None for anything else."""
+    if isinstance(x, (bool, np.bool_)):
+        return "bool"
+    if isinstance(x, (int, np.integer)):
+        return "int"
+    if isinstance(x, (float, np.floating)):
+        return "float"
+    return None
+
+
 def check_choice(value, choices, name):
     """Raise ``ValueError`` listing the valid choices if ``value`` is not one of them."""
     try:
-        ok = value in choices
-    except TypeError:  # an unhashable value tested against a set or dict
+        ok = bool(value in choices)
+    except (TypeError, ValueError):  # unhashable, or an array whose truth value is ambiguous
         ok = False
-    if not ok or isinstance(value, (bool, np.bool_)) and not any(c is value for c in choices):
+    # 2.0 == 2 and True == 1: an integer choice takes an integer, not a float or a bool
+    if ok and _number_kind(value) is not None:
+        ok = any(_number_kind(c) == _number_kind(value) and c == value for c in choices)
+    if not ok:
         valid = ", ".join(repr(c) for c in choices)
         raise ValueError(f"{name}: unknown value {value!r}; expected one of {valid}")
     return value

@@ -448,7 +448,7 @@ def build_parser():
     s.set_defaults(func=_cmd_compile)
 
     s = sub.add_parser("train", help="train a learning recipe on a GPISNav tier (needs torch, stable-baselines3)")
-    s.add_argument("recipe", help="dagger, dagger_ppo, ppo, recurrent_ppo, sac or tqc (docs/guide/learning.md)")
+    s.add_argument("recipe", help="dagger, dagger_map, dagger_ppo, ppo, recurrent_ppo, sac or tqc (docs/guide/learning.md)")
     s.add_argument("--env", default="polar_sim/GPISNav-Room-v1", help="the tier's env id")
     s.add_argument("--params", default=None, help='JSON object of recipe parameters, e.g. \'{"rounds": 6}\'')
     s.add_argument("--seed", type=int, default=0)

@@ -223,7 +223,7 @@ def demo_env(out: Path, progress: Progress):
         est.append(info["est_pose2d"][:2].copy())
         done, n = term or trunc, n + 1
         progress.update()
-    x0, x1, y0, y1 = env.unwrapped.world.meta["bounds"]
+    x0, x1, y0, y1 = env.unwrapped.world.meta.bounds
     X, Y = np.meshgrid(np.linspace(x0 - 0.5, x1 + 0.5, 360), np.linspace(y0 - 0.5, y1 + 0.5, 360))
     sdf = env.unwrapped.world.sdf(np.stack([X.ravel(), Y.ravel()], 1)).reshape(X.shape)
     title = (f"{ENV_ID.split('/')[1]}, seed {ENV_SEED}: the SDFNavigator policy drives to the goal on a GPIS map "

@@ -1,6 +1,7 @@
 """One module contract, after scikit-learn's estimators.
 
-Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) follows it:
+Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) and every baseline
+(``polar_sim.baselines``) follows it:
 
 - the constructor only stores its documented parameters, under their own names;
 - :meth:`~Parameterised.get_params` / :meth:`~Parameterised.set_params` read and change them
@@ -14,16 +15,82 @@ Every online module (``GPISMap2D``/``3D``, ``GroundVO``, ``ObjectTracker``) foll
 - a parameter may be a frozen dataclass of one stage's settings (a *stage config*): as in
   scikit-learn's nested estimators, ``get_params(deep=True)`` also lists its fields as
   ``stage__field``, and ``set_params(stage__field=value)`` replaces the config by a copy with that
-  field changed (validated by the config itself).
+  field changed (validated by the config itself);
+- the class declares what the contract checks (:func:`polar_sim.testing.check_module`) need to
+  know of it in :data:`~Parameterised.TAGS`, a :class:`Tags` (after scikit-learn's estimator
+  tags): its per-frame method, its query, its random-state parameter, whether it saves, and where
+  a small valid data set (:class:`CheckData`) comes from. The module does not import the checks.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import importlib
 import inspect
+from typing import ClassVar
 
-__all__ = ["Parameterised", "split_nested", "replace_fields", "check_fields"]
+__all__ = ["Parameterised", "Tags", "CheckData", "split_nested", "replace_fields", "check_fields"]
+
+
+@dataclasses.dataclass(frozen=True)
+class CheckData:
+    """A small valid data set for the contract checks of one module class.
+
+    Attributes
+    ----------
+    init : dict
+        Constructor arguments an instance needs to fit these frames (intrinsics, a model, ...);
+        the rest keep their defaults.
+    frames : tuple of tuple
+        The positional arguments of each call of the per-frame method (:attr:`Tags.update`), in order.
+    query : tuple
+        Positional arguments of one call of the query (:attr:`Tags.query`).
+    prepare : tuple of (str, tuple)
+        ``(method, args)`` calls that must come before the first frame (a filter's ``initialize``).
+    """
+
+    init: dict = dataclasses.field(default_factory=dict)
+    frames: tuple = ()
+    query: tuple = ()
+    prepare: tuple = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Tags:
+    """What the contract checks need to know of a module class (after scikit-learn's estimator tags).
+
+    Attributes
+    ----------
+    update : str or None
+        The per-frame (or fit) method; None for a class without learned state.
+    query : str or None
+        A method that reads the learned state without changing it.
+    requires_update : bool
+        The query raises :class:`polar_sim.errors.NotUpdatedError` before the first ``update``
+        (False for an exact, stateless model).
+    random_state : str or None
+        The constructor parameter that seeds every random choice.
+    saves : bool
+        ``save(path)`` and the class method ``load(path)`` round-trip the learned state.
+    data : str or None
+        ``"package.module:function"`` returning the class's :class:`CheckData`; imported only
+        when a check runs, so that a module does not import its synthetic data (or the checks).
+    """
+
+    update: str | None = None
+    query: str | None = None
+    requires_update: bool = True
+    random_state: str | None = None
+    saves: bool = False
+    data: str | None = None
+
+    def check_data(self) -> CheckData:
+        """The :class:`CheckData` named by :attr:`data`."""
+        if self.data is None:
+            raise ValueError("data: this class declares no check data")
+        module, _, name = self.data.partition(":")
+        return getattr(importlib.import_module(module), name)()
 
 
 class Parameterised:
@@ -31,6 +98,13 @@ class Parameterised:
 
     #: Parameter values of the published behaviour (the named preset ``published()``).
     PUBLISHED: dict = {}
+    #: What the contract checks need to know of the class (see :class:`Tags`).
+    TAGS: ClassVar[Tags] = Tags()
+
+    def __polar_tags__(self) -> Tags:
+        """The class's :class:`Tags` (a subclass may derive them from its parameters, as
+        scikit-learn's ``__sklearn_tags__`` does)."""
+        return self.TAGS
 
     @classmethod
     def _param_names(cls):

@@ -1,5 +1,6 @@
 """One hostile battery over every module, entry point family and env (polar_sim.testing): one
-pytest id per named check. A new module or env is checked by adding it to the lists below.
+pytest id per named check. A new module is checked by adding an instance to ``MODULES`` below
+(its class declares its check data in ``TAGS``), a new env by registering it.
 
 CI size: N_BAD hostile inputs per entry point, all of an entry point's inputs in one worker
 subprocess with a time limit (a crash or hang is a failure, never a frozen suite);
@@ -10,18 +11,20 @@ import pytest
 
 from ci_sizes import size
 from polar_sim.envs import ENV_IDS
-from polar_sim.testing import check_module, check_polar_env
+from polar_sim.testing import check_entry_points, check_module, check_polar_env
+from polar_sim.testing.contract import module_instances
 
 N_BAD = size(200, 12)
 
-# Checked in CI: the simulator's entry points, the shared layers, the modules, the metrics and the CLI.
-MODULES = [
+# Checked in CI: every module class of the contract (one instance each, built from its check
+# data), then the entry point families that are not modules.
+FAMILIES = [
     "World",                      # World(...) options, step, camera, lidar, sdf
     "RangeNoise",
     "Recording",                  # append, save, load
     "metrics.kitti_errors", "metrics.ate", "metrics.rpe", "metrics.iou", "metrics.hausdorff", "metrics.chamfer",
     "metrics.add", "metrics.adds",
-    "GPISMap2D", "GPISMap3D", "localize", "GroundVO", "ObjectTracker",
+    "localize",
     "cli",
 ]
 
@@ -30,8 +33,11 @@ ENVS = list(ENV_IDS)
 
 
 def _checks():
-    for name in MODULES:
-        for check in check_module(name, n_bad=N_BAD):
+    for obj in module_instances():
+        for check in check_module(obj, n_bad=N_BAD):
+            yield pytest.param(check, id=check.name)
+    for name in FAMILIES:
+        for check in check_entry_points(name, n_bad=N_BAD):
             yield pytest.param(check, id=check.name)
     for env_id in ENVS:
         for check in check_polar_env(env_id, n_bad=N_BAD):

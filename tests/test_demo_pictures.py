@@ -69,7 +69,7 @@ class _World:
     def __init__(self, ranges, bounds=None):
         self.angles = np.linspace(-3 * np.pi / 4, 3 * np.pi / 4, len(ranges))
         self.ranges = np.asarray(ranges, float)
-        self.meta = {} if bounds is None else {"bounds": bounds}
+        self.meta = types.SimpleNamespace() if bounds is None else types.SimpleNamespace(bounds=bounds)
 
     def lidar(self, name):
         ok = np.isfinite(self.ranges)

@@ -1,6 +1,7 @@
 """The battery itself: it finds what it must (a crash, a hang, a state change, a silent accept, a
 wrong exception type) and passes a well-behaved module; bad-input generation is seeded."""
 
+import functools
 import os
 from pathlib import Path
 
@@ -75,82 +76,67 @@ def test_state_digest():
     assert len({d0, d1, d2, state_digest(a)}) == 4
 
 
-# --- the module contract's checks can fail: a tiny module, sound or with one flaw each ---------------
-class _Sum:
-    """A sound tiny module: ``update(x)`` adds the (3,) array x to a running sum and returns the
-    sum so far (a new array); ``value()`` returns it; ``reset()`` forgets it."""
+# --- the module contract's checks can fail: a tiny module (battery_dummies.Sum), sound or with one flaw ---
+def _sum_checks(cls_name, flaw):
+    import battery_dummies
 
-    def __init__(self, scale=1.0, flaw=None):
-        self.scale, self.flaw = scale, flaw
+    from polar_sim.testing.contract import Subject, module_checks
 
-    def get_params(self, deep=True):
-        return {"scale": self.scale if self.flaw != "params" else 0.0, "flaw": self.flaw}
-
-    def set_params(self, **p):
-        for k, v in p.items():
-            setattr(self, k, v)
-        return self
-
-    def update(self, x):
-        if not hasattr(self, "total_"):
-            self.total_ = np.zeros(3)
-        self.total_ += self.scale * x
-        return x if self.flaw == "alias" else self.total_.copy()
-
-    def value(self):
-        from polar_sim.errors import NotUpdatedError
-
-        if not hasattr(self, "total_"):
-            if self.flaw == "query_before":
-                return np.zeros(3)
-            raise NotUpdatedError("update first")
-        if self.flaw == "impure":
-            self.total_ += 1.0
-        return self.total_.copy()
-
-    def reset(self):
-        if self.flaw != "reset" and hasattr(self, "total_"):
-            del self.total_
-        return self
-
-    def __deepcopy__(self, memo):
-        if self.flaw == "copy":  # a "copy" that shares its state with the original
-            return self
-        new = type(self)(self.scale, self.flaw)
-        if hasattr(self, "total_"):
-            new.total_ = self.total_.copy()
-        return new
+    s = Subject(getattr(battery_dummies, cls_name)(scale=2.0, flaw=flaw))
+    return {name: functools.partial(fn, s) for name, fn in module_checks(s.tags)}
 
 
-class _Eager(_Sum):
-    def __init__(self, scale=1.0, flaw=None):
-        super().__init__(scale, flaw)
-        self.total_ = np.zeros(3)  # learned state before any update
-
-
-def _sum_checks(cls, flaw):
-    from polar_sim.testing.checks import ModuleCase, _module_contract_checks
-
-    frames = [(np.array([1.0, 2.0, 3.0]) * k,) for k in range(1, 5)]
-    case = ModuleCase(name=f"dummy-{cls.__name__}-{flaw}", build=cls, params={"scale": 2.0, "flaw": flaw},
-                      frames=lambda: [tuple(a.copy() for a in f) for f in frames], method="update",
-                      query=("value", ()))
-    # "same_output_across_processes" looks the module up by name in a fresh process: the registered
-    # modules run it in tests/test_common.py; a module defined in a test cannot.
-    return {n: fn for n, fn in _module_contract_checks(case.name, lambda: case)
-            if n != "same_output_across_processes"}
-
-
-def test_a_sound_module_passes_every_check():
-    for name, fn in _sum_checks(_Sum, None).items():
+def test_a_sound_module_passes_every_check(dummies):
+    checks = _sum_checks("Sum", None)
+    assert len(checks) == 10
+    for fn in checks.values():
         fn()
 
 
 @pytest.mark.parametrize("cls, flaw, check", [
-    (_Sum, "params", "builds_and_stores_params"), (_Eager, None, "no_learned_state_before_update"),
-    (_Sum, "query_before", "query_before_update_raises"), (_Sum, "impure", "query_is_pure"),
-    (_Sum, "alias", "outputs_do_not_alias_inputs"), (_Sum, "reset", "reset_then_replay"),
-    (_Sum, "copy", "deep_copies")])
-def test_each_module_check_finds_its_flaw(cls, flaw, check):
+    ("Sum", "params", "builds_and_stores_params"), ("EagerSum", None, "no_learned_state_before_update"),
+    ("Sum", "query_before", "query_before_update_raises"), ("Sum", "impure", "query_is_pure"),
+    ("Sum", "alias", "outputs_do_not_alias_inputs"), ("Sum", "seed", "same_seed_same_output"),
+    ("Sum", "process", "same_output_across_processes"), ("Sum", "reset", "reset_then_replay"),
+    ("Sum", "copy", "deep_copies"), ("Sum", "pickle", "saves_without_pickle")])
+def test_each_module_check_finds_its_flaw(dummies, cls, flaw, check):
     with pytest.raises(AssertionError):
         _sum_checks(cls, flaw)[check]()
+
+
+# check_module takes an instance, never a name or a class.
+@pytest.mark.parametrize("bad", ["GPISMap2D", int, object()])
+def test_check_module_takes_an_instance(bad):
+    from polar_sim.testing import check_module
+
+    with pytest.raises(TypeError, match="obj"):
+        next(check_module(bad))
+
+
+# --- entry points derived from a class's signature and TAGS -------------------------------------------
+# Kinds come from the naming convention, else from the valid value; the derived list covers the
+# constructor, the per-frame method, the query and save/load, and nothing is hand-written.
+def test_entry_points_are_derived():
+    from polar_sim.testing import ENTRY_POINTS, entry_points_of
+
+    assert entry_points_of("GPISMap2D") == ["GPISMap2D", "GPISMap2D.update", "GPISMap2D.query", "GPISMap2D.save",
+                                            "GPISMap2D.load"]
+    assert entry_points_of("OccupancyGrid2D") == ["OccupancyGrid2D", "OccupancyGrid2D.update",
+                                                  "OccupancyGrid2D.probability"]
+    assert ENTRY_POINTS["GPISMap3D.update"]().kinds == {"depth": "depth", "K": "K", "T_world_cam": "pose"}
+    assert ENTRY_POINTS["ICPLocalizer.localize"]().kinds == {"scan": "scan2d", "initial_pose": "pose2d"}
+    kinds = ENTRY_POINTS["GroundVO"]().kinds
+    assert kinds["camera_height"] == "float+" and kinds["seed"] == "seed" and kinds["model"] == "choice"
+    assert kinds["tracking"] == "object"
+
+
+# A class outside MODULE_CLASSES is reached by its path, also in a worker process; the derived
+# constructor battery finds the parameters the class never checks (scale meets x in update; seed is unused).
+def test_derived_battery_of_an_unregistered_class(dummies):
+    from polar_sim.testing import entry_points_of
+
+    assert entry_points_of("battery_dummies:Sum") == [   # update(x): nothing to attack
+        "battery_dummies:Sum", "battery_dummies:Sum.save", "battery_dummies:Sum.load"]   # value(): no arguments
+    res = run_battery("battery_dummies:Sum", n=20, isolate=True, setup_timeout=120)
+    assert res.n == 20 and not res.ok
+    assert {f[1] for f in res.failures} == {"scale", "seed"}, res.report()   # seed: never read

@@ -81,3 +81,9 @@ def test_finding_6_cases():
         V.check_choice(True, (1, 2), "mode")
     with pytest.raises(ValueError, match="mode"):
         V.check_choice([1], {"a", "b"}, "mode")
+    # an array (ambiguous truth value) and a float for an integer choice name the argument too
+    for bad in (np.array([2, 2]), 2.0, np.float32(1.0)):
+        with pytest.raises(ValueError, match="^downsample: unknown value"):
+            V.check_choice(bad, (1, 2), "downsample")
+    assert V.check_choice(np.int64(2), (1, 2), "downsample") == 2
+    assert V.check_choice(np.float64(0.5), (0.5, 1.0), "scale") == 0.5

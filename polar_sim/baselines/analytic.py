@@ -13,11 +13,12 @@ import numpy as np
 from polar_sim._validation import as_float_array, as_angles, as_intrinsics, as_points, as_pose, as_pose2d
 from polar_sim.registration import as_sensor_offset, transform2d
 from polar_sim.geometry import pose2d_to_T
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["RoomSDF2D", "RoomSDF3D"]
 
 
-class _Room:
+class _Room(Parameterised):
     """Box [0, size] (room frame) minus balls; ``T`` maps room frame -> world (dim+1 square)."""
 
     def __init__(self, size, balls, T):
@@ -108,9 +109,12 @@ class RoomSDF2D(_Room):
     the walls (outside the box).
     """
 
+    TAGS = Tags(query="query", requires_update=False, data="polar_sim.baselines.examples:room_2d")
+
     def __init__(self, size=(10.0, 6.0), pillars=((6.0, 3.0, 0.5),), pose=(0.0, 0.0, 0.0)):
         pose = as_pose2d(pose, "pose")
         self.pose = pose
+        self.pillars = pillars
         T = pose2d_to_T(pose)
         super().__init__(as_float_array(size, "size").reshape(2), pillars, np.delete(np.delete(T, 2, 0), 2, 1))
 
@@ -149,6 +153,8 @@ class RoomSDF3D(_Room):
     T : (4, 4), default=identity
         Room frame -> world.
     """
+
+    TAGS = Tags(query="query", requires_update=False, data="polar_sim.baselines.examples:room_3d")
 
     def __init__(self, size=(4.0, 3.0, 2.5), balls=((2.5, 1.5, 1.0, 0.4),), T=None):
         T = np.eye(4) if T is None else as_pose(T, "T")

@@ -39,14 +39,14 @@ import numpy as np
 from scipy import ndimage
 
 from polar_sim._validation import as_float_array, as_points, as_positive_float, check_choice, check_updated
-from polar_sim.baselines._common import ResetMixin
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["DiscreteSDF2D", "DiscreteSDF3D"]
 
 _UNKNOWN = ("enclosed", "free", "occupied")
 
 
-class _DiscreteSDF(ResetMixin):
+class _DiscreteSDF(Parameterised):
     _dim = 0
 
     def __init__(self, *, unknown: str = "enclosed", outside_variance: float = 1.0):
@@ -121,6 +121,10 @@ class _DiscreteSDF(ResetMixin):
     def _as_mask(a, name):
         if not isinstance(a, np.ndarray):
             raise TypeError(f"{name}: expected a numpy array, got {type(a).__name__}")
+        if a.dtype.kind in "cOSUVMm":   # complex, objects, text, timestamps: no truth value per cell
+            raise TypeError(f"{name}: expected a boolean (or numeric) array, got dtype {a.dtype}")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise ValueError(f"{name}: contains NaN or inf")
         return np.asarray(a, dtype=bool)
 
     def _check_mask_dim(self, a, name):
@@ -196,6 +200,8 @@ class DiscreteSDF2D(_DiscreteSDF):
     >>> d, g, v = sdf.query([[1.0, 2.0]])            # doctest: +SKIP
     """
 
+    TAGS = Tags(update="fit", query="query", data="polar_sim.baselines.examples:discrete_sdf_2d")
+
     _dim = 2
 
     def fit(self, occupied, origin, cell_size, *, free=None):
@@ -238,6 +244,8 @@ class DiscreteSDF3D(_DiscreteSDF):
     Same parameters, attributes and sign convention as :class:`DiscreteSDF2D`, with arrays of
     shape (nx, ny, nz) and points of shape (n, 3).
     """
+
+    TAGS = Tags(update="fit", query="query", data="polar_sim.baselines.examples:discrete_sdf_3d")
 
     _dim = 3
 

@@ -15,7 +15,6 @@ from polar_sim._validation import (
     check_choice,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.baselines.discrete_sdf import DiscreteSDF2D
 from polar_sim.geometry import matrix_to_pose2d, pose2d_to_matrix, so3_log
 from polar_sim.registration import (
@@ -29,13 +28,14 @@ from polar_sim.registration import (
     scan3d_points,
     valid_beams,
 )
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["ICPLocalizer"]
 
 _METHODS = ("sdf", "point")
 
 
-class ICPLocalizer(ResetMixin):
+class ICPLocalizer(Parameterised):
     """Scan-to-map registration baselines.
 
     - ``method="sdf"`` ("ICP-D"): Gauss-Newton on a discrete signed distance field, each end point
@@ -76,6 +76,8 @@ class ICPLocalizer(ResetMixin):
         ``"point"``: KD-tree over ``points_``.
     """
 
+    TAGS = Tags(update="fit", query="localize", data="polar_sim.baselines.examples:icp")
+
     def __init__(
         self,
         *,
@@ -99,6 +101,12 @@ class ICPLocalizer(ResetMixin):
         self.max_range = max_range
         self.max_correction = max_correction
 
+    def _check_params(self):
+        """Refuse a bad method or correspondence gate before any map is set (the other parameters
+        are checked where the solver reads them)."""
+        check_choice(self.method, _METHODS, "method")
+        as_positive_float(self.max_correspondence_distance, "max_correspondence_distance")
+
     def fit(self, target):
         """Set the map.
 
@@ -113,7 +121,7 @@ class ICPLocalizer(ResetMixin):
         -------
         self
         """
-        check_choice(self.method, _METHODS, "method")
+        self._check_params()
         self.reset()
         if self.method == "sdf":
             if hasattr(target, "occupied_mask"):

@@ -8,12 +8,12 @@ import numpy as np
 from scipy import ndimage
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
-from polar_sim.baselines._common import ResetMixin
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["LikelihoodField"]
 
 
-class LikelihoodField(ResetMixin):
+class LikelihoodField(Parameterised):
     """Precomputed per-cell log-likelihood of a beam end point.
 
     ``p(z | x, m) = z_hit * N(dist; 0, sigma_hit**2) + z_rand / max_range``, where ``dist`` is the
@@ -44,6 +44,8 @@ class LikelihoodField(ResetMixin):
         Cell side, metres.
     """
 
+    TAGS = Tags(update="fit", query="log_likelihood", data="polar_sim.baselines.examples:likelihood_field")
+
     def __init__(
         self,
         *,
@@ -61,8 +63,9 @@ class LikelihoodField(ResetMixin):
 
     def _log_p(self, dist):
         s = self.sigma_hit
-        g = np.exp(-0.5 * (dist / s) ** 2) / (math.sqrt(2 * math.pi) * s)
-        return np.log(self.z_hit * g + self.z_rand / self.max_range)
+        with np.errstate(over="ignore", divide="ignore"):   # far from walls g underflows to 0: no error
+            g = np.exp(-0.5 * (np.asarray(dist, np.float64) / s) ** 2) / (math.sqrt(2 * math.pi) * s)
+            return np.log(self.z_hit * g + self.z_rand / self.max_range)
 
     def fit(self, grid):
         """Precompute the field of an :class:`~polar_sim.baselines.OccupancyGrid2D`. Returns ``self``."""

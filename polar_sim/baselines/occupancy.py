@@ -16,15 +16,17 @@ from polar_sim._validation import (
     as_positive_float,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, transform2d, valid_beams
 from polar_sim.geometry import compose2d
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["OccupancyGrid2D"]
 
 logger = logging.getLogger(__name__)
 
 _CHUNK = 64  # a growing grid extends by whole chunks of cells, so it reallocates rarely
+#: A scan that would grow the grid past this many cells (1.6 GB of float32) is refused first.
+MAX_CELLS = 4 * 10**8
 
 
 @numba.njit(cache=True, nogil=True)
@@ -89,7 +91,7 @@ def _logit(p):
     return math.log(p / (1.0 - p))
 
 
-class OccupancyGrid2D(ResetMixin):
+class OccupancyGrid2D(Parameterised):
     """Log-odds occupancy grid (Thrun, Burgard & Fox, ch. 9) with exact ray traversal.
 
     Each valid beam marks the cell of its end point occupied and every cell it crosses before
@@ -128,6 +130,8 @@ class OccupancyGrid2D(ResetMixin):
     n_scans_ : int
         Number of scans fused.
     """
+
+    TAGS = Tags(update="update", query="probability", data="polar_sim.baselines.examples:occupancy_grid")
 
     def __init__(
         self,
@@ -220,6 +224,7 @@ class OccupancyGrid2D(ResetMixin):
 
         lo = np.minimum(ends.min(axis=0), sensor[:2])
         hi = np.maximum(ends.max(axis=0), sensor[:2])
+        self._check_growth(lo, hi, cs)
         self._ensure_extent(lo, hi, cs)
         g_end = (ends - self.origin_) / cs
         g_src = (sensor[:2] - self.origin_) / cs
@@ -236,6 +241,18 @@ class OccupancyGrid2D(ResetMixin):
         )
         self.n_scans_ += 1
         return self
+
+    def _check_growth(self, lo, hi, cs):
+        """Refuse a scan whose box [lo, hi] (m) the growing grid cannot index or hold."""
+        if self.bounds is not None:
+            return
+        if not np.abs(np.concatenate([lo, hi])).max() / cs < 2.0**52:
+            raise ValueError(f"pose2d, ranges: the scan lies up to {np.abs(np.concatenate([lo, hi])).max():.3g} m "
+                             f"from the origin, beyond what cells of cell_size={cs} m can index")
+        cells = np.prod((hi - lo) / cs + 2 * _CHUNK)
+        if not cells <= MAX_CELLS:
+            raise ValueError(f"pose2d, ranges, cell_size: the scan spans {hi - lo} m; the grid would need "
+                             f"{cells:.3g} cells of {cs} m (at most MAX_CELLS = {MAX_CELLS:.0e})")
 
     def _ensure_extent(self, lo, hi, cs):
         """Create or grow the grid so that it covers the box [lo, hi] (metres)."""

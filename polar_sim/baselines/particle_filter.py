@@ -12,9 +12,9 @@ from polar_sim._validation import (
     as_rng,
     check_updated,
 )
-from polar_sim.baselines._common import ResetMixin
 from polar_sim.registration import as_scan2d, as_sensor_offset, beam_points, valid_beams
 from polar_sim.geometry import wrap_angle
+from polar_sim.params import Parameterised, Tags
 
 __all__ = ["ParticleFilterLocalizer", "sample_motion_model_odometry", "low_variance_resample"]
 
@@ -31,6 +31,8 @@ def sample_motion_model_odometry(particles, odom_prev, odom_now, alphas, rng):
     a1, a2, a3, a4 = alphas
     dx, dy = odom_now[0] - odom_prev[0], odom_now[1] - odom_prev[1]
     trans = float(np.hypot(dx, dy))
+    if not trans < 1e100:   # its square would overflow the noise model
+        raise ValueError(f"odom_pose2d: the odometry increment ({trans:.3g} m) is too large to model")
     rot1 = float(wrap_angle(np.arctan2(dy, dx) - odom_prev[2])) if trans > 1e-3 else 0.0
     rot2 = float(wrap_angle(odom_now[2] - odom_prev[2] - rot1))
     n = particles.shape[0]
@@ -58,7 +60,11 @@ def low_variance_resample(weights, rng):
     return np.minimum(np.searchsorted(c, pointers, side="right"), n - 1)
 
 
-class ParticleFilterLocalizer(ResetMixin):
+#: At most this many particles (240 MB of poses): more is refused before anything is allocated.
+MAX_PARTICLES = 10**7
+
+
+class ParticleFilterLocalizer(Parameterised):
     """MCL with the odometry motion model and a likelihood-field sensor model.
 
     Parameters
@@ -95,6 +101,8 @@ class ParticleFilterLocalizer(ResetMixin):
         Whether the last correction resampled.
     """
 
+    TAGS = Tags(update="update", random_state="seed", data="polar_sim.baselines.examples:particle_filter")
+
     def __init__(
         self,
         *,
@@ -117,7 +125,7 @@ class ParticleFilterLocalizer(ResetMixin):
         self.seed = seed
 
     def _check_params(self):
-        as_int(self.n_particles, "n_particles", minimum=1)
+        as_int(self.n_particles, "n_particles", minimum=1, maximum=MAX_PARTICLES)
         as_int(self.n_beams, "n_beams", minimum=1)
         a = as_float_array(self.alphas, "alphas")
         if a.shape != (4,) or not np.isfinite(a).all() or (a < 0).any():

@@ -83,10 +83,10 @@ def _load_file(path, env):
     from polar_sim.envs.policy_file import read_policy_file
 
     meta, _ = read_policy_file(path, "policy")
-    if meta["kind"] == "mlp":
-        from polar_sim.envs.mlp_policy import MLPPolicy
+    if meta["kind"] in ("mlp", "mapcnn"):
+        from polar_sim.envs.shipped import load_numpy_policy
 
-        return MLPPolicy.load(path, env, name="policy")
+        return load_numpy_policy(path, env, name="policy")
     if env is None:
         raise ValueError("policy: an SB3 policy file needs the environment to rebuild its network")
     from polar_sim.envs.learning import SB3Policy, load_model

@@ -1,13 +1,12 @@
-"""Imitation of a scripted expert: behaviour cloning, then DAgger (the expert labels the states
-the learner visits), in torch; the result is a numpy :class:`~polar_sim.envs.mlp_policy.MLPPolicy`.
+"""Imitation of a scripted expert by a memoryless MLP: behaviour cloning, then DAgger (the expert
+labels the states the learner visits), in torch; the result is a numpy
+:class:`~polar_sim.envs.mlp_policy.MLPPolicy`.
 
 Why not the ``imitation`` library: its latest release (1.0.1) pins ``gymnasium==0.29.1`` and
 ``stable-baselines3==2.2.1``, and polar_sim needs gymnasium >= 1.0 and works with SB3 2.9
-(checked with ``pip install --dry-run imitation``). The loop here follows DAgger (Ross, Gordon
-and Bagnell, AISTATS 2011) as that library's ``SimpleDAggerTrainer`` does: round 0 rolls out the
-expert and fits the learner to its actions (behaviour cloning); round k >= 1 rolls out a mixture
-that executes the expert's action with probability ``beta_decay ** k`` and the learner's
-otherwise, labels every visited state with the expert's action, aggregates, and refits.
+(checked with ``pip install --dry-run imitation``). The loop (:func:`polar_sim.envs.dagger.run_dagger`,
+shared with the map learner) follows DAgger (Ross, Gordon and Bagnell, AISTATS 2011) as that
+library's ``SimpleDAggerTrainer`` does.
 
 The expert is stateful (``SDFReactive``'s follow mode, ``SDFNavigator``'s map): it is called
 on every step of every rollout, whoever acts, so its state follows the trajectory driven.
@@ -16,25 +15,21 @@ on every step of every rollout, whoever acts, so its state follows the trajector
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import gymnasium as gym
 import numpy as np
-import torch
 from torch import nn
-from tqdm.auto import tqdm
 
 from polar_sim._validation import as_float, as_int, check_choice
+from polar_sim.envs.dagger import key_columns, TRAIN_SEEDS, TorchLearner, check_fit, run_dagger
 from polar_sim.envs.features import KNOWN_VAR, MASKED_KEYS, stencil_vector
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policies import SDFNavigator, SDFReactive
 
-__all__ = ["DAggerConfig", "EXPERTS", "make_expert", "rollout", "fit_mlp", "train_dagger", "TRAIN_SEEDS"]
+__all__ = ["DAggerConfig", "EXPERTS", "make_expert", "MLPLearner", "train_dagger", "TRAIN_SEEDS"]
 
 #: Experts by name; each reads the stencil observation (``obs_mode="stencil"``).
 EXPERTS = {"reactive": SDFReactive, "navigator": SDFNavigator}
-#: The training worlds: episode seeds cycle through this range (dev worlds start at 1000, held-out at 10,000).
-TRAIN_SEEDS = (0, 1000)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +63,13 @@ class DAggerConfig:
         Mask the stencil's unknown space (map variance >= ``known_var``) before the learner sees
         it, as the experts do (None: the raw stencil) (:func:`polar_sim.envs.features.stencil_vector`); needs ``sdf_var``
         in ``obs_keys``.
+    head : dict or None, default=None
+        The action head (:mod:`polar_sim.envs.action_head`): None regresses (v, omega) by mean
+        squared error; ``action_head.BINS`` classifies over action bins (soft cross-entropy).
+    near_weight : float, default=1.0
+        The loss weight of a sample near an obstacle (a known stencil distance below
+        ``near_distance`` m) relative to the others (1: all alike).
+    near_distance : float, default=0.5
     """
 
     rounds: int = 4
@@ -81,6 +83,9 @@ class DAggerConfig:
     obs_keys: tuple = MASKED_KEYS
     seed: int = 0
     known_var: float | None = KNOWN_VAR
+    head: dict | None = None
+    near_weight: float = 1.0
+    near_distance: float = 0.5
 
     def __post_init__(self):
         as_int(self.rounds, "rounds", minimum=1, maximum=100)
@@ -91,9 +96,8 @@ class DAggerConfig:
         for h in self.hidden:
             as_int(h, "hidden", minimum=1, maximum=4096)
         check_choice(self.activation, ("tanh", "relu"), "activation")
-        as_int(self.epochs, "epochs", minimum=1, maximum=10_000)
-        as_int(self.batch_size, "batch_size", minimum=1, maximum=1_000_000)
-        as_float(self.lr, "lr", minimum=0.0, maximum=1.0, exclusive_minimum=True)
+        object.__setattr__(self, "head", check_fit(self.epochs, self.batch_size, self.lr, self.head,
+                                                           self.near_weight, self.near_distance))
         if not isinstance(self.obs_keys, (tuple, list)) or not self.obs_keys \
                 or not all(isinstance(k, str) for k in self.obs_keys):
             raise ValueError(f"obs_keys: expected a non-empty tuple of observation keys, got {self.obs_keys!r}")
@@ -117,65 +121,13 @@ def make_expert(name, env):
     return EXPERTS[name](stencil_rays=stencil.n_rays, stencil_radii=tuple(stencil.radii))
 
 
-def rollout(env, expert, learner, *, beta, steps, rng, seeds, keys, known_var=None, bar=None):
-    """Run ``steps`` env steps, each executing the expert's action with probability ``beta`` and
-    ``learner``'s otherwise (``learner`` None: always the expert), and return the visited
-    features (steps, n), the expert's actions there (steps, 2) and the finished episodes'
-    outcomes ``{"episodes", "success", "collision"}``. ``seeds`` yields episode seeds; ``keys`` and
-    ``known_var`` make the features (:func:`polar_sim.envs.features.stencil_vector`)."""
-    X, Y = [], []
-    out = {"episodes": 0, "success": 0, "collision": 0}
-    obs, _ = env.reset(seed=next(seeds))
-    expert.reset()
-    if learner is not None:
-        learner.reset()
-    for _ in range(steps):
-        a_exp = np.asarray(expert(obs), np.float32)
-        X.append(stencil_vector(obs, keys, known_var))
-        Y.append(a_exp)
-        use_expert = learner is None or rng.random() < beta
-        a = a_exp if use_expert else learner(obs)
-        obs, _, term, trunc, info = env.step(a)
-        if bar is not None:
-            bar.update(1)
-        if term or trunc:
-            out["episodes"] += 1
-            out["success"] += bool(info.get("is_success"))
-            out["collision"] += bool(info.get("collision"))
-            obs, _ = env.reset(seed=next(seeds))
-            expert.reset()
-            if learner is not None:
-                learner.reset()
-    return np.asarray(X, np.float32), np.asarray(Y, np.float32), out
-
-
-def _mlp(n_in, hidden, activation):
+def _mlp(n_in, hidden, activation, n_out=2):
     act = {"tanh": nn.Tanh, "relu": nn.ReLU}[activation]
     layers, fan = [], n_in
     for h in hidden:
         layers += [nn.Linear(fan, h), act()]
         fan = h
-    return nn.Sequential(*layers, nn.Linear(fan, 2))
-
-
-def fit_mlp(net, X, Y, mean, std, *, epochs, batch_size, lr, generator):
-    """Fit ``net`` to ``Y`` (n, 2) from normalised ``X`` (n, d) by mean squared error with Adam;
-    returns the final epoch's mean loss."""
-    x = torch.as_tensor(np.clip((X - mean) / std, -10, 10), dtype=torch.float32)
-    y = torch.as_tensor(Y, dtype=torch.float32)
-    opt = torch.optim.Adam(net.parameters(), lr=lr)
-    loss_sum = 0.0
-    for _ in range(epochs):
-        perm = torch.randperm(len(x), generator=generator)
-        loss_sum = 0.0
-        for i in range(0, len(x), batch_size):
-            idx = perm[i:i + batch_size]
-            loss = nn.functional.mse_loss(net(x[idx]), y[idx])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            loss_sum += loss.item() * len(idx)
-    return loss_sum / len(x)
+    return nn.Sequential(*layers, nn.Linear(fan, n_out))
 
 
 def to_policy(net, mean, std, config, env, env_id, env_kwargs, recipe):
@@ -185,7 +137,35 @@ def to_policy(net, mean, std, config, env, env_id, env_kwargs, recipe):
                      obs_keys=config.obs_keys,
                      obs_shapes={k: env.observation_space[k].shape for k in config.obs_keys},
                      mean=mean, std=std, activation=config.activation, action=None, env_id=env_id,
-                     env_kwargs=env_kwargs, recipe=recipe, known_var=config.known_var)
+                     env_kwargs=env_kwargs, recipe=recipe, known_var=config.known_var, head=config.head)
+
+
+class MLPLearner(TorchLearner):
+    """The memoryless learner: the (masked) stencil features of ``config.obs_keys`` through an MLP
+    (:class:`~polar_sim.envs.dagger.TorchLearner`; exported as :class:`MLPPolicy`)."""
+
+    dtypes = (np.float32,)
+
+    def __init__(self, env, config, env_id, env_kwargs, recipe):
+        super().__init__(epochs=config.epochs, batch_size=config.batch_size, lr=config.lr, head=config.head,
+                         near_weight=config.near_weight, near_distance=config.near_distance)
+        self.sdf_columns = key_columns(config.obs_keys, env.observation_space)
+        if config.near_weight != 1.0 and self.sdf_columns.stop == 0:
+            raise ValueError("near_weight: weighing the samples near obstacles needs 'sdf' among the features")
+        self.env, self.config, self.env_id, self.env_kwargs, self.recipe = env, config, env_id, env_kwargs, recipe
+
+    def observe(self, obs):
+        return (stencil_vector(obs, self.config.obs_keys, self.config.known_var),)
+
+    def inputs(self, sample):
+        return (self.normalised(sample[0]),)
+
+    def make_net(self, data):
+        return _mlp(data[-1].shape[1], self.config.hidden, self.config.activation, self.n_out)
+
+    def export(self):
+        return to_policy(self.net, self.mean, self.std, self.config, self.env, self.env_id, self.env_kwargs,
+                         self.recipe)
 
 
 def train_dagger(env_id, *, expert="reactive", config=DAggerConfig(), env_kwargs=None, policy_env_kwargs=None,
@@ -224,40 +204,14 @@ def train_dagger(env_id, *, expert="reactive", config=DAggerConfig(), env_kwargs
     if policy_env_kwargs is None:
         policy_env_kwargs = {k: v for k, v in env_kwargs.items() if k != "pose_source"}
     env = gym.make(env_id, **env_kwargs)
-    t_wall, t_cpu = time.perf_counter(), time.process_time()
     try:
         ex = make_expert(expert, env)
         missing = [k for k in config.obs_keys if k not in env.observation_space.spaces]
         if missing:
             raise ValueError(f"obs_keys: {missing} are not observed by {env_id} {env_kwargs}")
-        rng = np.random.default_rng(config.seed)
-        gen = torch.Generator().manual_seed(config.seed)
-        torch.manual_seed(config.seed)
-        seeds = (TRAIN_SEEDS[0] + (config.seed * 7919 + i) % (TRAIN_SEEDS[1] - TRAIN_SEEDS[0]) for i in range(10**9))
-        X = Y = None
-        net = mean = std = policy = None
-        history = []
-        total = config.rounds * config.steps_per_round
-        with tqdm(total=total, desc=f"dagger {env_id}", unit="step",
-                  disable=None if progress is None else not progress) as bar:
-            for k in range(config.rounds):
-                beta = 1.0 if k == 0 else config.beta_decay ** k
-                x, y, out = rollout(env, ex, policy, beta=beta, steps=config.steps_per_round, rng=rng,
-                                    seeds=seeds, keys=config.obs_keys, known_var=config.known_var, bar=bar)
-                X = x if X is None else np.concatenate([X, x])
-                Y = y if Y is None else np.concatenate([Y, y])
-                if net is None:  # the normalisation of the expert's own data, fixed from then on
-                    mean = X.mean(0).astype(np.float64)
-                    std = np.maximum(X.std(0).astype(np.float64), 1e-3)
-                    net = _mlp(X.shape[1], config.hidden, config.activation)
-                loss = fit_mlp(net, X, Y, mean, std, epochs=config.epochs, batch_size=config.batch_size,
-                               lr=config.lr, generator=gen)
-                policy = to_policy(net, mean, std, config, env, env_id, policy_env_kwargs, recipe)
-                row = {"round": k, "beta": beta, "steps": int(len(X)), **out, "loss": loss,
-                       "wall_s": time.perf_counter() - t_wall, "cpu_s": time.process_time() - t_cpu}
-                history.append(row)
-                if callback is not None:
-                    callback(k, policy, row)
+        learner = MLPLearner(env, config, env_id, policy_env_kwargs, recipe)
+        return run_dagger(env, ex, learner, rounds=config.rounds, steps_per_round=config.steps_per_round,
+                          beta_decay=config.beta_decay, seed=config.seed, desc=f"dagger {env_id}", progress=progress,
+                          callback=callback)
     finally:
         env.close()
-    return policy, history

@@ -26,6 +26,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from polar_sim.envs.action_maps import ACTION_WRAPPERS, ForwardDriveAction, env_action, wrap_action
+from polar_sim.envs.far_mask import FarAsUnknown, feature_vector
 from polar_sim.envs.features import FeatureObservation
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
@@ -193,6 +194,11 @@ def load_model(path, env, name="path"):
     meta, arrays = read_policy_file(path, name)
     if meta["kind"] != "sb3":
         raise ValueError(f"{name}: a policy of kind {meta['kind']!r}, expected 'sb3'")
+    features = meta["recipe"].get("features")
+    if features:  # trained on the flat (masked) stencil: rebuild on the same vector
+        if features.get("far_unknown"):
+            env = FarAsUnknown(env)
+        env = FeatureObservation(env, features["keys"], known_var=features["known_var"])
     shapes = meta.get("obs_shapes", {})
     if "" in shapes:
         if tuple(env.observation_space.shape or ()) != tuple(shapes[""]):
@@ -215,11 +221,13 @@ def load_model(path, env, name="path"):
 
 class SB3Policy:
     """``policy(obs) -> action`` of an SB3 model: deterministic actions on normalised
-    observations, mapped to the env's action by the recipe's ``action``; ``reset()`` clears a
-    recurrent policy's state."""
+    observations (first flattened as the recipe's ``features`` say, ``{"keys", "known_var",
+    "far_unknown"}``, if it has them: :func:`~polar_sim.envs.far_mask.feature_vector`), mapped to the env's action by
+    the recipe's ``action``; ``reset()`` clears a recurrent policy's state."""
 
     def __init__(self, model, normaliser, recipe, env_id=None, env_kwargs=None):
         self.model, self.normaliser, self.recipe = model, normaliser, recipe
+        self.features = recipe.get("features")
         self.recurrent = recipe["algorithm"] == "RecurrentPPO"
         self.env_id, self.env_kwargs = env_id, dict(env_kwargs or {})
         self.reset()
@@ -233,6 +241,8 @@ class SB3Policy:
                            env_kwargs=self.env_kwargs)
 
     def __call__(self, obs):
+        if self.features:
+            obs = feature_vector(obs, **self.features)
         o = self.normaliser(obs)
         o = o[None] if self.normaliser.flat else {k: v[None] for k, v in o.items()}
         if self.recurrent:

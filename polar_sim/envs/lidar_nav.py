@@ -274,13 +274,13 @@ class LidarNavEnv(PolarMujocoEnv):
 
     def _reset_scene(self):
         w = self._world
-        self._goal = np.asarray(w.meta["goal"], dtype=np.float64)
-        x0, _, y0, _ = w.meta["bounds"]
-        self._geodesic = GeodesicDistance(w.meta["occupancy"], (x0, y0), w.meta["occupancy_res"], self._goal)
+        self._goal = np.asarray(w.meta.goal, dtype=np.float64)
+        x0, _, y0, _ = w.meta.bounds
+        self._geodesic = GeodesicDistance(w.meta.occupancy, (x0, y0), w.meta.occupancy_res, self._goal)
         self._pose = w.robot_pose2d()
         self._start = self._pose.copy()
         self._geo = self._prev_dist = self._geodesic(self._pose[:2])
-        self._robot_radius = float(w.meta["robot_radius"])
+        self._robot_radius = float(w.meta.robot_radius)
         self._path_length = 0.0
         self._collision = False
         self._scan = None  # cast when first read (see ``scan``)

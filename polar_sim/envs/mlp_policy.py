@@ -5,13 +5,44 @@ from __future__ import annotations
 
 import numpy as np
 
+from polar_sim.envs.action_head import check_head, decode, head_outputs
 from polar_sim.envs.action_maps import check_action, env_action
 from polar_sim.envs.features import stencil_vector
 from polar_sim.envs.policy_file import check_observation_space, read_policy_file, write_policy_file
 
-__all__ = ["MLPPolicy", "ACTIVATIONS"]
+__all__ = ["MLPPolicy", "ACTIVATIONS", "check_dense", "dense_forward"]
 
 ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, 0.0)}
+
+
+def check_dense(weights, biases, fan_in, n_out=2):
+    """Check a stack of dense layers: W_i (out_i, in_i) and b_i (out_i,) finite, in_0 = ``fan_in``,
+    each layer feeding the next, and ``n_out`` outputs (2: v, omega; or the bins of an action head,
+    :mod:`polar_sim.envs.action_head`); ``ValueError`` naming the layer."""
+    if not weights or len(weights) != len(biases):
+        raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
+                         f"{len(weights)} and {len(biases)}")
+    for i, (w, b) in enumerate(zip(weights, biases)):
+        if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
+            raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
+                             f"and b (out,)")
+        if not (np.isfinite(w).all() and np.isfinite(b).all()):
+            raise ValueError(f"weights: layer {i} holds NaN or inf")
+        fan_in = w.shape[0]
+    if fan_in != n_out:
+        what = "(v, omega)" if n_out == 2 else "(the action head's bins)"
+        raise ValueError(f"weights: the last layer outputs {fan_in} values, expected {n_out} {what}")
+
+
+def dense_forward(weights, biases, activation, h):
+    """The output of the dense stack on input ``h`` (in_0,): ``activation`` (a name of
+    :data:`ACTIVATIONS`) after every layer but the last."""
+    act = ACTIVATIONS[activation]
+    for i, (w, b) in enumerate(zip(weights, biases)):
+        h = w @ h + b
+        if i < len(weights) - 1:
+            h = act(h)
+    return h
 
 
 class MLPPolicy:
@@ -23,7 +54,7 @@ class MLPPolicy:
     ----------
     weights, biases : list of ndarray
         Layer ``i`` has ``W`` of shape (out_i, in_i) (torch's ``nn.Linear`` layout) and ``b`` of
-        shape (out_i,); the last layer outputs the 2 action values.
+        shape (out_i,); the last layer outputs the 2 action values, or the logits of ``head``'s bins.
     obs_keys : sequence of str
         The observation keys read, in order.
     obs_shapes : dict
@@ -44,10 +75,13 @@ class MLPPolicy:
     known_var : float, optional
         Mask the stencil's unknown space before normalising
         (:func:`polar_sim.envs.features.stencil_vector`); ``obs_keys`` must then hold ``sdf_var``.
+    head : dict or None, default=None
+        The action head (:mod:`polar_sim.envs.action_head`): None regresses (v, omega), a bins
+        head classifies over action bins.
     """
 
     def __init__(self, weights, biases, *, obs_keys, obs_shapes, mean, std, clip=10.0, activation="tanh",
-                 action=None, env_id=None, env_kwargs=None, recipe=None, known_var=None):
+                 action=None, env_id=None, env_kwargs=None, recipe=None, known_var=None, head=None):
         self.weights = [np.asarray(w, np.float64) for w in weights]
         self.biases = [np.asarray(b, np.float64) for b in biases]
         self.obs_keys = list(obs_keys)
@@ -61,6 +95,7 @@ class MLPPolicy:
         self.env_kwargs = dict(env_kwargs or {})
         self.recipe = dict(recipe or {})
         self.known_var = None if known_var is None else float(known_var)
+        self.head = check_head(head)
         self._check()
 
     def _check(self):
@@ -73,19 +108,7 @@ class MLPPolicy:
         if self.mean.shape != (n,) or self.std.shape != (n,) or not (self.std > 0).all():
             raise ValueError(f"mean, std: expected shape ({n},) (the features of {self.obs_keys}) and std > 0, "
                              f"got {self.mean.shape} and {self.std.shape}")
-        if not self.weights or len(self.weights) != len(self.biases):
-            raise ValueError(f"weights, biases: expected equal, non-zero numbers of layers, got "
-                             f"{len(self.weights)} and {len(self.biases)}")
-        fan_in = n
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
-                raise ValueError(f"weights: layer {i} has W {w.shape} and b {b.shape}; expected W (out, {fan_in}) "
-                                 f"and b (out,)")
-            if not (np.isfinite(w).all() and np.isfinite(b).all()):
-                raise ValueError(f"weights: layer {i} holds NaN or inf")
-            fan_in = w.shape[0]
-        if fan_in != 2:
-            raise ValueError(f"weights: the last layer outputs {fan_in} values, expected 2 (v, omega)")
+        check_dense(self.weights, self.biases, n, head_outputs(self.head))
 
     def features(self, obs):
         """The normalised feature vector (n_features,) of one observation dict."""
@@ -98,17 +121,16 @@ class MLPPolicy:
         return np.clip((x - self.mean) / self.std, -self.clip, self.clip)
 
     def raw_output(self, obs):
-        """The last layer's output (2,) before the action map."""
-        h = self.features(obs)
-        act = ACTIVATIONS[self.activation]
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < len(self.weights) - 1:
-                h = act(h)
-        return h
+        """The last layer's output (2, or the head's bins) before the head and the action map."""
+        return dense_forward(self.weights, self.biases, self.activation, self.features(obs))
+
+    def act(self, features):
+        """The env action (2,) float32 of normalised ``features`` (:meth:`features`)."""
+        return env_action(self.action, decode(self.head, dense_forward(self.weights, self.biases, self.activation,
+                                                                       features)))
 
     def __call__(self, obs):
-        return env_action(self.action, self.raw_output(obs))
+        return self.act(self.features(obs))
 
     def reset(self):
         """Nothing to forget: the policy is memoryless (the map in the observation is the memory)."""
@@ -123,7 +145,7 @@ class MLPPolicy:
         meta = {"kind": "mlp", "obs_keys": self.obs_keys, "obs_shapes": self.obs_shapes, "clip": self.clip,
                 "activation": self.activation, "action": self.action, "env_id": self.env_id,
                 "env_kwargs": self.env_kwargs, "recipe": self.recipe, "layers": len(self.weights),
-                "known_var": self.known_var}
+                "known_var": self.known_var, "head": self.head}
         arrays = {"obs_mean": self.mean, "obs_std": self.std}
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             arrays[f"layer{i}/W"], arrays[f"layer{i}/b"] = w, b
@@ -142,7 +164,7 @@ class MLPPolicy:
                          obs_keys=meta["obs_keys"], obs_shapes=meta["obs_shapes"], mean=arrays["obs_mean"],
                          std=arrays["obs_std"], clip=meta["clip"], activation=meta["activation"],
                          action=meta["action"], env_id=meta["env_id"], env_kwargs=meta["env_kwargs"],
-                         recipe=meta["recipe"], known_var=meta.get("known_var"))
+                         recipe=meta["recipe"], known_var=meta.get("known_var"), head=meta.get("head"))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{name}: the policy file lacks or garbles {exc}") from None
         if env is not None:

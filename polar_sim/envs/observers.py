@@ -69,7 +69,8 @@ class GPISSource:
 
         if "sensor_offset" in params:
             raise ValueError("sdf_params: sensor_offset is set by the environment (it passes the sensor's own pose)")
-        self.map = GPISMap2D(sensor_offset=(0.0, 0.0), **params)
+        # parameters or stage fields (local_gp__map_scale=1.0), checked by set_params
+        self.map = GPISMap2D(sensor_offset=(0.0, 0.0)).set_params(**params)
 
     def reset(self):
         self.map.reset()

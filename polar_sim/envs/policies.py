@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from polar_sim.control import PurePursuit
 from polar_sim.envs._gridplan import ObstacleMemory, cost_to_go
 
 __all__ = ["SDFReactive", "SDFPotentialField", "SDFNavigator", "PurePursuitVO", "VisualServoReach"]
@@ -268,11 +269,11 @@ class PurePursuitVO:
 
     It reads only ``waypoint`` (the route point a fixed distance ahead of the estimated position,
     in the estimated robot frame) and ``twist`` (the VO's speed): the arc through the waypoint has
-    curvature kappa = 2 y / d^2, the yaw rate is kappa times the speed, and the speed set-point is
-    ``speed``, lowered where the arc is tight so the lateral acceleration stays under
-    ``max_lateral_accel``. From rest the set-point ramps up at ``accel``: a monocular VO's speed
-    and yaw-rate filters lag a hard start, and the lag stays in the estimated pose for the rest of
-    the route.
+    curvature kappa = 2 y / d^2 (:meth:`polar_sim.control.PurePursuit.curvature`), the yaw rate is
+    kappa times the speed, and the speed set-point is ``speed``, lowered where the arc is tight so
+    the lateral acceleration stays under ``max_lateral_accel``. From rest the set-point ramps up at
+    ``accel``: a monocular VO's speed and yaw-rate filters lag a hard start, and the lag stays in
+    the estimated pose for the rest of the route.
 
     Parameters
     ----------
@@ -301,9 +302,7 @@ class PurePursuitVO:
         self._steps = 0
 
     def __call__(self, obs):
-        x, y = (float(c) for c in obs["waypoint"])
-        d2 = max(x * x + y * y, 1e-6)
-        kappa = 2.0 * y / d2
+        kappa = PurePursuit.curvature(*(float(c) for c in obs["waypoint"]))
         self._steps += 1
         v = min(self.speed, self.accel * self._steps * self.dt,
                 np.sqrt(self.max_lateral_accel / max(abs(kappa), 1e-9)))

@@ -1,7 +1,8 @@
 """The policy file: one ``.npz`` of named arrays and a JSON header, no pickle.
 
 The header (``meta``) holds the format version, the kind of policy (``"mlp"``: a numpy
-feed-forward policy, :class:`~polar_sim.envs.mlp_policy.MLPPolicy`; ``"sb3"``: the state dict
+feed-forward policy, :class:`~polar_sim.envs.mlp_policy.MLPPolicy`; ``"mapcnn"``: a numpy policy
+with a map memory, :class:`~polar_sim.envs.map_policy.MapCNNPolicy`; ``"sb3"``: the state dict
 of a stable-baselines3 policy, :func:`polar_sim.envs.learning.load_model`), the recipe it was
 trained with, the env id and ``gym.make`` arguments it is meant for, the observation keys and
 shapes it reads, and a SHA-256 digest of the arrays and the rest of the header. A file that was
@@ -23,7 +24,7 @@ __all__ = ["POLICY_FORMAT_VERSION", "POLICY_KINDS", "write_policy_file", "read_p
 
 #: v2: the header's kind, env id, observation shapes and digest (v1: SB3 state dicts, no digest).
 POLICY_FORMAT_VERSION = 2
-POLICY_KINDS = ("mlp", "sb3")
+POLICY_KINDS = ("mlp", "mapcnn", "sb3")
 
 
 def _digest(meta, arrays):

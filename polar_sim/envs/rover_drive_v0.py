@@ -170,7 +170,7 @@ class RoverDriveEnv(PolarMujocoEnv):
 
     def _reset_scene(self):
         w = self._world
-        loop = np.asarray(w.meta["route"], dtype=np.float64)
+        loop = np.asarray(w.meta.route, dtype=np.float64)
         seg = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
         laps = int(np.ceil((self._route_length + ROUTE_EXTENSION) / seg.sum()))
         pts = np.vstack([np.tile(loop, (laps, 1)), loop[:1]])
@@ -183,7 +183,7 @@ class RoverDriveEnv(PolarMujocoEnv):
         K = w.camera_intrinsics("front", width=k * width, height=k * height)
         if self._supersample:
             K[:2] /= 2.0  # reduced pixel i is centred on full pixel 2i
-        cfg = w.meta["rover_config"]
+        cfg = w.meta.rover_config
         T_body_cam = inv_pose(self._T) @ tr["cameras"]["front"]
         module_seed = int(self.np_random.integers(0, 2**31 - 1))
         self.task = RouteTask(self._path.points.copy(), self._route_length, self._T.copy(), K,

@@ -8,8 +8,9 @@
 >>> env.action_space.contains(policy(obs))
 True
 
-The files are numpy MLP policies (:class:`~polar_sim.envs.mlp_policy.MLPPolicy`): acting needs
-neither torch nor stable-baselines3. How each was trained, and its held-out score, is in its
+The files are numpy policies (:class:`~polar_sim.envs.mlp_policy.MLPPolicy`, or
+:class:`~polar_sim.envs.map_policy.MapCNNPolicy` with a map memory): acting needs neither torch
+nor stable-baselines3. How each was trained, and its held-out score, is in its
 ``recipe`` (``policy.recipe``) and in docs/guide/learning.md.
 """
 
@@ -17,9 +18,11 @@ from __future__ import annotations
 
 from importlib import resources
 
+from polar_sim.envs.map_policy import MapCNNPolicy
 from polar_sim.envs.mlp_policy import MLPPolicy
+from polar_sim.envs.policy_file import read_policy_file
 
-__all__ = ["pretrained", "pretrained_ids", "policy_path"]
+__all__ = ["pretrained", "pretrained_ids", "policy_path", "load_numpy_policy"]
 
 _PACKAGE = "polar_sim"
 
@@ -52,7 +55,18 @@ def pretrained(env_id):
     ``{"obs_mode": "stencil"}``) and ``recipe`` (how it was trained)."""
     path = policy_path(env_id)
     with resources.as_file(path) as p:
-        policy = MLPPolicy.load(p, name=f"pretrained policy of {env_id}")
+        policy = load_numpy_policy(p, name=f"pretrained policy of {env_id}")
     if policy.env_id != env_id.split(":")[-1]:
         raise ValueError(f"pretrained policy of {env_id}: the file was made for {policy.env_id!r}")
     return policy
+
+
+def load_numpy_policy(path, env=None, name="path"):
+    """The numpy policy in ``path`` (kind ``"mlp"``: :class:`MLPPolicy`, ``"mapcnn"``:
+    :class:`MapCNNPolicy`); with ``env``, checked against its observation space."""
+    meta, arrays = read_policy_file(path, name)
+    if meta["kind"] == "mapcnn":
+        return MapCNNPolicy.from_file(meta, arrays, env, name)
+    if meta["kind"] == "mlp":
+        return MLPPolicy.load(path, env, name)
+    raise ValueError(f"{name}: a policy of kind {meta['kind']!r}; the numpy policies are 'mlp' and 'mapcnn'")

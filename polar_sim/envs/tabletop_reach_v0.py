@@ -187,7 +187,7 @@ class TabletopReachEnv(PolarMujocoEnv):
         from polar_sim.sim.builders.objects import object_info
 
         w = self._world
-        tgt = w.meta["target"]
+        tgt = w.meta.target
         P, N = w.object_points(tgt, 3000)
         self._frame()
         sym = "continuous" if object_info(tgt).symmetry == "z-continuous" else "pi"
@@ -224,7 +224,7 @@ class TabletopReachEnv(PolarMujocoEnv):
         return pos < self._success_pos and abs(yaw) < self._success_yaw and not self._dropped()
 
     def _dropped(self):
-        return bool(self._truth["objects"][self.task.target][2, 3] < self._world.meta["table_z"] - DROP_HEIGHT)
+        return bool(self._truth["objects"][self.task.target][2, 3] < self._world.meta.table_z - DROP_HEIGHT)
 
     # -- observation, info, reward --------------------------------------------------------
     def _hand_obs(self):

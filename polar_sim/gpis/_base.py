@@ -8,13 +8,15 @@ dimension-specific constants. Everything else (fusion, tree updates, training, q
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import math
 
 import numpy as np
 
 from polar_sim._validation import as_points, as_positive_float, check_updated
-from polar_sim.params import Parameterised
+from polar_sim.gpis.config import SWITCHES
+from polar_sim.params import Parameterised, check_fields, replace_fields, split_nested
 from polar_sim.gpis import _io
 from polar_sim.gpis import _icp, _kernels  # noqa: F401  (their kernels, called through K)
 from polar_sim.gpis._distance import FreeSpace, far_field, far_weights
@@ -76,20 +78,12 @@ class GPISMapBase(Parameterised):
 
     The module contract is :class:`polar_sim.params.Parameterised`'s: ``get_params()``,
     ``set_params()`` (checked, the map unchanged on a bad value), ``reset()``, and the published
-    behaviour as a named preset, ``published(**overrides)``, built from ``PUBLISHED``.
+    behaviour as a named preset, ``published(**overrides)``: every stage config's ``published()``
+    (:mod:`polar_sim.gpis.config`).
     """
 
-    #: The published GPisMap C++ (v2), quirks and bugs included (spec [quirk]/[bug]). The laser
-    #: offset is not part of it: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses.
-    PUBLISHED = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                 "fusion": "published", "query_mode": "published"}
-    #: The published choice of each behaviour parameter (``legacy=True`` selects them all).
-    _PUBLISHED_CHOICE = {"spacing_rule": "chain", "retrain": "box", "gp_noise": "published",
-                         "fusion": "published", "query_mode": "published", "scan_model": "published"}
-    #: Allowed values of the behaviour parameters, the default first.
-    CHOICES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
-               "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
-               "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
+    #: Stage name -> config class (each map's dimension's variant), in constructor order.
+    _STAGES: dict = {}
 
     dim = 0
     _T_BLEND = 0.4          # query blending threshold (spec §9.1)
@@ -111,16 +105,74 @@ class GPISMapBase(Parameterised):
                             # of the sample spacing (0: the side of the closest surfel)
 
     # -- lifecycle -----------------------------------------------------------------------------
+    def __setattr__(self, name, value):
+        # a parameter (re)bound, by set_params or directly: its checked values are stale (the
+        # stage configs are frozen, so rebinding is the only way they change)
+        if not (name.startswith("_") or name.endswith("_")):
+            self.__dict__.pop("_params", None)
+        object.__setattr__(self, name, value)
+
     def _pub(self, name):
-        """True when behaviour ``name`` is the published one (its parameter, or ``legacy``)."""
-        return bool(self.legacy) or getattr(self, name) == self._PUBLISHED_CHOICE[name]
+        """True when behaviour switch ``name`` (a field of one stage config) is the published one."""
+        return self._checked_params()["pub"][name]
+
+    @classmethod
+    def published(cls, **overrides):
+        """A map with the published C++'s behaviour (GPisMap v2, quirks and bugs included, spec
+        [quirk]/[bug]): every stage config's ``published()``. ``overrides`` are parameters
+        (``sensor_offset=(0.08, 0)``, a whole stage config, used as given) or stage fields
+        (``local_gp__map_scale=1.0``, on top of the stage's published config). The laser offset
+        is not part of the preset: pass ``sensor_offset=(0.08, 0)`` with the demo's base poses."""
+        flat, nested = split_nested(overrides)
+        names = cls._param_names()
+        unknown = sorted(set(flat) - set(names)) + sorted(f"{s}__{f}" for s, fs in nested.items()
+                                                          if s not in cls._STAGES for f in fs)
+        if unknown:
+            raise ValueError(f"{unknown[0]}: unknown parameter of {cls.__name__}; valid: {', '.join(names)}")
+        for stage, config in cls._STAGES.items():
+            fields = nested.get(stage, {})
+            if stage in flat:
+                flat[stage] = replace_fields(flat[stage], stage, fields) if fields else flat[stage]
+            else:
+                check_fields(config, stage, fields)
+                try:
+                    flat[stage] = config.published(**fields)
+                except (TypeError, ValueError) as exc:
+                    raise type(exc)(f"{stage}__{exc}") from None
+        return cls(**flat)
 
     def _check_params(self):
         return self._checked_params()
 
-    def get_params(self):
-        """The constructor arguments, by name."""
-        return {k: getattr(self, k) for k in self._PARAMS}
+    def _checked_params(self):
+        """The checked parameters as one dict of clean values, the stage fields flattened
+        (``{"min_range": 0.2, ..., "map_scale": 1.2, ...}``), and under ``"pub"`` whether each
+        behaviour switch is the published one; raises ``ValueError``/``TypeError`` naming a bad
+        parameter. The stage configs checked their own fields when they were made.
+
+        Checked once per binding of the parameters (construction, ``set_params``, an assignment)
+        and kept, so that updates do not check them again; the dict is shared: read it only.
+        Array parameters are kept as checked copies: an array changed in place after it was given
+        takes effect at the next ``set_params``."""
+        p = self.__dict__.get("_params")
+        if p is None:
+            p = self._params = self._check_all()
+        return p
+
+    def _check_all(self):
+        for stage, config in self._STAGES.items():
+            cfg = getattr(self, stage)
+            if type(cfg) is not config:
+                raise TypeError(f"{stage}: expected a {config.__name__}, got {type(cfg).__name__}")
+        p = self._check_sensor()
+        for stage in self._STAGES:
+            cfg = getattr(self, stage)
+            for f in dataclasses.fields(cfg):
+                v = getattr(cfg, f.name)
+                p[f.name] = v if v is None or isinstance(v, str) else (
+                    int(v) if f.name == "train_cap" else float(v))
+        p["pub"] = {name: p[name] == SWITCHES[name][1] for name in SWITCHES if name in p}
+        return p
 
     def set_params(self, **params):
         """Change parameters (checked; the map unchanged on a bad value).
@@ -253,7 +305,7 @@ class GPISMapBase(Parameterised):
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
             new = K.apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
-            # which changes the trained GPs must see (all of them in legacy mode)
+            # which changes the trained GPs must see (all of them with the published retraining)
             ch, kept = K.reeval_changes(cand, action, new, tr.pos, tr.nrm, tr.sp, tr.sg, tr.pos_t,
                                       tr.nrm_t, tr.sp_t, tr.sg_t, self._retrain_tol(),
                                       bool(self._pub("retrain") or self._retrain_tol() <= 0))
@@ -319,7 +371,7 @@ class GPISMapBase(Parameterised):
         slots = slots[nonempty]
         ptr = np.concatenate([[0], np.cumsum(np.diff(ptr)[nonempty])])
         self._sync_slot_arrays()
-        self.gps_.train(slots, ptr, idx, tr, float(self.map_scale), float(self.fbias),
+        self.gps_.train(slots, ptr, idx, tr, float(self.local_gp.map_scale), float(self.local_gp.fbias),
                         self._pub("gp_noise") and self.dim == 2,
                         NOGRAD_VALUE_NOISE if self._pub("gp_noise") else self._NOGRAD_NOISE,
                         0.0 if self._pub("gp_noise") else self._VALUE_FLOOR)
@@ -353,7 +405,8 @@ class GPISMapBase(Parameterised):
 
     def _train_cap(self):
         """Samples per local GP at most (0: no cap; the published retraining has none)."""
-        return 0 if (self.train_cap is None or self._pub("retrain")) else int(self.train_cap)
+        cap = self.local_gp.train_cap
+        return 0 if (cap is None or self._pub("retrain")) else int(cap)
 
     # -- query ----------------------------------------------------------------------------------
     def _gp_query(self, pts):
@@ -361,11 +414,11 @@ class GPISMapBase(Parameterised):
         tr, g = self.tree_, self.gps_
         self._sync_slot_arrays()
         out = np.empty((len(pts), 2 * self.dim + 2))
-        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
-        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.local_gp.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.local_gp.map_scale))
         mmax = g.m_max
-        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.map_scale), v0, g0,
-                 1.0 + float(self.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
+        query_gp(pts, float(W), self._T_BLEND, self._pub("query_mode"), float(self.local_gp.map_scale), v0, g0,
+                 1.0 + float(self.noise.map_noise), tr.geo, tr.cgrid, tr.gshape, tr.goff,
                  tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                  g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(mmax, 1), out)
         return out
@@ -382,7 +435,7 @@ class GPISMapBase(Parameterised):
         -------
         sdf : ndarray of shape (n,)
             Signed distance in metres: positive in free space, negative behind surfaces.
-            Legacy mode returns the published ``f + fbias``.
+            ``distance.query_mode="published"`` returns the published ``f + fbias``.
         grad : ndarray of shape (n, dim)
             Gradient of the distance (unit outward normal near surfaces).
         var : ndarray of shape (n,)
@@ -410,7 +463,7 @@ class GPISMapBase(Parameterised):
             return self._far_prior(pts, np.abs(pts).max(1) > FAR_COORD)
         if self._pub("query_mode"):
             out = self._gp_query(pts)
-            return out[:, 0] + self.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
+            return out[:, 0] + self.local_gp.fbias, out[:, 1:d + 1].copy(), out[:, d + 1].copy()
         return self._faithful(pts)
 
     def _far_prior(self, pts, far):
@@ -430,7 +483,7 @@ class GPISMapBase(Parameterised):
         nu = np.linalg.norm(u, axis=1)
         dist[far] = s * nu
         grad[far] = u / nu[:, None]
-        var[far] = 1.0 + float(self.map_noise)
+        var[far] = 1.0 + float(self.noise.map_noise)
         return dist, grad, var
 
     def _kd(self):
@@ -452,7 +505,7 @@ class GPISMapBase(Parameterised):
         """Default query: GPIS near surfaces, surfel distance far away, blended smoothly."""
         tr = self.tree_
         sptr, sidx = self._sample_index_
-        var_unobs = 1.0 + float(self.map_noise)
+        var_unobs = 1.0 + float(self.noise.map_noise)
         n, d = pts.shape
         if len(sidx) == 0:
             return far_field(pts, None, tr.pos, tr.nrm, tr.sp, tr.sg, self._surfel_radius(),
@@ -470,7 +523,7 @@ class GPISMapBase(Parameterised):
             sel = np.flatnonzero(w > 0)
             if len(sel):
                 out = self._gp_query(pts[sel])
-                K.blend_gp(sel, out, w, float(self.fbias), var_unobs - 1e-12, dist, grad, var,
+                K.blend_gp(sel, out, w, float(self.local_gp.fbias), var_unobs - 1e-12, dist, grad, var,
                          t_info)
             return dist, grad, var
         dist, grad, var = np.empty(n), np.empty((n, d)), np.empty(n)
@@ -482,14 +535,14 @@ class GPISMapBase(Parameterised):
         tr, g, fr = self.tree_, self.gps_, self.free_
         sptr, sidx = self._sample_index_
         self._sync_slot_arrays()
-        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.map_scale
-        v0, g0 = _var_consts(self.dim, float(self.map_scale))
+        W = self._QUERY_W if self._QUERY_W is not None else 4.0 * self.local_gp.map_scale
+        v0, g0 = _var_consts(self.dim, float(self.local_gp.map_scale))
         near, far = self._blend_band()
         return (min(4, len(sidx)), sptr, sidx, tr.pos, tr.nrm, tr.sp, tr.sg, float(self._SIGN_GATE),
                 bool(np.isfinite(self._SIGN_GATE)), float(self._surfel_radius()), fr.grid, fr.gshape,
-                fr.goff, float(fr.res), 1.0 + float(self.map_noise), float(near), float(far),
+                fr.goff, float(fr.res), 1.0 + float(self.noise.map_noise), float(near), float(far),
                 float(self._sign_width()), float(self._BEHIND), float(W), self._T_BLEND, False,
-                float(self.map_scale), v0, g0, float(self.fbias),
+                float(self.local_gp.map_scale), v0, g0, float(self.local_gp.fbias),
                 self._T_BLEND if self._VAR_BLEND else 0.0, tr.geo, tr.cgrid, tr.gshape, tr.goff,
                 tr.node_sample, tr.node_internal, self.slot_gen_, self.gp_gen_, g.gp_m, g.gp_obs,
                 g.gp_tri, g.X, g.kinds, g.alpha, g.Lbuf, max(g.m_max, 1))
@@ -516,7 +569,8 @@ class GPISMapBase(Parameterised):
         tr = self.tree_
         self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
-    def surface(self, res=None, band=None):
+    def surface(self, res=None, band=None, *, evidence=None, free_depth=None, support_radius=None,
+                min_support=None, gate_var=None, face_end=None, return_evidence=False):
         """Zero level set of :meth:`query` near the observed samples.
 
         Parameters
@@ -527,6 +581,26 @@ class GPISMapBase(Parameterised):
             Only grid nodes within this distance of a sample are used (default 0.3 m in 2D,
             0.01 m in 3D); legacy mode also drops nodes with GP variance >= 0.4 (2D) / 0.1 (3D),
             as the published demos do.
+        evidence : bool, optional
+            2D only: return the zero level only where the map has evidence for it (default: on
+            in default mode, off in the published ``query_mode``). A vertex is left out when
+            observed free space lies ``free_depth`` inside it; when fewer than ``min_support``
+            samples of its face with a trusted normal lie within ``support_radius``, or it lies
+            past the end of its face (not between two of them along the face, and farther than
+            ``face_end`` from each); or when the map's variance there reaches ``gate_var``
+            (defaults ``_surface.FREE_DEPTH`` 0.05 m, ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1,
+            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds). A sample left with no
+            returned vertex within two grid steps (a post a few cm across, whose one or two
+            samples have no trusted normal) is returned as a (1, 2) point at its measured
+            position: the sensor's evidence for a surface there, without the level's guess at
+            its extent.
+        free_depth, support_radius, min_support, gate_var, face_end : optional
+            The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
+            pass ``evidence=False``.
+        return_evidence : bool, default False
+            2D only: return a :class:`~polar_sim.gpis._surface.SurfaceEvidence` (the polylines
+            with an evidence count and a position sigma per vertex, and the rejected pieces with
+            the gate they failed) instead of the list of polylines.
 
         Returns
         -------
@@ -541,15 +615,20 @@ class GPISMapBase(Parameterised):
             Naming ``res`` when the grid over the samples' bounding box would exceed
             ``_surface.MAX_SURFACE_NODES`` (2**24) nodes: a coarser ``res`` is needed (e.g. a
             3D map spanning a room at the default 2 mm). Nothing is allocated before the check.
+            Naming a gate argument that is out of range, or ``return_evidence`` in 3D.
         """
         from polar_sim.gpis import _surface
 
+        gates = _surface.gate_args(self, evidence, free_depth, support_radius, min_support, gate_var,
+                                   return_evidence, face_end)
         check_updated(self, "tree_")
         res = self._SURF_RES if res is None else as_positive_float(res, "res")
         band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)
         var_max = self._SURF_VAR if self._pub("query_mode") else np.inf
-        fn = _surface.surface_2d if self.dim == 2 else _surface.surface_3d
-        return fn(self, res, band, var_max)
+        if self.dim == 3:
+            return _surface.surface_3d(self, res, band, var_max)
+        out = _surface.surface_2d(self, res, band, var_max, gates)
+        return out.lines if gates is not None and not return_evidence else out
 
     # -- samples, persistence --------------------------------------------------------------------
     def samples(self):

@@ -27,6 +27,8 @@ import numba as nb
 import numpy as np
 
 from polar_sim.gpis._native import K, entry
+from polar_sim.gpis._shells import SHELL_STATE, shell_next, shell_start
+from polar_sim.gpis._tree import _lin
 
 __all__ = ["FreeSpace", "far_field", "far_weights", "blend_gp"]
 
@@ -268,52 +270,12 @@ def _surfels(pts, gi, pos, nrm, sp, sg, gate, r_s, seen, cell_diag, var_unobs, d
         dtrust[i] = bt
 
 
-@nb.njit(cache=True)
-def _ring_cells(r, c0, lo, hi, a0, a1, cc, out):
-    """Cells (flat grid indices into ``out``) at Chebyshev distance exactly r from c0 inside the
-    grid [lo, hi]; returns their number. Axis 0 is walked with a stride of 2r where the other
-    axes are inside the ring (only its two end cells are on it)."""
-    dim = c0.shape[0]
-    total = 1
-    for k in range(1, dim):
-        a0[k] = max(c0[k] - r, lo[k])
-        a1[k] = min(c0[k] + r, hi[k])
-        if a1[k] < a0[k]:
-            return 0
-        total *= a1[k] - a0[k] + 1
-    n = 0
-    for flat in range(total):
-        f = flat
-        edge = False
-        for k in range(1, dim):
-            span = a1[k] - a0[k] + 1
-            cc[k] = a0[k] + f % span
-            f //= span
-            if abs(cc[k] - c0[k]) == r:
-                edge = True
-        step = 1 if (edge or r == 0) else 2 * r
-        x0 = c0[0] - r
-        while x0 <= c0[0] + r:
-            if lo[0] <= x0 <= hi[0]:
-                cc[0] = x0
-                idx = 0
-                stride = 1
-                for k in range(dim):
-                    idx += (cc[k] - lo[k]) * stride
-                    stride *= hi[k] - lo[k] + 1
-                if n >= out.shape[0]:
-                    return -1
-                out[n] = idx
-                n += 1
-            x0 += step
-    return n
-
-
 @entry
 @nb.njit(cache=True)
 def knn(pts, k, geo, cgrid, gshape, goff, sptr, sidx, pos, out):
     """Indices (n, k) into ``out`` of the k samples nearest each point (nearest first; ties to
-    the one met first), by a search in rings of cluster cells around the point's cell.
+    the one met first), by a search in shells of cluster cells around the point's cell
+    (:mod:`._shells`).
 
     ``sptr``/``sidx`` list each cluster slot's samples (CSR); ``cgrid`` maps the grid cells
     (origin ``geo[:d]``, edge ``geo[d]``, shape ``gshape`` from ``goff``) to slots. The search
@@ -332,7 +294,7 @@ def knn(pts, k, geo, cgrid, gshape, goff, sptr, sidx, pos, out):
     a0 = np.empty(dim, np.int64)
     a1 = np.empty(dim, np.int64)
     bd = np.empty(k)
-    cells = np.empty(64, np.int64)
+    st = np.empty(SHELL_STATE, np.int64)
     for i in range(n):
         x = pts[i]
         rmax = 0
@@ -352,12 +314,10 @@ def knn(pts, k, geo, cgrid, gshape, goff, sptr, sidx, pos, out):
                         lb = min(lb, max(geo[j] + (c0[j] + r) * w - x[j], 0.0))
                 if lb * lb > bd[k - 1]:
                     break
-            nc = _ring_cells(r, c0, lo, hi, a0, a1, cc, cells)
-            while nc < 0:                       # more cells on this ring than room: grow
-                cells = np.empty(2 * cells.shape[0], np.int64)
-                nc = _ring_cells(r, c0, lo, hi, a0, a1, cc, cells)
-            for t in range(nc):
-                s = cgrid[cells[t]]
+            if not shell_start(r, c0, lo, hi, a0, a1, st):
+                continue
+            while shell_next(r, c0, lo, hi, a0, a1, cc, st):
+                s = cgrid[_lin(cc, gshape, goff)]
                 if s < 0:
                     continue
                 for u in range(sptr[s], sptr[s + 1]):

@@ -179,8 +179,9 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None
     c = np.ascontiguousarray
     K._fuse_rows(li, q, c(A), c(rnew), found, c(p, np.float64), c(oc, np.float64), fd_ok,
                  c(rhat, np.float64), P, N, sp_old, sg_old, c(R, np.float64), c(t, np.float64),
-                 float(m.delx), legacy, legacy and d == 3, float(m.min_position_noise),
-                 float(m.min_grad_noise), float(m.map_noise), *model_args(model), _beta(model),
+                 float(m.observation.delx), legacy, legacy and d == 3,
+                 float(m.noise.min_position_noise), float(m.noise.min_grad_noise),
+                 float(m.noise.map_noise), *model_args(model), _beta(model),
                  action, Pn, Nn, spn, sgn)
     return action, Pn, Nn, spn, sgn
 

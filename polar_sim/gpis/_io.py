@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import zipfile
 
@@ -9,24 +10,76 @@ import numpy as np
 
 from polar_sim.fileio import atomic_write, check_destination, check_source
 from polar_sim.gpis import _loadcheck
+from polar_sim.gpis.config import SWITCHES
+from polar_sim.params import check_fields
 
-__all__ = ["save", "load", "FORMAT", "VERSION"]
+__all__ = ["save", "load", "FORMAT", "VERSION", "READS"]
 
 FORMAT = "polar_sim.gpis"
-VERSION = 1
+#: Version 2 stores the stage configs (:mod:`polar_sim.gpis.config`) as objects of their fields;
+#: version 1 (flat parameters and ``legacy``) is still read.
+VERSION = 2
+READS = (1, 2)
 MAX_FILE_BYTES = 16 << 30     # declared array bytes a map file may hold (16 GiB)
 
 
+def _plain(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, tuple):
+        return list(v)
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return v.item()
+    return v
+
+
 def _params_json(m):
-    def conv(v):
-        if isinstance(v, np.ndarray):
-            return v.tolist()
-        if isinstance(v, tuple):
-            return list(v)
-        if isinstance(v, (np.floating, np.integer, np.bool_)):
-            return v.item()
-        return v
-    return json.dumps({k: conv(getattr(m, k)) for k in m._PARAMS})
+    """The parameters as JSON: each stage config as an object of its fields."""
+    params = m.get_params(deep=False)
+    return json.dumps({k: {f.name: _plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+                       if k in m._STAGES else _plain(v) for k, v in params.items()})
+
+
+def _from_version1(cls, params):
+    """Version-1 parameters (flat, with ``legacy``) as version-2 ones (stage configs as dicts)."""
+    legacy = params.pop("legacy", False)
+    out = {k: params.pop(k) for k in cls._param_names() if k in params and k not in cls._STAGES}
+    for stage, config in cls._STAGES.items():
+        names = {f.name for f in dataclasses.fields(config)}
+        fields = {k: params.pop(k) for k in sorted(names & set(params))}
+        if legacy is True:
+            fields.update({k: SWITCHES[k][1] for k in names & set(SWITCHES)})
+        out[stage] = fields
+    if params or not isinstance(legacy, bool):
+        raise ValueError(f"{sorted(params) or ['legacy']}: not {cls.__name__} parameters of format version 1")
+    return out
+
+
+def _params(cls, path, text, version):
+    """The constructor arguments stored in a file's 'params' text."""
+    try:
+        params = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"path: {path}: array 'params' is not JSON ({exc})") from None
+    if not isinstance(params, dict):
+        raise ValueError(f"path: {path}: array 'params' is not a dict of {cls.__name__} parameters")
+    try:
+        if version == 1:
+            params = _from_version1(cls, params)
+        if not set(params) <= set(cls._param_names()):
+            raise ValueError(f"{sorted(set(params) - set(cls._param_names()))[0]}: unknown parameter")
+        for stage, config in cls._STAGES.items():
+            if stage in params:
+                if not isinstance(params[stage], dict):
+                    raise ValueError(f"{stage}: expected an object of {config.__name__} fields")
+                check_fields(config, stage, params[stage])
+                params[stage] = config(**params[stage])
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"path: {path}: array 'params': {exc}") from None
+    for k in ("sensor_offset", "angle_obs_limit"):      # JSON has no tuples
+        if isinstance(params.get(k), list):
+            params[k] = tuple(params[k])
+    return params
 
 
 def save(m, path):
@@ -93,22 +146,14 @@ def load(cls, path):
     ver, name, params_text, fitted = _loadcheck.check_meta(path, data)
     if str(data["format"]) != FORMAT:
         raise ValueError(f"path: {path} is not a GPIS map (format {data['format']!s})")
-    if ver != VERSION:
-        raise ValueError(f"path: {path} has format version {ver}; this code reads {VERSION}")
+    if ver not in READS:
+        raise ValueError(f"path: {path} has format version {ver}; this code reads {', '.join(map(str, READS))}")
     if name != cls.__name__:
         raise ValueError(f"path: {path} holds a {name}, not a {cls.__name__}")
     _loadcheck.check_keys(path, data, fitted, cls.dim)
+    params = _params(cls, path, params_text, ver)
     try:
-        params = json.loads(params_text)
-    except (json.JSONDecodeError, RecursionError) as exc:
-        raise ValueError(f"path: {path}: array 'params' is not JSON ({exc})") from None
-    if not isinstance(params, dict) or not set(params) <= set(cls._PARAMS):
-        raise ValueError(f"path: {path}: array 'params' is not a dict of {cls.__name__} parameters")
-    for k in ("sensor_offset", "angle_obs_limit"):      # JSON has no tuples
-        if isinstance(params.get(k), list):
-            params[k] = tuple(params[k])
-    m = cls(**params)
-    try:
+        m = cls(**params)
         m._checked_params()
         if fitted:
             m._init_state()

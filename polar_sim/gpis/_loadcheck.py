@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from polar_sim.gpis._checks import MAX_CLUSTER_NODES
+from polar_sim.gpis.config import MAX_CLUSTER_NODES
 
 __all__ = ["MapFileError", "check_meta", "check_arrays", "META_KEYS", "state_keys"]
 

@@ -28,7 +28,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["K", "entry", "native_dir", "source_key", "SOURCES"]
 
 #: The modules whose kernels (and their callees) the compiled module holds: their text keys it.
-SOURCES = ("_numeric", "_tree", "_localgp", "_kernels", "_distance", "_query", "_obsgp", "_scan2d",
+SOURCES = ("_numeric", "_shells", "_tree", "_localgp", "_kernels", "_distance", "_query", "_obsgp", "_scan2d",
            "_fusion", "_icp")
 _REGISTRY = {}
 

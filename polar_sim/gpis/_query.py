@@ -10,6 +10,7 @@ from polar_sim.gpis._distance import _far_weights, blend_gp, knn
 from polar_sim.gpis._localgp import _dot4
 from polar_sim.gpis._native import K, entry
 from polar_sim.gpis._numeric import _exp_neg
+from polar_sim.gpis._shells import SHELL_STATE, shell_next, shell_start
 from polar_sim.gpis._tree import _lin
 
 __all__ = ["PARALLEL_POINTS", "query_gp", "faithful"]
@@ -21,9 +22,9 @@ def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s
     """Up to 3 nearest non-empty clusters (by centre) whose box meets the box of half W at x.
 
     Ties in distance go to the cluster that comes first in grid order (last axis slowest), as
-    in a plain scan of the box. The cells are visited in rings around x's own cell, and the
-    search stops once no further ring can hold a nearer centre. ``best_k`` (3,) and ``iw``
-    (6 * dim,) are int64 work arrays (no allocation per point).
+    in a plain scan of the box. The cells are visited in shells around x's own cell
+    (:mod:`._shells`), and the search stops once no further shell can hold a nearer centre. ``best_k`` (3,) and ``iw``
+    (6 * dim + SHELL_STATE,) are int64 work arrays (no allocation per point).
     """
     dim = x.shape[0]
     w = geo[dim]
@@ -34,6 +35,7 @@ def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s
     cc = iw[3 * dim:4 * dim]
     a0 = iw[4 * dim:5 * dim]
     a1 = iw[5 * dim:6 * dim]
+    st = iw[6 * dim:6 * dim + SHELL_STATE]
     rmax = 0
     for k in range(dim):
         lo[k] = max(int(np.ceil((x[k] - W - hc - geo[k]) / w - 0.5)), goff[k])
@@ -48,63 +50,38 @@ def _nearest3(x, W, geo, cgrid, gshape, goff, node_sample, node_internal, best_s
             lb = (r - 0.5) * w
             if lb * lb > best_d[2] * (1.0 + 1e-9):
                 break
-        # the cells at Chebyshev distance r from c0, inside the box
-        total = 1
-        empty = False
-        for k in range(1, dim):
-            a0[k] = max(c0[k] - r, lo[k])
-            a1[k] = min(c0[k] + r, hi[k])
-            if a1[k] < a0[k]:
-                empty = True
-            total *= a1[k] - a0[k] + 1
-        if empty:
+        if not shell_start(r, c0, lo, hi, a0, a1, st):
             continue
-        for flat in range(total):
-            f = flat
-            edge = False
-            for k in range(1, dim):
-                span = a1[k] - a0[k] + 1
-                cc[k] = a0[k] + f % span
-                f //= span
-                if abs(cc[k] - c0[k]) == r:
-                    edge = True
-            xs = c0[0] - r
-            step = 1 if (edge or r == 0) else 2 * r
-            while xs <= c0[0] + r:
-                cx = xs
-                xs += step
-                if cx < lo[0] or cx > hi[0]:
-                    continue
-                cc[0] = cx
-                s = cgrid[_lin(cc, gshape, goff)]
-                if s < 0 or (node_sample[s, 0] < 0 and not node_internal[s, 0]):
-                    continue
-                d2 = 0.0
-                for k in range(dim):
-                    e = geo[k] + (cc[k] + 0.5) * w - x[k]
-                    d2 += e * e
-                # position in a scan of the box (first axis fastest): the tie-break
-                key = 0
-                stride = 1
-                for k in range(dim):
-                    key += (cc[k] - lo[k]) * stride
-                    stride *= hi[k] - lo[k] + 1
-                if n < 3:
-                    j = n
-                    n += 1
-                elif d2 < best_d[2] or (d2 == best_d[2] and key < best_k[2]):
-                    j = 2
-                else:
-                    continue
-                while j > 0 and (best_d[j - 1] > d2 or (best_d[j - 1] == d2
-                                                         and best_k[j - 1] > key)):
-                    best_d[j] = best_d[j - 1]
-                    best_s[j] = best_s[j - 1]
-                    best_k[j] = best_k[j - 1]
-                    j -= 1
-                best_d[j] = d2
-                best_s[j] = s
-                best_k[j] = key
+        while shell_next(r, c0, lo, hi, a0, a1, cc, st):
+            s = cgrid[_lin(cc, gshape, goff)]
+            if s < 0 or (node_sample[s, 0] < 0 and not node_internal[s, 0]):
+                continue
+            d2 = 0.0
+            for k in range(dim):
+                e = geo[k] + (cc[k] + 0.5) * w - x[k]
+                d2 += e * e
+            # position in a scan of the box (first axis fastest): the tie-break
+            key = 0
+            stride = 1
+            for k in range(dim):
+                key += (cc[k] - lo[k]) * stride
+                stride *= hi[k] - lo[k] + 1
+            if n < 3:
+                j = n
+                n += 1
+            elif d2 < best_d[2] or (d2 == best_d[2] and key < best_k[2]):
+                j = 2
+            else:
+                continue
+            while j > 0 and (best_d[j - 1] > d2 or (best_d[j - 1] == d2
+                                                     and best_k[j - 1] > key)):
+                best_d[j] = best_d[j - 1]
+                best_s[j] = best_s[j - 1]
+                best_k[j] = best_k[j - 1]
+                j -= 1
+            best_d[j] = d2
+            best_s[j] = s
+            best_k[j] = key
     return n
 
 
@@ -387,7 +364,7 @@ def _query_rows(i0, i1, pts, W, T, legacy, scale, var_f0, var_g0, default_var, g
     best_s = np.empty(3, np.int64)
     best_d = np.empty(3)
     best_k = np.empty(3, np.int64)
-    iw = np.empty(6 * dim, np.int64)
+    iw = np.empty(6 * dim + SHELL_STATE, np.int64)
     rbuf = np.empty((dim + 3, mmax))
     Z = np.empty((4, mmax))
     acc = np.empty(4)

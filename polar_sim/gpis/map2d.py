@@ -6,14 +6,17 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from polar_sim._validation import as_angles, as_pose2d, as_ranges
+from polar_sim._validation import as_angles, as_pose2d, as_positive_float, as_ranges
 from polar_sim.gpis._base import GPISMapBase
-from polar_sim.gpis._checks import check_params
+from polar_sim.gpis._checks import as_vector2
+from polar_sim.gpis.config import (DistanceConfig2D, LocalGPConfig2D, NoiseConfig2D,
+                                   ObservationConfig2D, TreeConfig2D)
 from polar_sim.gpis._fusion import RangeNoiseModel, fuse
 from polar_sim.gpis._linesearch import TOL
 from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
 from polar_sim.gpis._scan2d import line_search, new_samples, occupancy
+from polar_sim.params import Tags
 
 __all__ = ["GPISMap2D"]
 
@@ -26,110 +29,49 @@ _FLOOR_P = 1e-5     # m^2, floor of the samples' (fused) position variances ((3 
 _KAPPA = 0.5
 
 
+def _median(x):
+    """``float(np.median(x))`` of a non-empty finite 1D array, the same float, without
+    ``np.median``'s overhead (it is called on every scan): the middle element, or the mean of
+    the two middle ones computed as numpy's mean does, their sum over 2."""
+    n = len(x)
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2.0)
+
+
 class GPISMap2D(GPISMapBase):
     """Online Gaussian-process implicit surface in the plane (GPisMap, quadtree).
 
+    The configs' fields are in :mod:`polar_sim.gpis.config`; ``GPISMap2D.published()`` sets
+    every stage's behaviour switch to the published C++'s.
+
     Parameters
     ----------
-    map_scale : float, default=1.2
-        Matérn-3/2 length scale of the local GPs, metres; the query search half-width is 4x this.
-    fbias : float, default=0.2
-        Value target of every surface sample is -fbias; the published SDF is f + fbias.
-    obs_var_thre : float, default=0.1
-        Observation-GP variance above which a direction counts as unobservable.
-    delx : float, default=0.01
-        Finite-difference step and initial line-search step, metres.
-    min_position_noise, min_grad_noise, map_noise : float, default=0.01
-        Noise floors (variances) of the sample model (spec §1).
     sensor_offset : (2,) array_like, default=(0.0, 0.0)
         Laser position in the frame of the pose given to :meth:`update`, metres. The default
         takes the *sensor* pose, as the contract says (``World.lidar(...).T_world_sensor``).
         To feed robot *base* poses, give the laser's mounting here: the published demo's
         turtlebot (and the ``gazebo1`` log) use (0.08, 0), which is
-        ``load_gazebo1()["sensor_offset"]``. ``legacy=True`` does not change it.
+        ``load_gazebo1()["sensor_offset"]``. ``published()`` does not change it.
     angle_obs_limit : (2,) array_like, default=(-3/4 pi, 3/4 pi)
         Field of view of the laser, rad: beams outside are ignored and samples outside are not
         re-evaluated.
     min_range, max_range : float, default=0.2, 30.0
         Valid return window, metres.
-    init_half, cluster_half, min_half, max_half : float, default=12.8, 0.8, 0.2, 102.4
-        Quadtree root half-length, cluster-cell half-length, minimum sample spacing and root
-        growth limit, metres.
-    obs_scale, obs_noise : float, default=0.5, 0.01
-        Observation GP (Ornstein-Uhlenbeck) length scale in rad and noise variance.
-    blend_near, blend_far : float, default=0.05, 0.25
-        Default mode: the query is the GPIS within ``blend_near`` of the nearest surfel, the
-        surfel distance beyond ``blend_far``, and a smoothstep blend in between, metres. The
-        GPIS weight is further scaled by ``clip(1 - var_f / 0.4, 0, 1)``: where the local GP is
-        uninformative (no gradient observations) the surfel distance is used. (On office2d the
-        GP's extrapolation past the end of a face, 0.1-0.4 m beyond a corner or into a door,
-        is the larger error there; the surfel distance to the end of the face is exact.)
-    surfel_radius : float or None, default=None
-        Radius of the disc each sample stands for in the far-field distance; None = min_half / 2.
-    free_res : float or None, default=None
-        Cell size of the observed-free-space grid (sign and variance far away); None = 0.05 m.
-        The grid sets the sign only beyond one cell diagonal of the nearest surfel; a coarser
-        one leaves the shadow of every corner to the surfel's side, negative.
-    retrain_tol : float or None, default=None
-        Default mode: a re-evaluated sample triggers retraining of the GPs that use it only once
-        it has moved more than this (or its normal turned > 0.05 rad, or a noise changed > 2x)
-        since they were trained; None = 0.005 m; 0 = retrain on every change (as published).
-    train_cap : int or None, default=32
-        Default mode: each local GP trains on at most this many samples, the nearest its
-        cluster's centre among those within the training radius (4 h_c = 3.2 m); None = all of
-        them. The published retraining (``retrain="box"``) has no cap. Training costs O(m^3) in
-        the m samples: in cluttered rooms (the Intel Lab: a median of 244, up to 450) the cap
-        bounds the update time and memory. 32 was chosen on office2d's dev seeds, where it
-        leaves every accuracy figure unchanged (benchmarks/RESULTS.md).
-    sample_spacing : float or None, default=None
-        Default mode: minimum distance between samples, enforced across cell borders (the
-        published code checks only the cell chain, giving about half the intended spacing);
-        None = min_half. It applies between samples of the same face only: a sample whose
-        trusted normal (gradient noise within the GP gate 0.1001) points away from the new
-        one's (dot < -0.5) is the other face of a thin wall and does not block it (the tree gets
-        leaves of half-length min_half / 2 so that both faces fit).
-    range_noise : float, default=0.01
-        Default mode: standard deviation of the laser's range noise, metres. It sets the sample
-        noise (spec §5/§6 replaced by ``_fusion.RangeNoiseModel``): position variance
-        ``range_noise^2 cos^2(incidence)`` m^2 (re-evaluation adds the line-search residual and
-        the between-beam term ``(r dtheta sin(incidence))^2``; fused values are floored at
-        1e-5 m^2, and the local GPs add 1e-3 m^2 to every value noise) and normal variance
-        ``(0.5 range_noise cos^2(incidence) / (r dtheta))^2`` rad^2 (``dtheta`` the beam spacing),
-        so far and grazing returns keep their normals. Re-evaluation fuses only line searches
-        that reached the observed surface within 3 sigma (at least 5 cm) with a normal facing the
-        sensor, and drops samples whose doubled noises pass the drop gate. Returns without a
-        trusted normal keep their position (value noise = position noise, not 2.0) with the
-        normal facing the sensor. Legacy mode uses the spec's model (0.01 r^2 and the view-angle
-        terms).
-    spacing_rule : {"strict", "chain"}, default="strict"
-        "strict": ``sample_spacing`` enforced across cell borders (in 2D only between samples of
-        the same face); "chain": the published chain-only test (about half the spacing).
-    retrain : {"changed", "box"}, default="changed"
-        "changed": retrain exactly the clusters whose training set changed by more than
-        ``retrain_tol``; "box": the published box around the active clusters, every change,
-        with its |U| <= 1 carry-over (spec §8.1).
-    gp_noise : {"model", "published"}, default="model"
-        Value noise of the local GPs: the default model (samples without a gradient keep their
-        position noise, plus a value floor) or the published one (2.0, no floor, the 2D
-        x-gradient noise quirk).
-    fusion : {"fixed", "published"}, default="fixed"
-        Re-evaluation: the fixed line search and slerp normal fusion (weight
-        sg_old / (sg_old + sg_new)), or the published ones (3D line search that re-projects the
-        original point, inverted weight, unnormalised 3D rotation axis).
-    query_mode : {"faithful", "published"}, default="faithful"
-        "faithful": GPIS near surfaces blended into the surfel distance; "published": the
-        published SDF ``f + fbias`` of the nearest clusters' GPs only (and ``surface()`` keeps
-        the published variance cut).
-    scan_model : {"range", "published"}, default="range"
-        2D scans: the range-sigma noise model, the field of view applied to new samples and
-        re-evaluation around the laser; or the published ones (spec noise model, limits for
-        re-evaluation only, re-evaluation around the base).
-    legacy : bool, default=False
-        Shorthand for every behaviour parameter above at its published value: the published
-        implementation, quirks and bugs included (spec [quirk]/[bug]); the query is then the
-        published SDF f + fbias. ``GPISMap2D.published()`` is the same map built from those
-        parameters (``PUBLISHED``) with ``legacy=False``. The published demo's laser offset is a
-        parameter, not part of this switch: pass ``sensor_offset=(0.08, 0)`` with base poses.
+    observation : ObservationConfig2D
+        Observation GP and occupancy test (spec §3-4).
+    noise : NoiseConfig2D
+        Sample noise, the laser's range noise and re-evaluation (spec §5-6).
+    tree : TreeConfig2D
+        Quadtree and sample spacing (spec §7).
+    local_gp : LocalGPConfig2D
+        Local GPs and their retraining (spec §8; ``train_cap`` 32 by default).
+    distance : DistanceConfig2D
+        Query and the faithful distance (spec §9). In 2D the GPIS weight is further scaled by
+        ``clip(1 - var_f / 0.4, 0, 1)``: where the local GP is uninformative (no gradient
+        observations) the surfel distance is used.
 
     Attributes
     ----------
@@ -142,7 +84,9 @@ class GPISMap2D(GPISMapBase):
     """
 
     dim = 2
-    PUBLISHED = {**GPISMapBase.PUBLISHED, "scan_model": "published"}
+    TAGS = Tags(update="update", query="query", saves=True, data="polar_sim.gpis.synthetic:check_data_2d")
+    _STAGES = {"observation": ObservationConfig2D, "noise": NoiseConfig2D, "tree": TreeConfig2D,
+               "local_gp": LocalGPConfig2D, "distance": DistanceConfig2D}
     # the two faces of a wall thinner than the sample spacing (office walls are 15 cm) both
     # need samples: spacing is enforced only between samples whose normals agree (dot >= -0.5)
     _FACE_COS = -0.5
@@ -164,70 +108,51 @@ class GPISMap2D(GPISMapBase):
     # the GPIS interpolates across gaps between the samples of a face, which the discs of the
     # surfel distance leave (a wall seen at grazing incidence): the same band on both sides
     _BEHIND = 1.0
-    _PARAMS = ("map_scale", "fbias", "obs_var_thre", "delx", "min_position_noise",
-               "min_grad_noise", "map_noise", "sensor_offset", "angle_obs_limit", "min_range",
-               "max_range", "init_half", "cluster_half", "min_half", "max_half", "obs_scale",
-               "obs_noise", "blend_near", "blend_far", "surfel_radius", "free_res", "retrain_tol", "train_cap", "sample_spacing", "range_noise", "spacing_rule", "retrain", "gp_noise", "fusion",
-               "query_mode", "scan_model", "legacy")
 
-    def __init__(self, *, map_scale=1.2, fbias=0.2, obs_var_thre=0.1, delx=0.01,
-                 min_position_noise=0.01, min_grad_noise=0.01, map_noise=0.01,
-                 sensor_offset=(0.0, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
-                 min_range=0.2, max_range=30.0, init_half=12.8, cluster_half=0.8, min_half=0.2,
-                 max_half=102.4, obs_scale=0.5, obs_noise=0.01, blend_near=0.05, blend_far=0.25,
-                 surfel_radius=None, free_res=None, retrain_tol=None, train_cap=32, sample_spacing=None,
-                 range_noise=0.01, spacing_rule="strict", retrain="changed", gp_noise="model",
-                 fusion="fixed", query_mode="faithful", scan_model="range", legacy=False):
-        self.map_scale = map_scale
-        self.fbias = fbias
-        self.obs_var_thre = obs_var_thre
-        self.delx = delx
-        self.min_position_noise = min_position_noise
-        self.min_grad_noise = min_grad_noise
-        self.map_noise = map_noise
+    def __init__(self, *, sensor_offset=(0.0, 0.0), angle_obs_limit=(-2.35619449, 2.35619449),
+                 min_range=0.2, max_range=30.0, observation=ObservationConfig2D(),
+                 noise=NoiseConfig2D(), tree=TreeConfig2D(), local_gp=LocalGPConfig2D(),
+                 distance=DistanceConfig2D()):
         self.sensor_offset = sensor_offset
         self.angle_obs_limit = angle_obs_limit
         self.min_range = min_range
         self.max_range = max_range
-        self.init_half = init_half
-        self.cluster_half = cluster_half
-        self.min_half = min_half
-        self.max_half = max_half
-        self.obs_scale = obs_scale
-        self.obs_noise = obs_noise
-        self.blend_near = blend_near
-        self.blend_far = blend_far
-        self.surfel_radius = surfel_radius
-        self.free_res = free_res
-        self.retrain_tol = retrain_tol
-        self.train_cap = train_cap
-        self.sample_spacing = sample_spacing
-        self.range_noise = range_noise
-        self.spacing_rule = spacing_rule
-        self.retrain = retrain
-        self.gp_noise = gp_noise
-        self.fusion = fusion
-        self.query_mode = query_mode
-        self.scan_model = scan_model
-        self.legacy = legacy
+        self.observation = observation
+        self.noise = noise
+        self.tree = tree
+        self.local_gp = local_gp
+        self.distance = distance
+        self._check_params()  # fail early; kept until a parameter is bound again (set_params)
 
-    def _checked_params(self):
-        return check_params(self, vec2=("sensor_offset", "angle_obs_limit"))
+    def _check_sensor(self):
+        out = {k: as_vector2(getattr(self, k), k) for k in ("sensor_offset", "angle_obs_limit")}
+        if not out["angle_obs_limit"][0] < out["angle_obs_limit"][1]:
+            raise ValueError("angle_obs_limit: expected (low, high) with low < high")
+        out["min_range"] = as_positive_float(self.min_range, "min_range", allow_zero=True)
+        out["max_range"] = as_positive_float(self.max_range, "max_range")
+        if not out["min_range"] < out["max_range"]:
+            raise ValueError(f"min_range/max_range: expected min_range < max_range, got "
+                             f"{out['min_range']} and {out['max_range']}")
+        return out
 
     def _free_res(self):
-        return 0.05 if self.free_res is None else float(self.free_res)
+        free_res = self.distance.free_res
+        return 0.05 if free_res is None else float(free_res)
 
     def _surfel_radius(self):
-        return 0.5 * self.min_half if self.surfel_radius is None else float(self.surfel_radius)
+        r = self.distance.surfel_radius
+        return 0.5 * self.tree.min_half if r is None else float(r)
 
     def _spacing(self):
-        return float(self.min_half) if self.sample_spacing is None else float(self.sample_spacing)
+        s = self.tree.sample_spacing
+        return float(self.tree.min_half) if s is None else float(s)
 
     def _retrain_tol(self):
-        return 0.005 if self.retrain_tol is None else float(self.retrain_tol)
+        tol = self.local_gp.retrain_tol
+        return 0.005 if tol is None else float(tol)
 
     def _blend_band(self):
-        return float(self.blend_near), float(self.blend_far)
+        return float(self.distance.blend_near), float(self.distance.blend_far)
 
     # -- input ----------------------------------------------------------------------------------
     def update(self, angles, ranges, pose2d):
@@ -277,7 +202,7 @@ class GPISMap2D(GPISMapBase):
         hits = (sp + o) @ R.T + t
         model = None
         if not pub:
-            dth = float(np.median(np.diff(phi))) if len(phi) > 1 else 1e-3
+            dth = _median(np.diff(phi)) if len(phi) > 1 else 1e-3
             model = RangeNoiseModel(p["range_noise"], max(dth, 1e-6), _FLOOR_P, kappa=_KAPPA)
         # re-evaluation searches around the base in the published code (spec §2.1); the default
         # searches around the laser, so that a sensor pose and a base pose with the mounting as
@@ -290,11 +215,11 @@ class GPISMap2D(GPISMapBase):
     # -- sensor model ---------------------------------------------------------------------------
     def _oc(self, q, gp):
         """Occupancy test (spec §3) at sensor-frame points q (..., 2): (oc, observable, r_hat)."""
-        return occupancy(gp, q, self.obs_var_thre)
+        return occupancy(gp, q, self.observation.obs_var_thre)
 
     def _fd(self, q, gp):
         """Finite differences at sensor points q (n, 2): oc (n, 4), observable (n,), r_hat (n, 4)."""
-        dx = float(self.delx)
+        dx = float(self.observation.delx)
         E = np.array([[dx, 0], [-dx, 0], [0, dx], [0, -dx]])
         oc, obs, rhat = self._oc(q[:, None, :] + E[None], gp)
         return oc, obs.all(1), rhat
@@ -306,8 +231,8 @@ class GPISMap2D(GPISMapBase):
 
     def _new_samples(self, scan):
         ok, n, sp, sg, bad = new_samples(scan.gp, scan.sensor_pts, scan.phi, scan.r,
-                                         self.obs_var_thre, self.delx, scan.R,
-                                         self.min_position_noise, self.min_grad_noise,
+                                         self.observation.obs_var_thre, self.observation.delx, scan.R,
+                                         self.noise.min_position_noise, self.noise.min_grad_noise,
                                          scan.model, _GRAD_GATE)
         return scan.hits, ok, bad, n, sp, sg
 
@@ -317,7 +242,7 @@ class GPISMap2D(GPISMapBase):
         p = (P - scan.t) @ scan.R - scan.o
         n = N @ scan.R
         def search(p, n):
-            return line_search(scan.gp, p, n, self.obs_var_thre, self.delx, TOL, self._OC_SKIP)
+            return line_search(scan.gp, p, n, self.observation.obs_var_thre, self.observation.delx, TOL, self._OC_SKIP)
 
         return fuse(self, p, n, P, N, tr.sp[cand], tr.sg[cand], scan, search, self._fd, scan.R,
                     scan.R @ scan.o + scan.t, model=scan.model)

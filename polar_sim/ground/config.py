@@ -385,14 +385,22 @@ class DenseConfig(_Stage):
         ``alias_margin`` (relative) of the solution's, multiplies the fit's variance by
         ``alias_var_scale``; 0 turns the test off.
     gate : float, default=3.0
-        Sparse and dense speeds that differ by more than ``gate`` standard deviations are not averaged:
-        the one with the smaller variance is used alone.
+        Sparse and dense speeds (and yaw rates) that differ by more than ``gate`` standard deviations are
+        not averaged: the one with the smaller variance is used alone.
+    fuse_yaw : bool, default=True
+        The yaw-rate measurement is the tracks' yaw rate fused with the dense fit's by their variances
+        (both scaled by ``var_scale``); the tracks' variance grows by 1 + ``alias_var_scale`` x the share of
+        tracks caught aliasing. False: the tracks' yaw rate alone.
 
     label_evidence : float, default=4.0
         Ground self-labels: pixels whose parallax fits the ground better than points at infinity by this
         much (windowed mean difference of squared residuals, grey levels²); 0 = no dense labels.
+    label_region : {"support", "evidence"}, default="support"
+        Where the dense ground labels are spread: over the ground the evidence is connected to through
+        untextured pixels the fitted motion agrees with (:func:`polar_sim.ground.dense.ground_evidence`),
+        or over the evidence alone (the textured parts of the ground).
     max_labels : int, default=300
-        Dense ground labels per image (spread over the evidence).
+        Dense ground labels per image (spread evenly over the label region).
     track_alias_px : float, default=1.5
         Aliasing in tracks: a point tracked both plainly and in the ground-warped image, to two positions
         farther apart than this (processed px, at the KITTI focal length), is dropped.
@@ -422,7 +430,9 @@ class DenseConfig(_Stage):
     alias_margin: float = 0.2
     alias_var_scale: float = 100.0
     gate: float = 3.0
+    fuse_yaw: bool = True
     label_evidence: float = 4.0
+    label_region: str = "support"
     max_labels: int = 300
     track_alias_px: float = 1.5
     periodic_ncc: float = 0.7
@@ -449,7 +459,9 @@ class DenseConfig(_Stage):
         as_positive_float(self.alias_margin, "alias_margin", allow_zero=True)
         as_float(self.alias_var_scale, "alias_var_scale", minimum=1.0)
         as_positive_float(self.gate, "gate")
+        as_bool(self.fuse_yaw, "fuse_yaw")
         as_positive_float(self.label_evidence, "label_evidence", allow_zero=True)
+        check_choice(self.label_region, ("support", "evidence"), "label_region")
         as_int(self.max_labels, "max_labels", minimum=0, maximum=MAX_FEATURES)
         as_positive_float(self.track_alias_px, "track_alias_px")
         as_float(self.periodic_ncc, "periodic_ncc", minimum=-1.0, maximum=1.0)

@@ -437,39 +437,71 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
                     spread)
 
 
-def ground_evidence(prev, cur, cam, h, fit, mask, *, window=7, agreement=2.0):
-    """Per-pixel ground evidence (H, W) float32 of ``prev`` (a :class:`Pyramid`) under a converged fit:
-    the windowed mean of (squared residual under the rotation alone, where points at infinity go) −
-    (squared residual under the fitted ground motion), grey levels², where the fitted motion agrees
-    with the pixel (windowed mean squared residual within ``agreement`` times the fit's residual scale)
-    inside ``mask``; 0 elsewhere. Large where the pixel's parallax is the ground's; near 0 where the
-    image has no texture to tell."""
+def _residual_maps(prev, cur, cam, h, fit, mask, window):
+    """Windowed mean squared residuals (grey levels²) of ``prev``'s pixels against ``cur`` under the fitted
+    ground motion (g) and under its rotation alone (i, where points at infinity go), over the rows of
+    ``mask``: (g, i, r0, r1) with the maps of rows r0:r1, or None if the mask is empty."""
     p = np.array(fit.params or (fit.s, fit.a))
     warp = _make_warp({2: "plane", 3: "pitch", 4: "pitch_roll", 6: "surface"}[len(p)], cam, h)
     rows = np.flatnonzero(mask.any(axis=1))
-    out = np.zeros(prev.shape, np.float32)
     if len(rows) == 0:
-        return out
+        return None
     r0, r1 = max(rows[0] - window, 0), min(rows[-1] + window + 1, prev.shape[0])
     yy, xx = np.mgrid[r0:r1, 0:prev.shape[1]]
     xh = np.stack([xx.ravel(), yy.ravel(), np.ones(xx.size)], axis=1).astype(np.float64)
     p_inf = p.copy()
     p_inf[0] = 0.0  # the same rotation, no translation
     p_img = prev.img[0][r0:r1]
-    res = []
+    out = []
     for q in (p, p_inf):
         # The previous image's pixel x matches the current image at warp(x): sample the current image there.
         x = warp.points(xh, q).astype(np.float32)
         x[~np.isfinite(x)] = -1.0
         w = cv2.remap(cur.img[0], x[:, 0].reshape(xx.shape), x[:, 1].reshape(xx.shape), cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_REPLICATE)
-        res.append((w - p_img) ** 2)
-    g = cv2.blur(res[0], (window, window), borderType=cv2.BORDER_REPLICATE)
-    e = cv2.blur(res[1], (window, window), borderType=cv2.BORDER_REPLICATE) - g
+        out.append(cv2.blur((w - p_img) ** 2, (window, window), borderType=cv2.BORDER_REPLICATE))
+    return out[0], out[1], r0, r1
+
+
+def ground_evidence(prev, cur, cam, h, fit, mask, *, window=7, agreement=2.0, support_threshold=None):
+    """Per-pixel ground evidence (H, W) float32 of ``prev`` (a :class:`Pyramid`) under a converged fit:
+    the windowed mean of (squared residual under the rotation alone, where points at infinity go) −
+    (squared residual under the fitted ground motion), grey levels², where the fitted motion agrees
+    with the pixel (windowed mean squared residual within ``agreement`` times the fit's residual scale)
+    inside ``mask``; 0 elsewhere. Large where the pixel's parallax is the ground's; near 0 where the
+    image has no texture to tell.
+
+    With ``support_threshold`` (grey levels²) also returns the ground's support (H, W) bool: the pixels
+    of ``mask`` connected (8-neighbours) to evidence above the threshold through pixels where the
+    fitted motion agrees and the evidence says nothing either way (|evidence| <= threshold: no texture
+    to tell), or where the evidence is above the threshold and the ground motion's residual is below a
+    quarter of the one of points at infinity (a strong edge of the ground). Texture alone decides where evidence exists (the painted lines of a road, the grain of
+    one patch); the support carries it over the untextured ground between them, up to where the motion
+    stops agreeing (the textured edge of an obstacle) or the evidence says far (points at infinity)."""
+    out = np.zeros(prev.shape, np.float32)
+    maps = _residual_maps(prev, cur, cam, h, fit, mask, window)
+    if maps is None:
+        return out if support_threshold is None else (out, np.zeros(prev.shape, bool))
+    g, i, r0, r1 = maps
+    e = i - g
     # Near non-ground (a wall, a box) has parallax too: the ground motion must also fit the pixel.
-    agree = g <= (agreement * fit.sigma) ** 2
-    out[r0:r1] = np.where(mask[r0:r1] & agree, e, 0.0)
-    return out
+    agree = mask[r0:r1] & (g <= (agreement * fit.sigma) ** 2)
+    out[r0:r1] = np.where(agree, e, 0.0)
+    if support_threshold is None:
+        return out
+    seeds = agree & (e > support_threshold)
+    # Strong edges of the ground (paint on dark asphalt) leave residuals above the fit's scale, set by the
+    # flat ground; they pass where the ground motion explains them 4x better than points at infinity do.
+    edges = mask[r0:r1] & (e > support_threshold) & (g <= 0.25 * i)
+    region = (seeds | edges | (agree & (np.abs(e) <= support_threshold))).astype(np.uint8)
+    n, comp = cv2.connectedComponents(region, connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[np.unique(comp[seeds])] = True
+    keep[0] = False  # the background of connectedComponents
+    support = np.zeros(prev.shape, bool)
+    # The windowed residuals reach half a window past the ground's edge: keep the support inside it.
+    support[r0:r1] = cv2.erode(keep[comp].view(np.uint8), np.ones((window, window), np.uint8)) > 0
+    return out, support
 
 
 def label_points(evidence, threshold, max_labels, step=4):

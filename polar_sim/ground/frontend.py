@@ -143,12 +143,16 @@ def periodic(grey, pts, *, half=5, radius=8, min_shift=3, threshold=0.8, rise=0.
     if not ok.any():
         return out
     g = grey.astype(np.float32)
-    off = np.arange(-half, half + 1)
+    off = np.arange(-m, m + 1)
     oy, ox = np.meshgrid(off, off, indexing="ij")
     cc = c[ok]
+    # Every patch tested is a slice of one window per point: one gather instead of one per shift.
+    win = g[cc[:, 1, None] + oy.ravel()[None, :], cc[:, 0, None] + ox.ravel()[None, :]].reshape(len(cc), 2 * m + 1,
+                                                                                                  2 * m + 1)
+    side = 2 * half + 1
 
     def patches(dx, dy):
-        p = g[cc[:, 1, None] + dy + oy.ravel()[None, :], cc[:, 0, None] + dx + ox.ravel()[None, :]]
+        p = win[:, m - half + dy:m - half + dy + side, m - half + dx:m - half + dx + side].reshape(len(cc), -1)
         p = p - p.mean(axis=1, keepdims=True)
         return p / np.maximum(np.sqrt((p * p).sum(axis=1, keepdims=True)), 1e-6)
 

@@ -64,6 +64,8 @@ class MotionResult:
     dbar : (N,) scaled inverse depth V/Z in 1/s, absolute value; NaN where not valid.
     valid : (N,) bool, d̄ has the sign of the median d̄ (points behind or reversing are dropped).
     iterations : IRLS iterations run (0 = plain least squares).
+    yaw_var : variance of the yaw rate, (rad/s)²: the least-squares covariance of the inlier rows (residuals
+        within 3 robust standard deviations) at the solution, the depths eliminated; NaN if undetermined.
     """
 
     rates: np.ndarray
@@ -71,6 +73,7 @@ class MotionResult:
     dbar: np.ndarray
     valid: np.ndarray
     iterations: int
+    yaw_var: float = float("nan")
 
     @property
     def yaw_rate(self):
@@ -238,4 +241,31 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
     med = np.median(dbar) if n else 0.0
     valid = np.sign(dbar) == np.sign(med) if med != 0 else np.zeros(n, dtype=bool)
     out = np.where(valid, np.abs(dbar), np.nan)
-    return MotionResult(rates=rates, foe=t, dbar=out, valid=valid, iterations=it)
+    fu, fv = _predict(u, v, rates, t, dbar)
+    yaw_var = _yaw_variance(u, v, udot - bias_u - fu, vdot - bias_v - fv, ng_rates, lam_rates)
+    return MotionResult(rates=rates, foe=t, dbar=out, valid=valid, iterations=it, yaw_var=yaw_var)
+
+
+def _yaw_variance(u, v, r_u, r_v, ng_rates, ridge):
+    """Variance of the yaw rate, (rad/s)²: σ² [S⁻¹] of the yaw with S the Schur complement of the depths in
+    the unit-weight normal equations of the inlier points (both residuals within 3 σ), σ the residuals'
+    robust scale. Ignores the FOE unknowns (the yaw's variance with them fixed)."""
+    r = np.r_[r_u, r_v]
+    r = r[np.isfinite(r)]
+    if len(r) < 2 * ng_rates + 2:
+        return float("nan")
+    sigma = 1.4826 * float(np.median(np.abs(r)))
+    inl = np.isfinite(r_u) & np.isfinite(r_v) & (np.abs(r_u) <= 3 * sigma) & (np.abs(r_v) <= 3 * sigma)
+    if inl.sum() < ng_rates + 2 or not sigma > 0:
+        return float("nan")
+    C_u, a_u, C_v, a_v = _rows(u[inl], v[inl], ng_rates, np.zeros(2), None)
+    A11, A12, D, _, _ = arrow_normal_equations(C_u, a_u, C_v, a_v, r_u[inl], r_v[inl], ridge=ridge)
+    S = A11 - (A12 / D) @ A12.T
+    try:
+        cov = np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    # The rows' residual variance, with the depths and rates fitted (2 rows and 1 unknown per point).
+    dof = max(2 * int(inl.sum()) - int(inl.sum()) - ng_rates, 1)
+    s2 = float(np.sum(r_u[inl] ** 2 + r_v[inl] ** 2)) / dof
+    return float(s2 * cov[1 if ng_rates == 3 else 0, 1 if ng_rates == 3 else 0])

@@ -47,9 +47,10 @@ def _texture(rng, size, base, amp, tint):
 
 
 #: Ground textures of :class:`CorridorScene`: multi-octave noise, a faint grain on one colour (few
-#: corners), square tiles with grout lines, and painted stripes across the path; the last two repeat
-#: along the path (``tile`` and ``stripe_period`` texels).
-GROUND_KINDS = ("noise", "faint", "checker", "stripes")
+#: corners), square tiles with grout lines, painted stripes across the path on a grainy grey, and wide
+#: painted bands on a dark, almost untextured asphalt; the last three repeat along the path (``tile``
+#: and ``stripe_period`` texels).
+GROUND_KINDS = ("noise", "faint", "checker", "stripes", "painted")
 
 
 def _ground_texture(kind, rng, size, base, *, tile=32, stripe_period=128, stripe_width=3):
@@ -67,9 +68,12 @@ def _ground_texture(kind, rng, size, base, *, tile=32, stripe_period=128, stripe
         grout = ((ii % tile < 2) | (jj % tile < 2))[..., None]
         tex = np.where(light, np.float32([170, 165, 155]), np.float32([95, 95, 100]))
         tex = np.where(grout, np.float32([45, 45, 48]), tex) + 4.0 * grain
-    else:  # stripes across the path: texture rows are the forward coordinate
+    elif kind == "stripes":  # stripes across the path: texture rows are the forward coordinate
         line = ((ii % stripe_period) < stripe_width)[..., None]
         tex = np.where(line, np.float32([230, 228, 215]), np.float32([70, 70, 72])) + 12.0 * grain
+    else:  # painted: 0.16 m bands every 1.28 m on dark asphalt whose only texture is +-1 grey level of grain
+        line = ((ii % (stripe_period // 2)) < 8)[..., None]
+        tex = np.where(line, np.float32([225, 222, 210]), np.float32([52, 52, 55])) + 1.0 * grain
     tex = np.clip(tex, 0, 255).astype(np.float32)
     pyr = [tex]
     while pyr[-1].shape[0] > 8:
@@ -153,10 +157,11 @@ class CorridorScene:
         Size of one texel of the finest texture level, m.
     seed : int
         Texture randomness.
-    ground : {"noise", "faint", "checker", "stripes"}
+    ground : {"noise", "faint", "checker", "stripes", "painted"}
         Ground texture (:data:`GROUND_KINDS`): the default noise; a faint grain on one colour (almost no
         corners, as a plain concrete floor); 0.64 m tiles with grout lines; painted stripes every
-        2.56 m across the path (the last two repeat along the path).
+        2.56 m across the path; 0.16 m bands every 1.28 m on dark, almost untextured asphalt (the last
+        three repeat along the path).
     """
 
     camera_height: float = 1.0
@@ -313,3 +318,13 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
                 speed=speed, yaw_rate=yaw_rate, pitch=pitch, speeds=speeds)
+
+
+def check_data():
+    """:class:`polar_sim.params.CheckData` of :class:`polar_sim.ground.GroundVO`: four 160x120
+    frames of a curving drive (3 m/s, 0.05 rad/s), and the intrinsics and camera height they need."""
+    from polar_sim.params import CheckData
+
+    s = make_sequence(4, width=160, height=120, speed=3.0, yaw_rate=0.05, camera_height=1.0, seed=0)
+    return CheckData(init={"K": s["K"], "camera_height": s["camera_height"]},
+                     frames=tuple((s["rgb"][i], float(s["times"][i])) for i in range(len(s["rgb"]))))

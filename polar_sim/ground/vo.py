@@ -32,7 +32,7 @@ from polar_sim.ground.image import grey, hsv216, reduce2x
 from polar_sim.ground.integration import motion_step
 from polar_sim.ground.models import GROUND_MODELS, fit_ground
 from polar_sim.ground.motion import estimate_motion
-from polar_sim.params import Parameterised, check_fields, replace_fields, split_nested
+from polar_sim.params import Parameterised, Tags, check_fields, replace_fields, split_nested
 
 __all__ = ["GroundVO", "GroundEstimate", "STATUSES", "STAGE_CONFIGS"]
 
@@ -70,6 +70,7 @@ class _Frame:
     motion_done: bool = False
     speed_raw: float = np.nan
     yaw_raw: float = np.nan
+    yaw_measured: float = np.nan
     speed_dense: float = np.nan
     speed_measured: float = np.nan
     rates_raw: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
@@ -172,6 +173,8 @@ class GroundVO(Parameterised):
         Dense alignment of the ground between images, its fusion with the RANSAC speed, its ground
         self-labels and the aliasing guards (not in the published method).
     """
+
+    TAGS = Tags(update="process", query="trajectory", requires_update=False, random_state="seed", data="polar_sim.ground.synthetic:check_data")
 
     def __init__(self, K, camera_height, *, model="6param", sampling="weighted", seed=0, downsample=2,
                  integration="planar", camera_pitch=0.0, tracking=TrackingConfig(), motion=MotionConfig(),
@@ -355,6 +358,8 @@ class GroundVO(Parameterised):
             self.rates_ = np.zeros(3)
         self._integrate_pose(k, dt, fr.diag)
         prob = self._ground_map(labels)
+        if c.calibration.method == "platt":
+            fr.diag["calibration_fallback"] = self.calibrator_.fallback_
         if self._replenish(g, fr.diag) and fr.status == "no_features":
             fr.status = "few_triplets"  # nothing was tracked in, but this image has features to track on
         fr.diag["status"] = fr.status
@@ -521,6 +526,7 @@ class GroundVO(Parameterised):
             return
         m, idx, x1, u, v = solved
         fr.motion_done, fr.rates_raw, fr.yaw_raw = True, m.rates.copy(), float(m.rates[1])
+        fr.yaw_measured = self._measured_yaw(fr, m)
         fit, ci, below = self._fit_ground(fr, m, idx, x1, u, v)
         fr.speed_raw = fit.speed if fit.ok else np.nan
         vf, yf = self.speed_filter_, self.yaw_filter_
@@ -530,7 +536,7 @@ class GroundVO(Parameterised):
         measured = self._measured_speed(fr, fit if accepted else None)
         if measured is not None:
             vf.update(measured[0], var=measured[1])
-        yf.update(fr.yaw_raw)
+        yf.update(fr.yaw_measured)
         self.rates_ = np.array([fr.rates_raw[0], yf.x, fr.rates_raw[2]])
         if measured is not None:
             self._fuse_depths(m, idx, fit.speed)
@@ -657,8 +663,14 @@ class GroundVO(Parameterised):
                     dense_iterations=fit.iterations)
         self.dense_labels_ = np.zeros((0, 2))
         if fit.ok and not fit.aliased and d.label_evidence > 0 and d.max_labels > 0:
-            self.evidence_ = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_)
-            self.dense_labels_ = label_points(self.evidence_, d.label_evidence, d.max_labels)
+            if d.label_region == "support":
+                # Labels spread over the ground the evidence is connected to, not only over its texture.
+                self.evidence_, support = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_,
+                                                          support_threshold=d.label_evidence)
+                self.dense_labels_ = label_points(support.view(np.uint8), 0, d.max_labels)
+            else:
+                self.evidence_ = ground_evidence(self.prev_pyr_, pyr, self.camera_, c.h, fit, self.dense_mask_)
+                self.dense_labels_ = label_points(self.evidence_, d.label_evidence, d.max_labels)
         diag["n_dense_labels"] = int(len(self.dense_labels_))
 
     def _dense_pair_motion(self):
@@ -707,6 +719,23 @@ class GroundVO(Parameterised):
             z = fuse_measurements(fit.speed, c.ground.var_scale * fit.speed_var, dense.speed, dense.speed_var,
                                   c.dense.gate)
         fr.speed_measured = z[0]
+        return z
+
+    def _measured_yaw(self, fr, m):
+        """The yaw-rate measurement of this frame (rad/s): the tracks' yaw rate fused with the dense fit's by
+        their variances. The tracks' variance grows with the share of the ground's tracks seen to alias
+        (1 + alias_var_scale x share): on a repeating texture the tracks that were not caught alias too.
+        The tracks' yaw alone without the dense stage, or when either variance is unknown."""
+        c = self.cfg_
+        dense = self._dense_speed() if c.dense.enabled and c.dense.fuse_yaw else None
+        if dense is None or dense.aliased or not np.isfinite(m.yaw_var) or not np.isfinite(dense.yaw_var):
+            return fr.yaw_raw
+        d = fr.diag
+        share = d.get("n_track_aliased", 0) / max(d.get("n_track_aliased", 0) + d.get("n_tracked", 0), 1)
+        var = c.dense.var_scale * m.yaw_var * (1.0 + c.dense.alias_var_scale * share)
+        z, z_var = fuse_measurements(fr.yaw_raw, var, dense.yaw_rate, dense.yaw_var, c.dense.gate)
+        d.update(yaw_tracks_var=var, yaw_dense=dense.yaw_rate, yaw_dense_var=dense.yaw_var, yaw_measured=z,
+                 yaw_measured_var=z_var)
         return z
 
     def _dense_ground_at(self, xy):

@@ -98,6 +98,20 @@ def run_serial(exp, todo, out_dir, size, split, run_params, workers, timeout, ad
         yield execute(exp, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params)
 
 
+#: What a pool worker sends when it has a trial in hand and its experiment imported: the trial's
+#: clock (``trial_timeout``) starts then, not when the trial was sent to a worker still starting.
+_STARTED = "started"
+#: Seconds a new worker may take to start (spawn, imports) before its trial is recorded as failed.
+STARTUP_S = 300.0
+
+
+def _deadline(task, timeout):
+    """When a pool task (params, seed, sent, started) times out: ``timeout`` after it started, or
+    :data:`STARTUP_S` after it was sent while its worker has not started it."""
+    _, _, sent, started = task
+    return started + timeout if started is not None else sent + STARTUP_S
+
+
 def _worker_main(conn):
     """A pool worker: runs the trials it is sent, one at a time, until it gets ``None``. Its
     progress bars stay off (several processes drawing on one terminal garble it): the parent's
@@ -110,6 +124,8 @@ def _worker_main(conn):
             return
         if msg is None:
             return
+        get_experiment(msg[0])   # import it first: a new worker's start-up is not the trial's time
+        conn.send(_STARTED)
         conn.send(execute(*msg))
 
 
@@ -119,7 +135,7 @@ class _Worker:
         self.proc = ctx.Process(target=_worker_main, args=(child,), daemon=True)
         self.proc.start()
         child.close()
-        self.task = None      # (params, seed, started_at)
+        self.task = None      # (params, seed, sent_at, started_at or None until the worker says so)
 
     def stop(self, kill=False):
         if kill and self.proc.is_alive():
@@ -148,14 +164,14 @@ def run_pool(exp, todo, out_dir, size, split, run_params, workers, timeout, addr
                 if w.task is None and queue:
                     p, s = queue.pop(0)
                     w.conn.send((portable, p, s, str(trial_dir(out_dir, trial_key(p, s))), size, split, run_params))
-                    w.task = (p, s, time.monotonic())
+                    w.task = (p, s, time.monotonic(), None)
             busy = [w for w in pool if w.task]
-            wait_s = 1.0 if timeout is None else max(0.05, min(w.task[2] + timeout for w in busy) - time.monotonic())
+            wait_s = 1.0 if timeout is None else max(0.05, min(_deadline(w.task, timeout) for w in busy) - time.monotonic())
             mpc.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], timeout=min(wait_s, 5.0))
             for i, w in enumerate(pool):
                 if w.task is None:
                     continue
-                p, s, t0 = w.task
+                p, s, sent, t0 = w.task
                 row, restart = None, False
                 got = w.conn.poll()
                 if got:
@@ -164,14 +180,19 @@ def run_pool(exp, todo, out_dir, size, split, run_params, workers, timeout, addr
                     except (EOFError, OSError):   # the worker's end closed: it died
                         w.proc.join(timeout=5)
                         got = False
+                if got and isinstance(row, str) and row == _STARTED:
+                    w.task, row = (p, s, sent, time.monotonic()), None
+                    continue
+                now = time.monotonic()
                 if got:
                     pass
                 elif not w.proc.is_alive():
                     row, restart = error_row(p, s, size, split, f"worker process died (exit code {w.proc.exitcode})",
-                                             time.monotonic() - t0), True
-                elif timeout is not None and time.monotonic() - t0 > timeout:
-                    row, restart = error_row(p, s, size, split, f"timed out after {timeout:g} s (trial_timeout)",
-                                             time.monotonic() - t0), True
+                                             now - (t0 or sent)), True
+                elif timeout is not None and now > _deadline(w.task, timeout):
+                    what = (f"timed out after {timeout:g} s (trial_timeout)" if t0 is not None else
+                            f"the worker did not start within {STARTUP_S:g} s")
+                    row, restart = error_row(p, s, size, split, what, now - (t0 or sent)), True
                 if row is None:
                     continue
                 w.task = None
@@ -179,7 +200,7 @@ def run_pool(exp, todo, out_dir, size, split, run_params, workers, timeout, addr
                     w.stop(kill=True)
                     pool[i] = _Worker(ctx)
                 yield row
-            yield Running([w.task[2] for w in pool if w.task])
+            yield Running([w.task[3] or w.task[2] for w in pool if w.task])
     finally:
         for w in pool:
             w.stop(kill=bool(w.task))

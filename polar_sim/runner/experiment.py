@@ -109,10 +109,9 @@ def _check_array_name(name):
 
 
 @dataclasses.dataclass(frozen=True)
-class TrialContext:
-    """What a trial gets besides its parameters: its artefact folder, the size, the split and the
-    run's protocol parameters (``params``: durations, frame counts, resolutions; see
-    :class:`Experiment`)."""
+class _Context:
+    """A folder, the size (``"full"`` or ``"quick"``), the split and the run's protocol parameters
+    (``params``: durations, frame counts, resolutions; see :class:`Experiment`)."""
 
     out_dir: Path
     size: str = "full"
@@ -122,6 +121,12 @@ class TrialContext:
     @property
     def quick(self) -> bool:
         return self.size == "quick"
+
+
+@dataclasses.dataclass(frozen=True)
+class TrialContext(_Context):
+    """What a trial gets besides its parameters: its artefact folder (``out_dir``), the size, the
+    split and the run's protocol parameters."""
 
     def save_arrays(self, name: str = "arrays", **arrays) -> Path:
         """Save per-trial arrays to ``<out_dir>/<name>.npz`` (atomically, no pickle), for the
@@ -131,18 +136,9 @@ class TrialContext:
 
 
 @dataclasses.dataclass(frozen=True)
-class RunContext:
-    """What ``summarize``, ``checks`` and ``findings`` get: the run folder, size, split and
-    protocol parameters, and access to each row's saved arrays."""
-
-    out_dir: Path
-    size: str = "full"
-    split: str = "dev"
-    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-
-    @property
-    def quick(self) -> bool:
-        return self.size == "quick"
+class RunContext(_Context):
+    """What ``summarize``, ``checks`` and ``findings`` get: the run folder (``out_dir``), size,
+    split and protocol parameters, and access to each row's saved arrays."""
 
     def trial_dir(self, row) -> Path:
         """The artefact folder of the trial that produced ``row``."""

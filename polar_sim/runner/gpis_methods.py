@@ -53,27 +53,32 @@ def icpd_gt(*, exact_sdf):
 
 
 def gpis2d(**params):
-    """``GPISMap2D`` taking the sensor pose (``sensor_offset=(0, 0)``), every other parameter at its default."""
+    """``GPISMap2D`` taking the sensor pose (``sensor_offset=(0, 0)``), every other parameter at its
+    default; ``params`` are parameters or stage fields (``local_gp__train_cap=16``)."""
     from polar_sim.gpis import GPISMap2D
 
-    return GPISMap2D(**{"sensor_offset": (0.0, 0.0), **params})
+    return GPISMap2D(sensor_offset=(0.0, 0.0)).set_params(**params)
 
 
 def gpis2d_legacy(**params):
-    """``GPISMap2D(legacy=True)``: the published behaviour, taking the sensor pose."""
-    return gpis2d(legacy=True, **params)
+    """``GPISMap2D.published()``: the published behaviour, taking the sensor pose."""
+    from polar_sim.gpis import GPISMap2D
+
+    return GPISMap2D.published(**{"sensor_offset": (0.0, 0.0), **params})
 
 
 def gpis3d(**params):
-    """``GPISMap3D()`` with its defaults."""
+    """``GPISMap3D()`` with its defaults; ``params`` are parameters or stage fields."""
     from polar_sim.gpis import GPISMap3D
 
-    return GPISMap3D(**params)
+    return GPISMap3D().set_params(**params)
 
 
 def gpis3d_legacy(**params):
-    """``GPISMap3D(legacy=True)``."""
-    return gpis3d(legacy=True, **params)
+    """``GPISMap3D.published()``: the published behaviour."""
+    from polar_sim.gpis import GPISMap3D
+
+    return GPISMap3D.published(**params)
 
 
 class _GridBase:

@@ -153,14 +153,14 @@ from polar_sim.runner import gpis_methods as _gm  # noqa: E402  (light: no heavy
 
 for _name, _f, _d in [
     ("gpis", _gm.gpis2d, "GPISMap2D, default mode, taking the sensor pose"),
-    ("gpis_legacy", _gm.gpis2d_legacy, "GPISMap2D(legacy=True): the published behaviour"),
+    ("gpis_legacy", _gm.gpis2d_legacy, "GPISMap2D.published(): the published behaviour"),
     ("grid5", lambda **kw: _gm.GridMapper2D(0.05, **kw), "5 cm occupancy grid; SDF = its signed EDT; surface = occupied cells next to free"),
     ("grid10", lambda **kw: _gm.GridMapper2D(0.10, **kw), "10 cm occupancy grid (as grid5)"),
     ("edt5", lambda **kw: _gm.EDTMapper2D(0.05, **kw), "signed EDT of a 5 cm grid; surface = its zero contour"),
 ]:
     register_method("mapper2d", _name, _f, description=_d)
 register_method("mapper3d", "gpis", _gm.gpis3d, description="GPISMap3D, default mode")
-register_method("mapper3d", "gpis_legacy", _gm.gpis3d_legacy, description="GPISMap3D(legacy=True)")
+register_method("mapper3d", "gpis_legacy", _gm.gpis3d_legacy, description="GPISMap3D.published(): the published behaviour")
 for _n in (1000, 5000, 10000):
     register_method("localizer2d", f"pf{_n}", _gm.pf_factory(_n),
                     description=f"MCL, {_n} particles, likelihood field of a 5 cm grid")

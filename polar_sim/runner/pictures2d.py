@@ -5,7 +5,9 @@
 - :func:`map_panel`: those arrays drawn (SDF where observed, grey where never observed, zero
   level, path);
 - :func:`map_figure`: the three-panel figure of a whole log (update-time histogram, SDF, variance);
-- :func:`error_figure`: |SDF error| near surfaces and the worst 1 % of the surface, classed.
+- :func:`error_figure`: |SDF error| near surfaces and the worst 1 % of the surface, classed;
+  :func:`error_rows_figure`: one row of those per trial;
+- :func:`spacing_figure`: scores against the scan spacing, per scene and method.
 
 Coordinates in metres; SDF in metres; variance in m^2; times in ms. Legends sit under the axes
 and colour bars beside them (:mod:`polar_sim.plotting`), so neither covers a map.
@@ -20,7 +22,7 @@ from polar_sim.plotting import colorbar_beside, legend_under
 #: Grey of never-observed map cells (the map's distance there is an extrapolation).
 UNSEEN_GREY = "0.75"
 
-__all__ = ["map_picture", "map_panel", "map_figure", "error_figure"]
+__all__ = ["map_picture", "map_panel", "map_figure", "error_figure", "error_rows_figure", "spacing_figure"]
 
 
 def map_picture(m, pts, step):
@@ -118,4 +120,33 @@ def map_figure(z, *, mapper, title):
     ax[2].set(title="log10 variance of the SDF", xlabel="x (m)", ylabel="y (m)", aspect="equal")
     colorbar_beside(fig, ax[2], im, "log10 variance (m^2)")
     fig.suptitle(title)
+    return fig
+
+
+def error_rows_figure(arrays, rows, scene, *, height):
+    """One row of :func:`error_figure`'s two panels per trial (its saved ``arrays`` and its ``rows``,
+    alike in order), ``height`` inches a row."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(len(rows), 2, figsize=(15, height * len(rows)), squeeze=False)
+    for a, z, r in zip(ax, arrays, rows):
+        error_figure(a, z, r, scene)
+    return fig
+
+
+def spacing_figure(long, keys):
+    """Per scene of ``long`` (rows of scene, spacing_m, method and the ``keys``, metres), each method's
+    ``keys`` against the scan spacing: a row of log-scale panels per scene."""
+    import matplotlib.pyplot as plt
+
+    scenes = sorted({r["scene"] for r in long})
+    fig, ax = plt.subplots(len(scenes), len(keys), figsize=(15, 4.2 * len(scenes)), squeeze=False)
+    for i, scene in enumerate(scenes):
+        for k in sorted({r["method"] for r in long}):
+            rs = [r for r in long if r["scene"] == scene and r["method"] == k]
+            for a, key in zip(ax[i], keys):
+                a.plot([r["spacing_m"] for r in rs], [r[key] for r in rs], "o-", label=k)
+                a.set(xlabel="scan spacing (m of travel)", ylabel="m", yscale="log", title=f"{scene}: {key} (mean)")
+                a.grid(alpha=0.3)
+        ax[i, 0].legend()
     return fig

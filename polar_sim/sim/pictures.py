@@ -131,7 +131,7 @@ def lidar_map_figure(world, lidar, title, *, margin=3.0, max_half=30.0, n_cells=
     n_beams, n_ret = len(scan.ranges), len(W)
     sparse = n_ret < n_beams / 2
     span = np.vstack([W, [[cx, cy]]] + ([[[cx - rmax, cy - rmax], [cx + rmax, cy + rmax]]] if sparse else []))
-    bounds = (getattr(world, "meta", None) or {}).get("bounds")
+    bounds = getattr(getattr(world, "meta", None), "bounds", None)
     if bounds is not None:   # the whole world, and whatever of the scan lies beyond it
         x0, x1, y0, y1 = (float(b) for b in bounds)
         lo, hi = np.minimum(span.min(0), [x0, y0]) - 1.0, np.maximum(span.max(0), [x1, y1]) + 1.0

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 import mujoco
 
-from polar_sim.sim.meta import check_meta
+from polar_sim.sim.meta import SceneMeta, check_meta
 from polar_sim._validation import as_float, as_int, check_choice
 from polar_sim.fileio import check_source
 
@@ -202,7 +202,7 @@ def load_scene(scene, seed=0, **options):
             spec = mujoco.MjSpec.from_file(str(path))
         except Exception as exc:  # mujoco raises its own error types for XML problems
             raise ValueError(f"scene: malformed MJCF in {str(path)!r}: {exc}") from exc
-        return spec, {}
+        return spec, SceneMeta()
     if not isinstance(scene, str):
         raise TypeError(f"scene: expected a scene name or a path to an MJCF file, got {type(scene).__name__}")
     if scene not in SCENES:

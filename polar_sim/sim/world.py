@@ -11,6 +11,7 @@ from polar_sim._validation import as_bool, as_float, as_float_array, as_int, as_
 from polar_sim.geometry import T_to_pose2d, make_pose, matrix_to_quat, pinhole_intrinsics
 from polar_sim.sim import truth as _truth
 from polar_sim.sim.actors.robots import RoverController
+from polar_sim.sim.meta import RoverMeta, check_meta
 from polar_sim.sim.scenes import load_scene
 from polar_sim.sim.sensors import CameraFrame, CameraRig, DepthNoise, Lidar, RangeNoise, camera_pose, parse_lidars
 
@@ -63,8 +64,10 @@ class World:
         Sensor names in this scene.
     dt : float
         Control period of :meth:`step`, seconds.
-    meta : dict
-        Scene metadata (``route`` (n, 2) for the rover scenes, ``target`` for tabletop, ...).
+    meta : polar_sim.sim.meta.SceneMeta
+        The scene's metadata, a frozen dataclass per scene (:data:`polar_sim.sim.meta.SCENE_META`):
+        ``w.meta.route`` (n, 2) for the rover scenes, ``w.meta.goal`` for navworld, ``w.meta.target``
+        for tabletop, ...
     """
 
     def __init__(self, scene="rover_flat", seed=0, *, kinematic=False, noise=None, control_dt=None,
@@ -91,9 +94,9 @@ class World:
         # within 0.5 mm, so depth back-projects onto the exact geometry that lidar rays and sdf()
         # use; no more, since every slice costs frame rate (128 slices cut 640x480 by 30 %).
         m.vis.quality.numslices = max(int(m.vis.quality.numslices),
-                                      _slices_for(m, tol=5e-4, radius=self.meta.get("max_round_radius", 0.0)))
-        if self.meta.get("pooled"):  # a layout written into the compiled model's slots
-            self.meta = self._relayout_fn()(m, self.seed, **scene_options)
+                                      _slices_for(m, tol=5e-4, radius=getattr(self.meta, "max_round_radius", 0.0)))
+        if getattr(self.meta, "pooled", False):  # a layout written into the compiled model's slots
+            self.meta = self._relayout_meta(self.seed)
         self.data = mujoco.MjData(m)
         self.cameras = tuple(_truth.name_of(m, _OBJ.mjOBJ_CAMERA, i) for i in range(m.ncam))
         self._lidars = {k: Lidar(m, s) for k, s in parse_lidars(m).items()}
@@ -105,19 +108,19 @@ class World:
         self._closed = False
         self.kinematic = kinematic
         # A rover is one added by a scene builder (it brings its configuration and controller).
-        self._has_rover = "rover_config" in self.meta and _has_body(m, "rover")
+        self._has_rover = isinstance(self.meta, RoverMeta) and _has_body(m, "rover")
         if self.kinematic and not self._has_rover:
             raise ValueError("kinematic: only scenes with a rover can move kinematically")
-        terrain = self.meta.get("terrain")
+        terrain = getattr(self.meta, "terrain", None)
         if planar and terrain is not None and np.any(terrain.heights):
             raise ValueError(f"kinematic: 'planar' needs a flat scene; {scene!r} has hills (use True)")
         self._planar = planar
-        self._controller = RoverController(m, self.meta["rover_config"]) if self._has_rover else None
-        self._script = self.meta.get("script")
+        self._controller = RoverController(m, self.meta.rover_config) if self._has_rover else None
+        self._script = getattr(self.meta, "script", None)
         ts = m.opt.timestep
         if control_dt is None:
             # The scene's period, snapped to a whole number of physics steps.
-            dt0 = self.meta.get("control_dt", 0.1 if self._has_rover else 1.0 / 30.0)
+            dt0 = getattr(self.meta, "control_dt", 0.1 if self._has_rover else 1.0 / 30.0)
             control_dt = max(1, round(dt0 / ts)) * ts
         self.dt = float(control_dt)
         self._substeps = int(round(self.dt / ts))
@@ -126,14 +129,14 @@ class World:
         self._noise = {}
         for name, model_ in (noise or {}).items():
             self.set_noise(name, model_)
-        self._labels = _truth.label_table(m, self.meta.get("target"))
+        self._labels = _truth.label_table(m, getattr(self.meta, "target", None))
         self._robot_set = frozenset(np.flatnonzero(self._labels == _truth.LABELS["robot"]).tolist())
         self._ground_set = frozenset(np.flatnonzero(self._labels == _truth.LABELS["ground"]).tolist())
         self._ids = {"rover": _truth.id_of(m, _OBJ.mjOBJ_BODY, "rover") if self._has_rover else -1,
                      "hand": _truth.id_of(m, _OBJ.mjOBJ_BODY, "hand"),
                      "cameras": {c: _truth.id_of(m, _OBJ.mjOBJ_CAMERA, c) for c in self.cameras},
                      "sites": {k: _truth.id_of(m, _OBJ.mjOBJ_SITE, s.spec.site) for k, s in self._lidars.items()},
-                     "objects": {o: m.body(o).id for o in self.meta.get("objects", ())}}
+                     "objects": {o: m.body(o).id for o in getattr(self.meta, "objects", ())}}
         self._sdf = None
         self.reset(self.seed)
 
@@ -159,7 +162,7 @@ class World:
                 mujoco.mj_step(self.model, self.data)
             self.data.time = 0.0
         elif self.kinematic:
-            self._kin = np.array(self.meta["start_pose2d"], dtype=np.float64)
+            self._kin = np.array(self.meta.start_pose2d, dtype=np.float64)
             if self._planar:
                 self._kin = tuple(float(v) for v in self._kin)
             self._set_kinematic_pose(0.0, 0.0)
@@ -172,19 +175,20 @@ class World:
         ``pooled=True`` (``navworld``); a seed whose layout cannot be drawn raises ``ValueError``
         and leaves the world as it was."""
         self._check_open()
-        if not self.meta.get("pooled"):
+        if not getattr(self.meta, "pooled", False):
             raise ValueError(f"relayout: scene {self.scene!r} was not built pooled (pass pooled=True to a scene "
                              "that supports it: navworld); build a new World for another layout")
         seed = as_int(seed, "seed", minimum=0)
-        self.meta = self._relayout_fn()(self.model, seed, **self._scene_options)
+        self.meta = self._relayout_meta(seed)
         self.seed = seed
         self._sdf = None  # the static geometry changed
         return self.reset(seed)
 
-    def _relayout_fn(self):
+    def _relayout_meta(self, seed):
+        """Write the layout of ``seed`` into the pooled model's slots; returns its metadata."""
         from polar_sim.sim.scenes import SCENES
 
-        return SCENES[self.scene].load_relayout()
+        return check_meta(self.scene, SCENES[self.scene].load_relayout()(self.model, seed, **self._scene_options))
 
     def close(self):
         """Free the renderers. Safe to call twice."""
@@ -257,7 +261,7 @@ class World:
                 raise ValueError(f"action: contains NaN or inf: {[v, w]}")
         else:
             a = self._check_action_array(action)
-        cfg = self.meta["rover_config"]
+        cfg = self.meta.rover_config
         if abs(a[0]) > cfg.max_speed + 1e-9 or abs(a[1]) > cfg.max_yaw_rate + 1e-9:
             raise ValueError(f"action: ({a[0]:.3g}, {a[1]:.3g}) exceeds the rover's limits "
                              f"|v| <= {cfg.max_speed} m/s, |omega| <= {cfg.max_yaw_rate} rad/s")
@@ -305,7 +309,7 @@ class World:
         x, y, th = self._kin
         qpos, qvel = self.data.qpos, self.data.qvel
         a, va = self._controller.qpos_adr, self._controller.qvel_adr
-        qpos[a : a + 7] = (x, y, self.meta["rover_config"].wheel_radius, math.cos(th / 2), 0.0, 0.0,
+        qpos[a : a + 7] = (x, y, self.meta.rover_config.wheel_radius, math.cos(th / 2), 0.0, 0.0,
                            math.sin(th / 2))
         qvel[va : va + 6] = (v * math.cos(th), v * math.sin(th), 0.0, 0.0, 0.0, w)
         mujoco.mj_forward(self.model, self.data)
@@ -314,9 +318,9 @@ class World:
         if self._planar:
             return self._set_planar_pose(v, w)
         m, d = self.model, self.data
-        cfg = self.meta["rover_config"]
+        cfg = self.meta.rover_config
         x, y, th = self._kin
-        terrain = self.meta.get("terrain")
+        terrain = getattr(self.meta, "terrain", None)
         z = float(terrain.height(x, y)) if terrain is not None else 0.0
         n = terrain.normal(x, y) if terrain is not None else np.array([0.0, 0.0, 1.0])
         h = np.array([np.cos(th), np.sin(th), 0.0])
@@ -407,7 +411,7 @@ class World:
             else:
                 lookat = self.model.stat.center
         if distance is None:
-            distance = (12.0 * self.meta["rover_config"].wheelbase if self._has_rover
+            distance = (12.0 * self.meta.rover_config.wheelbase if self._has_rover
                         else 1.5 * self.model.stat.extent)
         if self._rig is None:
             self._rig = CameraRig(self.model)
@@ -459,7 +463,7 @@ class World:
         """
         m, d = self.model, self.data
         ids = self._ids
-        out = {"time": self.time, "target": self.meta.get("target")}
+        out = {"time": self.time, "target": getattr(self.meta, "target", None)}
         if self._has_rover:
             b = ids["rover"]
             T = _truth.body_pose(d, b)
@@ -596,7 +600,7 @@ class World:
 
     def _scene_sdf(self):
         if self._sdf is None:
-            self._sdf = _truth.SceneSDF(self.model, self.data, self.meta.get("terrain"))
+            self._sdf = _truth.SceneSDF(self.model, self.data, getattr(self.meta, "terrain", None))
         return self._sdf
 
     def nearest_surface(self, points):
@@ -619,7 +623,7 @@ class World:
         try:
             bid = self.model.body(name).id
         except KeyError as exc:
-            raise ValueError(f"name: unknown object {name!r}; objects: {list(self.meta.get('objects', ()))}") from exc
+            raise ValueError(f"name: unknown object {name!r}; objects: {list(getattr(self.meta, 'objects', ()))}") from exc
         n = as_int(n, "n", minimum=1)
         mesh = _truth.body_trimesh(self.model, bid)
         import trimesh
@@ -635,7 +639,7 @@ class World:
         try:
             return self.model.body(_check_name(name, "name")).id
         except KeyError:
-            raise ValueError(f"name: unknown object {name!r}; objects: {list(self.meta.get('objects', ()))}") from None
+            raise ValueError(f"name: unknown object {name!r}; objects: {list(getattr(self.meta, 'objects', ()))}") from None
 
 
 def _compose_points(pose, points):

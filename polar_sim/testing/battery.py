@@ -184,20 +184,20 @@ def _close(target):
 
 
 def _entry(name):
-    """The :class:`EntryPoint` of a registered name, or of ``"package.module:builder"`` (a
-    user's entry point, importable in the worker process too)."""
+    """The :class:`EntryPoint` of a registered or derived name (:data:`ENTRY_POINTS`), or of
+    ``"package.module:builder"`` (a user's entry point, importable in the worker process too)."""
     from polar_sim.testing.entries import ENTRY_POINTS
 
-    if ":" in name and not name.startswith("polar_sim/"):
-        import importlib
-
-        mod, _, attr = name.partition(":")
-        return getattr(importlib.import_module(mod), attr)()
     try:
         builder = ENTRY_POINTS[name]
     except KeyError:
-        raise ValueError(f"name: unknown entry point {name!r}; known: {sorted(dict.keys(ENTRY_POINTS))} "
-                         "and ID.reset / ID.step of every env id") from None
+        if ":" in name and not name.startswith("polar_sim/"):
+            import importlib
+
+            mod, _, attr = name.partition(":")
+            return getattr(importlib.import_module(mod), attr)()
+        raise ValueError(f"name: unknown entry point {name!r}; known: {sorted(dict.keys(ENTRY_POINTS))}, "
+                         "the module classes' (entry_point_names()) and ID.reset / ID.step of every env id") from None
     return builder()
 
 

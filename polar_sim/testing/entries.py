@@ -13,27 +13,8 @@ import numpy as np
 from polar_sim.testing.entry import EntryPoint, Graceful
 from polar_sim.testing.digest import state_digest
 
-__all__ = ["ENTRY_POINTS", "entry_points_of"]
+__all__ = ["ENTRY_POINTS", "entry_points_of", "entry_point_names"]
 
-
-
-def _scan_circle(n=180, radius=3.0, centre=(0.4, -0.2), pose=(0.0, 0.0, 0.0)):
-    """Angles (n,) and exact ranges (n,) of a lidar at ``pose`` inside a circular wall."""
-    ang = np.linspace(-np.pi, np.pi, n, endpoint=False)
-    x, y, th = pose
-    d = np.stack([np.cos(ang + th), np.sin(ang + th)], 1)
-    o = np.array([x, y]) - np.asarray(centre)
-    b = d @ o
-    r = -b + np.sqrt(b * b - (o @ o - radius**2))
-    return ang, r
-
-
-def _depth_plane(h=24, w=32, z=1.0):
-    K = np.array([[30.0, 0, (w - 1) / 2], [0, 30.0, (h - 1) / 2], [0, 0, 1.0]])
-    v, u = np.mgrid[0:h, 0:w]
-    # a plane tilted about the camera's x axis: depth grows towards the bottom rows
-    depth = z / (1.0 - 0.3 * (v - K[1, 2]) / K[1, 1])
-    return depth.astype(np.float64), K
 
 
 def _poses_line(n=40, step=3.0):
@@ -46,173 +27,27 @@ def _poses_line(n=40, step=3.0):
 
 def _gpis2d(n_scans=2):
     from polar_sim.gpis import GPISMap2D
+    from polar_sim.gpis.synthetic import scan_circle
 
     m = GPISMap2D()
     for k in range(n_scans):
         pose = (0.1 * k, 0.05 * k, 0.1 * k)
-        a, r = _scan_circle(pose=pose)
-        m.update(a, r, pose)
+        m.update(*scan_circle(pose=pose), pose)
     return m
-
-
-def _gpis3d():
-    from polar_sim.gpis import GPISMap3D
-
-    depth, K = _depth_plane()
-    m = GPISMap3D()
-    m.update(depth, K, np.eye(4))
-    return m
-
-
-def _vo_sequence(n=4):
-    from polar_sim.ground.synthetic import make_sequence
-
-    return make_sequence(n, width=160, height=120, speed=3.0, yaw_rate=0.05, camera_height=1.0, seed=0)
-
-
-_CACHE: dict = {}
-
-
-def _cached(key, fn):
-    if key not in _CACHE:
-        _CACHE[key] = fn()
-    return _CACHE[key]
-
-
-def _track_sequence():
-    from polar_sim.tracking.synthetic import make_sequence
-
-    seq = make_sequence(3, "mug", hand=False, seed=0, shape=(120, 160))
-    pts, nrm = seq.model(800)
-    return seq, pts, nrm, [seq.frame(i) for i in range(3)]
-
-
-def _ep_gpis2d_update():
-    return EntryPoint(
-        "GPISMap2D.update", setup=lambda tmp: _gpis2d(1),
-        args=lambda t, tmp: dict(zip(("angles", "ranges"), _scan_circle(pose=(0.2, 0.1, 0.3)))) | {"pose2d": np.array([0.2, 0.1, 0.3])},
-        call=lambda t, a: t.update(a["angles"], a["ranges"], a["pose2d"]),
-        kinds={"angles": "angles", "ranges": "ranges", "pose2d": "pose2d"})
-
-
-def _ep_gpis2d_query():
-    return EntryPoint(
-        "GPISMap2D.query", setup=lambda tmp: _gpis2d(1), args=lambda t, tmp: {"points": np.array([[0.5, 0.5], [2.0, -1.0], [0.0, 3.0]])},
-        call=lambda t, a: t.query(a["points"]), kinds={"points": "points"}, pure=True)
-
-
-def _ep_gpis2d_save():
-    return EntryPoint("GPISMap2D.save", setup=lambda tmp: _gpis2d(1), args=lambda t, tmp: {"path": str(Path(tmp) / "ok.npz")},
-                      call=lambda t, a: t.save(a["path"]), kinds={"path": "path_out"})
-
-
-def _gpis_file(tmp, cls="2d"):
-    p = Path(tmp) / f"valid_{cls}.npz"
-    if not p.exists():
-        (_gpis2d(1) if cls == "2d" else _gpis3d()).save(p)
-    return str(p)
-
-
-def _ep_gpis2d_load():
-    from polar_sim.gpis import GPISMap2D
-
-    return EntryPoint("GPISMap2D.load", setup=lambda tmp: None, args=lambda t, tmp: {"path": _gpis_file(tmp)},
-                      call=lambda t, a: GPISMap2D.load(a["path"]), kinds={"path": "path_in"})
-
-
-def _ep_gpis3d_update():
-    def args(t, tmp):
-        depth, K = _depth_plane(z=1.1)
-        T = np.eye(4)
-        T[:3, 3] = [0.02, 0.0, 0.0]
-        return {"depth": depth, "K": K, "T_world_cam": T}
-
-    return EntryPoint("GPISMap3D.update", setup=lambda tmp: _gpis3d(), args=args,
-                      call=lambda t, a: t.update(a["depth"], a["K"], a["T_world_cam"]),
-                      kinds={"depth": "depth", "K": "K", "T_world_cam": "pose"})
-
-
-def _ep_gpis3d_query():
-    return EntryPoint("GPISMap3D.query", setup=lambda tmp: _gpis3d(),
-                      args=lambda t, tmp: {"points": np.array([[0.0, 0.0, 0.9], [0.1, 0.05, 1.0]])},
-                      call=lambda t, a: t.query(a["points"]), kinds={"points": "points"}, pure=True)
 
 
 def _ep_localize():
     from polar_sim.gpis.localize import localize
 
     def args(t, tmp):
-        return {"map": t, "scan": _scan_circle(pose=(0.05, 0.02, 0.05)), "initial_pose": np.array([0.0, 0.0, 0.0])}
+        from polar_sim.gpis.synthetic import scan_circle
+
+        return {"map": t, "scan": scan_circle(pose=(0.05, 0.02, 0.05)), "initial_pose": np.array([0.0, 0.0, 0.0])}
 
     return EntryPoint("localize", setup=lambda tmp: _gpis2d(2), args=args,
                       call=lambda t, a: localize(a["map"], a["scan"], a["initial_pose"]),
                       kinds={"map": "object", "scan": "scan2d", "initial_pose": "pose2d"},
                       names={"scan": ("angles", "ranges"), "map": ("query",)})
-
-
-def _ep_groundvo_init():
-    from polar_sim.ground import GroundVO
-
-    K = np.array([[100.0, 0, 79.5], [0, 100.0, 59.5], [0, 0, 1.0]])
-    return EntryPoint("GroundVO", setup=lambda tmp: None,
-                      args=lambda t, tmp: {"K": K.copy(), "camera_height": 1.0, "model": "6param", "sampling": "weighted", "seed": 0},
-                      call=lambda t, a: GroundVO(a["K"], a["camera_height"], model=a["model"], sampling=a["sampling"], seed=a["seed"]),
-                      kinds={"K": "K", "camera_height": "float+", "model": "choice", "sampling": "choice", "seed": "seed"})
-
-
-def _ep_groundvo_process():
-    from polar_sim.ground import GroundVO
-
-    def setup(tmp):
-        s = _cached("vo", _vo_sequence)
-        vo = GroundVO(s["K"], s["camera_height"], seed=0)
-        for i in range(2):
-            vo.process(s["rgb"][i], float(s["times"][i]))
-        return vo
-
-    def args(t, tmp):
-        s = _cached("vo", _vo_sequence)
-        return {"rgb": s["rgb"][2].copy(), "t": float(s["times"][2])}
-
-    return EntryPoint("GroundVO.process", setup=setup, args=args, call=lambda t, a: t.process(a["rgb"], a["t"]),
-                      kinds={"rgb": "image", "t": "float"}, timeout=120.0)
-
-
-def _ep_tracker_init():
-    from polar_sim.tracking import LearningConfig, ObjectTracker, RegistrationConfig
-
-    def args(t, tmp):
-        seq, pts, nrm, _ = _cached("trk", _track_sequence)
-        return {"model_points": pts.copy(), "K": seq.K.copy(), "initial_pose": seq.poses[0].copy(), "appearance": "ww",
-                "registration": RegistrationConfig(), "learning": LearningConfig(), "fps": 30.0, "calibrate": True,
-                "random_state": 0}
-
-    def call(t, a):
-        kw = {k: v for k, v in a.items() if k not in ("model_points", "K", "initial_pose")}
-        return ObjectTracker(a["model_points"], a["K"], a["initial_pose"], **kw)
-
-    return EntryPoint("ObjectTracker", setup=lambda tmp: None, args=args, call=call,
-                      kinds={"model_points": "points", "K": "K", "initial_pose": "pose", "appearance": "choice",
-                             "registration": "object", "learning": "object", "fps": "float+", "calibrate": "bool",
-                             "random_state": "seed"})
-
-
-def _ep_tracker_process():
-    from polar_sim.tracking import ObjectTracker
-
-    def setup(tmp):
-        seq, pts, nrm, frames = _cached("trk", _track_sequence)
-        tr = ObjectTracker(pts, seq.K, seq.poses[0], model_normals=nrm, random_state=0)
-        tr.process(frames[0]["rgb"], frames[0]["depth"], 0.0)
-        return tr
-
-    def args(t, tmp):
-        _, _, _, frames = _cached("trk", _track_sequence)
-        return {"rgb": frames[1]["rgb"].copy(), "depth": frames[1]["depth"].copy(), "t": 1 / 30}
-
-    return EntryPoint("ObjectTracker.process", setup=setup, args=args,
-                      call=lambda t, a: t.process(a["rgb"], a["depth"], a["t"]),
-                      kinds={"rgb": "image", "depth": "depth", "t": "float"}, timeout=120.0)
 
 
 def _ep_metric(fname, kinds, make_args, names=None):
@@ -625,12 +460,7 @@ _METRIC_ENTRIES = {
 ENTRY_POINTS: dict[str, Callable[[], EntryPoint]] = {
     "World": _ep_world_init, "World.step": _ep_world_step, "World.camera": _ep_world_camera,
     "World.lidar": _ep_world_lidar, "World.sdf": _ep_world_sdf, "RangeNoise": _ep_world_noise,
-    "GPISMap2D.update": _ep_gpis2d_update, "GPISMap2D.query": _ep_gpis2d_query,
-    "GPISMap2D.save": _ep_gpis2d_save, "GPISMap2D.load": _ep_gpis2d_load,
-    "GPISMap3D.update": _ep_gpis3d_update, "GPISMap3D.query": _ep_gpis3d_query,
     "localize": _ep_localize,
-    "GroundVO": _ep_groundvo_init, "GroundVO.process": _ep_groundvo_process,
-    "ObjectTracker": _ep_tracker_init, "ObjectTracker.process": _ep_tracker_process,
     **_METRIC_ENTRIES,
     "Recording.append": _ep_recording_append, "Recording.save": _ep_recording_save,
     "Recording.load": _ep_recording_load,
@@ -638,23 +468,74 @@ ENTRY_POINTS: dict[str, Callable[[], EntryPoint]] = {
 }
 
 
-class _EnvEntries(dict):
-    """Env entry points (``ID.step``, ``ID.reset``) resolved on demand, so listing the module entry
-    points does not import gymnasium."""
+class _Entries(dict):
+    """The hand-written entry points above, plus those derived on demand (so that listing them
+    imports neither gymnasium nor the modules): ``ID.step``/``ID.reset`` of every env id, and the
+    constructor and methods of every module class (:func:`polar_sim.testing.derive.module_entry_points`),
+    by class name for :data:`~polar_sim.testing.contract.MODULE_CLASSES` (``"GPISMap2D.update"``)
+    or by path for any other (``"package.module:Class.update"``)."""
 
     def __missing__(self, key):
         for suffix, fn in ((".step", _ep_env_step), (".reset", _ep_env_reset)):
             if key.startswith("polar_sim/") and key.endswith(suffix):
                 env_id = key[: -len(suffix)]
                 return lambda: fn(env_id)
+        cls = _module_class(key.partition(".")[0] if ":" not in key else key.split(".")[0])
+        if cls is not None:
+            return _derived(cls, key)
         raise KeyError(key)
 
 
-ENTRY_POINTS = _EnvEntries(ENTRY_POINTS)
+def _module_class(name):
+    """The module class called ``name`` in MODULE_CLASSES, or at path ``"package.module:Class"``."""
+    import importlib
+
+    from polar_sim.testing.contract import MODULE_CLASSES
+
+    if ":" not in name:
+        name = next((p for p in MODULE_CLASSES if p.endswith(f":{name}")), None)
+        if name is None:
+            return None
+    module, _, qual = name.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module), qual)
+    except (ImportError, AttributeError):
+        return None
+    return cls if isinstance(cls, type) and hasattr(cls, "TAGS") else None
+
+
+def _derived(cls, key):
+    from polar_sim.testing.derive import module_entry_points
+
+    entries = module_entry_points(cls, _prefix(cls, key))
+    if key not in entries:
+        raise KeyError(key)
+    return entries[key]
+
+
+def _prefix(cls, name):
+    return cls.__name__ if ":" not in name else f"{cls.__module__}:{cls.__qualname__}"
+
+
+ENTRY_POINTS = _Entries(ENTRY_POINTS)
 
 
 def entry_points_of(name):
-    """Entry point names belonging to module, function family or env ``name``."""
+    """Entry point names belonging to an env id, a module class (its name, or
+    ``"package.module:Class"``) or a family of calls (``"World"``, ``"metrics.ate"``, ``"cli"``)."""
     if name.startswith("polar_sim/"):
         return [f"{name}.reset", f"{name}.step"]
+    cls = _module_class(name)
+    if cls is not None:
+        from polar_sim.testing.derive import module_entry_points
+
+        return list(module_entry_points(cls, _prefix(cls, name)))
     return [k for k in dict.keys(ENTRY_POINTS) if k == name or k.startswith(name + ".")]
+
+
+def entry_point_names():
+    """Every hand-written and module entry point name (env entry points: :func:`entry_points_of`)."""
+    from polar_sim.testing.contract import MODULE_CLASSES
+
+    names = [n for p in MODULE_CLASSES for n in entry_points_of(p.partition(":")[2])]
+    return names + list(dict.keys(ENTRY_POINTS))

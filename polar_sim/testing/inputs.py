@@ -180,11 +180,109 @@ def _choice_families(arg, v):
             BadInput(arg, "long", "x" * 10_000, "refuse"), BadInput(arg, "object", _Foreign(), "refuse")]
 
 
+def _depth_families(arg, valid, rng, c, tmp):
+    v = np.asarray(valid)
+    out = c + _array_families(arg, v, rng, nan="either", negative="refuse", empty="refuse", length="either")
+    # another image size is a valid depth image (K says where its pixels look)
+    out = [dataclasses.replace(b, expect="either") if b.label in ("shape:last-axis", "shape:transposed") else b
+           for b in out]
+    out.append(BadInput(arg, "dtype:float16", v.astype(np.float16), "either"))
+    out.append(BadInput(arg, "zeros", np.zeros_like(v), "either"))
+    return out
+
+
+def _grid_families(arg, valid, rng, c, tmp):
+    out = c + _array_families(arg, valid, rng, empty="refuse", length="either")
+    return [dataclasses.replace(b, expect="either") if b.label in ("shape:last-axis", "shape:transposed") else b
+            for b in out if b.label != "dtype:bool"]
+
+
+def _image_families(kind, arg, valid, rng, c, tmp):
+    v = np.asarray(valid)
+    out = [b for b in c + _array_families(arg, v, rng, empty="refuse", length="either" if kind == "image" else "refuse")
+           if not (kind == "mask" and b.label == "dtype:bool")]
+    out += [BadInput(arg, "dtype:float32", v.astype(np.float32), "either"),
+            BadInput(arg, "dtype:uint16", v.astype(np.uint16), "either"),
+            BadInput(arg, "non-contiguous", v[:, ::-1], "either")]
+    if v.ndim == 3:
+        out += [BadInput(arg, "channels:4", np.concatenate([v, v[..., :1]], -1), "refuse"),
+                BadInput(arg, "channels:gray", v[..., 0], "refuse")]
+    return out
+
+
+def _pose_kind_families(kind, arg, valid, rng, c, tmp):
+    # 1e300 at a random entry: in the rotation block it must be refused, in the translation
+    # it is a valid (if absurd) pose, like "pose:1e300"; either answer is fine, a crash is not.
+    out = c + _array_families(arg, valid, rng, huge="either", empty="refuse") + _pose_families(arg, valid, rng)
+    if kind == "pose_or_stack":   # a (1, 4, 4) stack is a documented input of the stack metrics
+        out = [dataclasses.replace(b, expect="either") if b.label == "shape:extra-dim" else b for b in out]
+    return out
+
+
+def _poses_families(arg, valid, rng, c, tmp):
+    v = np.asarray(valid)
+    out = c + _array_families(arg, v, rng, huge="either", empty="refuse")
+    k = int(rng.integers(len(v)))
+    for b in _pose_families(arg, v[k], rng):
+        if b.value.shape == (4, 4):
+            w = v.copy()
+            w[k] = b.value
+            out.append(BadInput(arg, b.label, w, b.expect))
+    return out
+
+
+def _K_families(arg, valid, rng, c, tmp):
+    K = np.asarray(valid, np.float64)
+    out = c + _array_families(arg, K, rng, huge="either", empty="refuse", negative="either")
+    for label, (i, j, x) in (("K:fx-negative", (0, 0, -K[0, 0])), ("K:fy-zero", (1, 1, 0.0)),
+                             ("K:last-row", (2, 0, 1.0)), ("K:fx-nan", (0, 0, np.nan))):
+        b = K.copy()
+        b[i, j] = x
+        out.append(BadInput(arg, label, b, "refuse"))
+    return out
+
+
+def _lengths_families(arg, valid, rng, c, tmp):
+    return c[:-2] + [BadInput(arg, "str-number", "100", "refuse"), BadInput(arg, "negative", [-100.0], "refuse"),
+                     BadInput(arg, "zero", [0.0], "refuse"), BadInput(arg, "nan", [np.nan], "refuse"),
+                     BadInput(arg, "inf", [np.inf], "refuse"), BadInput(arg, "empty", [], "refuse"),
+                     BadInput(arg, "scalar", 100.0, "refuse"), BadInput(arg, "nested", [[100.0]], "refuse"),
+                     BadInput(arg, "complex", [100 + 1j], "refuse"), BadInput(arg, "1e300", [1e300], "either")]
+
+
+def _frame_families(arg, valid, rng, c, tmp):
+    f = dict(valid)
+    k = sorted(f)[0]
+    return [BadInput(arg, "None", None, "refuse"), BadInput(arg, "list", list(f.values()), "refuse"),
+            BadInput(arg, "empty", {}, "refuse"), BadInput(arg, "key:int", {**f, 3: f[k]}, "refuse"),
+            BadInput(arg, "key:slash", {**f, "a/b": f[k]}, "refuse"), BadInput(arg, "key:empty", {**f, "": f[k]}, "refuse"),
+            BadInput(arg, "value:object", {**f, k: np.array([None, 1], object)}, "refuse"),
+            BadInput(arg, "value:str", {**f, k: "abc"}, "refuse"),
+            BadInput(arg, "value:complex", {**f, k: np.asarray(f[k]) + 1j}, "refuse"),
+            BadInput(arg, "value:None", {**f, k: None}, "refuse"),
+            BadInput(arg, "schema:shape", {**f, k: np.zeros((2,) + np.shape(f[k]))}, "refuse"),
+            BadInput(arg, "schema:dtype", {**f, k: np.asarray(f[k]).astype(np.complex64).real.astype(np.float16)}, "refuse"),
+            BadInput(arg, "schema:missing-key", {kk: vv for kk, vv in f.items() if kk != k}, "refuse"),
+            BadInput(arg, "schema:extra-key", {**f, "extra": 1.0}, "refuse")]
+
+
+def _scan2d_families(arg, valid, rng, c, tmp):
+    a, r = valid
+    out = [BadInput(arg, "None", None, "refuse"), BadInput(arg, "str", "abc", "refuse"),
+           BadInput(arg, "tuple:1", (a,), "refuse"), BadInput(arg, "tuple:3", (a, r, r), "refuse"),
+           BadInput(arg, "object", _Foreign(), "refuse")]
+    out += [dataclasses.replace(b, value=(b.value, r)) for b in bad_inputs("angles", a, arg, rng)
+            if not b.label.startswith(("None", "str", "bytes", "dict", "object", "bool", "complex", "numeric-str"))]
+    out += [dataclasses.replace(b, value=(a, b.value)) for b in bad_inputs("ranges", r, arg, rng)
+            if not b.label.startswith(("None", "str", "bytes", "dict", "object", "bool", "complex", "numeric-str"))]
+    return out
+
+
 def bad_inputs(kind, valid, arg, rng, *, tmp=None):
     """Hostile inputs (list of :class:`BadInput`) for argument ``arg`` of ``kind`` whose valid value
     is ``valid``. Kinds: ``points``, ``angles``, ``ranges``, ``depth``, ``image``, ``mask``,
-    ``pose``, ``poses``, ``pose2d``, ``K``, ``vector``, ``lengths``, ``float``, ``float+``,
-    ``unit``, ``int+``, ``int0``, ``seed``, ``bool``, ``choice``, ``name``, ``path_in``,
+    ``pose``, ``poses``, ``pose2d``, ``K``, ``grid`` (an occupancy array of any size), ``vector``,
+    ``lengths``, ``float``, ``float+``, ``unit``, ``int+``, ``int0``, ``seed``, ``bool``, ``choice``, ``name``, ``path_in``,
     ``path_out``, ``frame`` (a recording frame dict), ``scan2d`` (an (angles, ranges) pair),
     ``object``."""
     c = _common(arg)
@@ -195,59 +293,21 @@ def bad_inputs(kind, valid, arg, rng, *, tmp=None):
     if kind == "ranges":
         return c + _array_families(arg, valid, rng, nan="either", negative="refuse", huge="either")
     if kind == "depth":
-        v = np.asarray(valid)
-        out = c + _array_families(arg, v, rng, nan="either", negative="refuse", empty="refuse", length="either")
-        # another image size is a valid depth image (K says where its pixels look)
-        out = [dataclasses.replace(b, expect="either") if b.label in ("shape:last-axis", "shape:transposed") else b
-               for b in out]
-        out.append(BadInput(arg, "dtype:float16", v.astype(np.float16), "either"))
-        out.append(BadInput(arg, "zeros", np.zeros_like(v), "either"))
-        return out
+        return _depth_families(arg, valid, rng, c, tmp)
+    if kind == "grid":   # a whole occupancy array: any size with the same number of axes is a valid grid
+        return _grid_families(arg, valid, rng, c, tmp)
     if kind in ("image", "mask"):
-        v = np.asarray(valid)
-        out = [b for b in c + _array_families(arg, v, rng, empty="refuse", length="either" if kind == "image" else "refuse")
-               if not (kind == "mask" and b.label == "dtype:bool")]
-        out += [BadInput(arg, "dtype:float32", v.astype(np.float32), "either"),
-                BadInput(arg, "dtype:uint16", v.astype(np.uint16), "either"),
-                BadInput(arg, "non-contiguous", v[:, ::-1], "either")]
-        if v.ndim == 3:
-            out += [BadInput(arg, "channels:4", np.concatenate([v, v[..., :1]], -1), "refuse"),
-                    BadInput(arg, "channels:gray", v[..., 0], "refuse")]
-        return out
+        return _image_families(kind, arg, valid, rng, c, tmp)
     if kind in ("pose", "pose_or_stack"):
-        # 1e300 at a random entry: in the rotation block it must be refused, in the translation
-        # it is a valid (if absurd) pose, like "pose:1e300"; either answer is fine, a crash is not.
-        out = c + _array_families(arg, valid, rng, huge="either", empty="refuse") + _pose_families(arg, valid, rng)
-        if kind == "pose_or_stack":   # a (1, 4, 4) stack is a documented input of the stack metrics
-            out = [dataclasses.replace(b, expect="either") if b.label == "shape:extra-dim" else b for b in out]
-        return out
+        return _pose_kind_families(kind, arg, valid, rng, c, tmp)
     if kind == "poses":
-        v = np.asarray(valid)
-        out = c + _array_families(arg, v, rng, huge="either", empty="refuse")
-        k = int(rng.integers(len(v)))
-        for b in _pose_families(arg, v[k], rng):
-            if b.value.shape == (4, 4):
-                w = v.copy()
-                w[k] = b.value
-                out.append(BadInput(arg, b.label, w, b.expect))
-        return out
+        return _poses_families(arg, valid, rng, c, tmp)
     if kind == "pose2d":
         return c + _array_families(arg, valid, rng, huge="either", empty="refuse")
     if kind == "K":
-        K = np.asarray(valid, np.float64)
-        out = c + _array_families(arg, K, rng, huge="either", empty="refuse", negative="either")
-        for label, (i, j, x) in (("K:fx-negative", (0, 0, -K[0, 0])), ("K:fy-zero", (1, 1, 0.0)),
-                                 ("K:last-row", (2, 0, 1.0)), ("K:fx-nan", (0, 0, np.nan))):
-            b = K.copy()
-            b[i, j] = x
-            out.append(BadInput(arg, label, b, "refuse"))
-        return out
+        return _K_families(arg, valid, rng, c, tmp)
     if kind == "lengths":
-        return c[:-2] + [BadInput(arg, "str-number", "100", "refuse"), BadInput(arg, "negative", [-100.0], "refuse"),
-                         BadInput(arg, "zero", [0.0], "refuse"), BadInput(arg, "nan", [np.nan], "refuse"),
-                         BadInput(arg, "inf", [np.inf], "refuse"), BadInput(arg, "empty", [], "refuse"),
-                         BadInput(arg, "scalar", 100.0, "refuse"), BadInput(arg, "nested", [[100.0]], "refuse"),
-                         BadInput(arg, "complex", [100 + 1j], "refuse"), BadInput(arg, "1e300", [1e300], "either")]
+        return _lengths_families(arg, valid, rng, c, tmp)
     if kind in ("float", "float+", "unit"):
         return _scalar_families(arg, valid, positive=kind == "float+", unit=kind == "unit")
     if kind in ("int+", "int0", "seed"):
@@ -263,29 +323,9 @@ def bad_inputs(kind, valid, arg, rng, *, tmp=None):
         (Path(tmp) / "file_as_dir").write_bytes(b"x")
         return _path_out_families(arg, tmp)
     if kind == "frame":
-        f = dict(valid)
-        k = sorted(f)[0]
-        return [BadInput(arg, "None", None, "refuse"), BadInput(arg, "list", list(f.values()), "refuse"),
-                BadInput(arg, "empty", {}, "refuse"), BadInput(arg, "key:int", {**f, 3: f[k]}, "refuse"),
-                BadInput(arg, "key:slash", {**f, "a/b": f[k]}, "refuse"), BadInput(arg, "key:empty", {**f, "": f[k]}, "refuse"),
-                BadInput(arg, "value:object", {**f, k: np.array([None, 1], object)}, "refuse"),
-                BadInput(arg, "value:str", {**f, k: "abc"}, "refuse"),
-                BadInput(arg, "value:complex", {**f, k: np.asarray(f[k]) + 1j}, "refuse"),
-                BadInput(arg, "value:None", {**f, k: None}, "refuse"),
-                BadInput(arg, "schema:shape", {**f, k: np.zeros((2,) + np.shape(f[k]))}, "refuse"),
-                BadInput(arg, "schema:dtype", {**f, k: np.asarray(f[k]).astype(np.complex64).real.astype(np.float16)}, "refuse"),
-                BadInput(arg, "schema:missing-key", {kk: vv for kk, vv in f.items() if kk != k}, "refuse"),
-                BadInput(arg, "schema:extra-key", {**f, "extra": 1.0}, "refuse")]
+        return _frame_families(arg, valid, rng, c, tmp)
     if kind == "scan2d":
-        a, r = valid
-        out = [BadInput(arg, "None", None, "refuse"), BadInput(arg, "str", "abc", "refuse"),
-               BadInput(arg, "tuple:1", (a,), "refuse"), BadInput(arg, "tuple:3", (a, r, r), "refuse"),
-               BadInput(arg, "object", _Foreign(), "refuse")]
-        out += [dataclasses.replace(b, value=(b.value, r)) for b in bad_inputs("angles", a, arg, rng)
-                if not b.label.startswith(("None", "str", "bytes", "dict", "object", "bool", "complex", "numeric-str"))]
-        out += [dataclasses.replace(b, value=(a, b.value)) for b in bad_inputs("ranges", r, arg, rng)
-                if not b.label.startswith(("None", "str", "bytes", "dict", "object", "bool", "complex", "numeric-str"))]
-        return out
+        return _scan2d_families(arg, valid, rng, c, tmp)
     if kind == "object":
         return [BadInput(arg, "None", None, "refuse"), BadInput(arg, "str", "abc", "refuse"),
                 BadInput(arg, "object", _Foreign(), "refuse"), BadInput(arg, "int", 3, "refuse")]

@@ -341,3 +341,15 @@ def make_sequence(n_frames=60, obj="mug", *, hand=True, speed=1.0, seed=0, shape
     return Sequence(K, (H, W), target, np.array(poses), np.array(hposes) if hand else None, T_wc,
                     seed, noise, frozenset(hidden), frozenset(occluded), tuple(hand_color),
                     tuple(brightness))
+
+
+def check_data():
+    """:class:`polar_sim.params.CheckData` of :class:`polar_sim.tracking.ObjectTracker`: three
+    160x120 frames of the mug without the hand, 30 fps, and the model and first pose they need."""
+    from polar_sim.params import CheckData
+
+    seq = make_sequence(3, "mug", hand=False, seed=0, shape=(120, 160))
+    pts, nrm = seq.model(800)
+    frames = tuple((f["rgb"], f["depth"], i / 30) for i, f in enumerate(seq.frame(i) for i in range(3)))
+    return CheckData(init={"model_points": pts, "K": seq.K, "initial_pose": seq.poses[0], "model_normals": nrm},
+                     frames=frames)

@@ -20,7 +20,7 @@ import numpy as np
 from polar_sim._validation import as_bool, as_float, as_int, as_intrinsics, as_pose, check_choice
 from polar_sim.errors import PolarSimError
 from polar_sim.geometry import inv_pose, make_pose, se3_exp, se3_log
-from polar_sim.params import Parameterised
+from polar_sim.params import Parameterised, Tags
 from polar_sim.tracking import pixels
 from polar_sim.tracking._checks import as_model_points, as_normals, as_rgbd
 from polar_sim.tracking.appearance import make_appearance
@@ -170,6 +170,8 @@ class ObjectTracker(Parameterised):
     ``pose_``, ``n_frames_``, ...) and :meth:`reset` removes it. There is no published preset
     (:meth:`published` says why).
     """
+
+    TAGS = Tags(update="process", random_state="random_state", data="polar_sim.tracking.synthetic:check_data")
 
     def __init__(self, model_points, K, initial_pose, *, model_normals=None, appearance="ww",
                  motion=MotionConfig(), attention=AttentionConfig(), registration=RegistrationConfig(),

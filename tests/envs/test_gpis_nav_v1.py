@@ -255,9 +255,9 @@ def test_unreachable_layout_is_redrawn_deterministically():
     with pytest.raises(ValueError, match="no reachable start/goal pair"):
         World("navworld", seed=bad, rooms=1, room_size=6.0, clutter=6, lidar_beams=base._n_beams)
     w1 = base._make_world(bad)
-    s1, goal1 = base._layout_seed, np.array(w1.meta["goal"])
+    s1, goal1 = base._layout_seed, np.array(w1.meta.goal)
     w2 = base._make_world(bad)
-    assert s1 != bad and base._layout_seed == s1 and np.array_equal(np.array(w2.meta["goal"]), goal1)
+    assert s1 != bad and base._layout_seed == s1 and np.array_equal(np.array(w2.meta.goal), goal1)
     w3 = base._make_world(12345)
     assert base._layout_seed == 12345
     for w in (w1, w2, w3):
@@ -273,7 +273,7 @@ def test_reward_terms_and_proximity_against_the_truth():
     w = {"progress": 2.0, "time": 0.02, "collision": 1.5, "success": 7.0, "proximity": 0.5, "proximity_radius": 0.4}
     env = gym.make(ROOM, pose_source="truth", reward_weights=w)
     _, info = env.reset(seed=1)
-    world, radius = env.unwrapped.base.world, env.unwrapped.base.world.meta["robot_radius"]
+    world, radius = env.unwrapped.base.world, env.unwrapped.base.world.meta.robot_radius
     prev_geo, seen_near = info["geodesic_distance"], False
     for _ in range(40):
         _, r, term, trunc, info = env.step(np.array([0.6, 0.3], np.float32))

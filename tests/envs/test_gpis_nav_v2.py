@@ -44,7 +44,7 @@ def test_v2_has_the_v1_worlds(tier):
         assert ia["layout_seed"] == ib["layout_seed"]
         np.testing.assert_array_equal(ia["goal"], ib["goal"])
         np.testing.assert_allclose(ia["robot_pose2d"][:2], ib["robot_pose2d"][:2], rtol=0, atol=1e-3)
-        np.testing.assert_array_equal(a.unwrapped.world.meta["occupancy"], b.unwrapped.world.meta["occupancy"])
+        np.testing.assert_array_equal(a.unwrapped.world.meta.occupancy, b.unwrapped.world.meta.occupancy)
     a.close()
     b.close()
 

@@ -8,7 +8,8 @@ from stable_baselines3 import PPO
 
 import polar_sim.envs  # noqa: F401
 from polar_sim.envs.features import FAR, stencil_vector
-from polar_sim.envs.imitation import DAggerConfig, _mlp, make_expert, rollout, to_policy
+from polar_sim.envs.dagger import rollout
+from polar_sim.envs.imitation import DAggerConfig, _mlp, make_expert, to_policy
 from polar_sim.envs.learning import FeatureObservation, export_mlp, load_mlp_into
 from polar_sim.envs.mlp_policy import MLPPolicy
 from polar_sim.envs.policies import SDFReactive
@@ -30,13 +31,20 @@ class _Recorder(gym.Wrapper):
 
 
 class _Constant:
+    """A learner (the protocol of polar_sim.envs.dagger) whose features are the raw stencil and whose action is constant."""
+
+    dtypes = (np.float32,)
+
     def __init__(self, a):
         self.a, self.resets = np.float32(a), 0
 
     def reset(self):
         self.resets += 1
 
-    def __call__(self, obs):
+    def observe(self, obs):
+        return (np.concatenate([obs[k].ravel() for k in KEYS]),)
+
+    def act(self, sample):
         return self.a.copy()
 
 
@@ -44,8 +52,8 @@ class _Constant:
 # one the expert drives alone (same seed, same actions).
 def test_rollout_with_beta_one_is_the_experts_episode():
     env = _Recorder(gym.make(ROOM, pose_source="truth"))
-    X, Y, _ = rollout(env, make_expert("reactive", env), _Constant([0.0, 1.0]), beta=1.0, steps=40,
-                      rng=np.random.default_rng(0), seeds=iter(range(1000, 2000)), keys=KEYS)
+    (X,), Y, _ = rollout(env, make_expert("reactive", env), _Constant([0.0, 1.0]), beta=1.0, steps=40,
+                         rng=np.random.default_rng(0), seeds=iter(range(1000, 2000)))
     np.testing.assert_array_equal(np.array(env.actions), Y)
     alone = gym.make(ROOM, pose_source="truth")
     obs, _ = alone.reset(seed=1000)
@@ -61,16 +69,20 @@ def test_rollout_with_beta_one_is_the_experts_episode():
 
 
 # beta = 0: the learner drives (the env receives its constant action), the expert still labels
-# every visited state, and both are reset at every episode start.
+# every visited state, and both are reset at every episode start; acting=False: the expert drives.
 def test_rollout_with_beta_zero_drives_the_learner_and_labels_with_the_expert():
     env = _Recorder(gym.make(ROOM, pose_source="truth"))
     learner = _Constant([0.3, -0.2])
     expert = make_expert("reactive", env)
-    X, Y, out = rollout(env, expert, learner, beta=0.0, steps=30, rng=np.random.default_rng(0),
-                        seeds=iter(range(1000, 2000)), keys=KEYS)
+    _, Y, out = rollout(env, expert, learner, beta=0.0, steps=30, rng=np.random.default_rng(0),
+                        seeds=iter(range(1000, 2000)))
     assert all(np.array_equal(a, np.float32([0.3, -0.2])) for a in env.actions)
     assert not np.allclose(Y, np.float32([0.3, -0.2]))  # labels are the expert's, not the executed ones
     assert learner.resets == 1 + out["episodes"]
+    env.actions.clear()
+    _, Y, _ = rollout(env, expert, learner, beta=0.0, steps=30, rng=np.random.default_rng(0),
+                      seeds=iter(range(1000, 2000)), acting=False)
+    np.testing.assert_array_equal(np.array(env.actions), Y)
 
 
 # The numpy MLP policy computes exactly the torch net it was exported from (float64 vs float32

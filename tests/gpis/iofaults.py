@@ -30,17 +30,16 @@ ANG = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
 
 # -- valid maps ------------------------------------------------------------------------------------
 def make_maps(n2=6, n3=2):
-    """Valid maps: 2D default, 2D legacy (free lists in use), 3D default."""
+    """Valid maps: 2D default, 2D published (free lists in use), 3D default."""
     sys.path.insert(0, str(ROOT / "tests"))
     from gpis.scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
 
     from polar_sim.gpis import GPISMap2D, GPISMap3D
 
     out = {}
-    # the legacy map of 20 room scans has removed samples and a freed slot: the free lists are
+    # the published map of 20 room scans has removed samples and a freed slot: the free lists are
     # in use (and tampered)
-    for name, kw, n in (("2d", {}, n2), ("2d_legacy", {"legacy": True, "sensor_offset": (0.08, 0.0)}, 20)):
-        m = GPISMap2D(**kw)
+    for name, m, n in (("2d", GPISMap2D(), n2), ("2d_legacy", GPISMap2D.published(sensor_offset=(0.08, 0.0)), 20)):
         for pose in room_path(n):
             m.update(ANG, scan_2d(pose, ANG), pose)
         out[name] = m
@@ -247,16 +246,22 @@ def tamper_cases(data, dim):
     for key in list(data):
         cases.append((f"{key}:missing", lambda d, key=key: {k: v for k, v in d.items() if k != key}))
     cases.append(("extra-key", lambda d: {**d, "tree/evil": np.arange(3)}))
-    for v, lab in ((np.array("1"), "str"), (np.array(1.5), "float"), (np.array(True), "bool"), (np.array(2), "2"),
-                   (np.array(-1), "-1"), (np.array([1]), "array"), (np.array(1.0), "float-1.0"),
+    return cases + _header_cases()
+
+
+def _header_cases():
+    """Tampered header scalars: version, format, class, fitted flag, parameters, update count."""
+    cases = []
+    for v, lab in ((np.array("1"), "str"), (np.array(1.5), "float"), (np.array(True), "bool"), (np.array(3), "3"),
+                   (np.array(1), "1"), (np.array(-1), "-1"), (np.array([1]), "array"), (np.array(1.0), "float-1.0"),
                    (np.array(None, dtype=object), "object")):
         cases.append((f"version={lab}", lambda d, v=v: {**d, "version": v}))
     for key, v in (("format", np.array("other")), ("format", np.array(1)), ("cls", np.array("GPISMapXD")),
                    ("fitted", np.array("yes")), ("fitted", np.array(1)), ("params", np.array("{not json")),
-                   ("params", np.array('{"map_scale": -1}')), ("params", np.array('{"evil": 1}')),
-                   ("params", np.array('[1, 2]')), ("params", np.array('{"min_half": 1e-9}')),
-                   ("params", np.array('{"legacy": "no"}')), ("n_updates", np.array(-1)), ("n_updates", np.array(1.5)),
-                   ("n_updates", np.array("3"))):
+                   ("params", np.array('{"local_gp": {"map_scale": -1}}')), ("params", np.array('{"evil": 1}')),
+                   ("params", np.array('[1, 2]')), ("params", np.array('{"tree": {"min_half": 1e-9}}')),
+                   ("params", np.array('{"tree": "no"}')), ("params", np.array('{"legacy": true}')),
+                   ("n_updates", np.array(-1)), ("n_updates", np.array(1.5)), ("n_updates", np.array("3"))):
         cases.append((f"{key}={v!r}", lambda d, key=key, v=v: {**d, key: v}))
     return cases
 

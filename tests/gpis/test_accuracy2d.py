@@ -47,7 +47,7 @@ def test_far_field_is_euclidean(room):
 # the published SDF (legacy) cannot do this: it falls back toward the 0.2 bias
 def test_legacy_far_field_drifts_to_bias(room):
     rng = np.random.default_rng(1)
-    leg = GPISMap2D(legacy=True)
+    leg = GPISMap2D.published()
     for pose in room["path"]:
         leg.update(ANGLES, scan_2d(pose, ANGLES, noise=0.01, rng=rng), pose)
     far = room["far"] & (room["gt"] > 1.0)
@@ -82,7 +82,7 @@ def test_variance_meaning(room):
     m, P, v = room["m"], room["P"], room["v"]
     assert np.median(v[room["far"]]) < 0.1
     outside = (P[:, 0] < -0.3) & (np.abs(room["d"]) > 0.3)
-    assert np.all(v[outside] >= 1.0 + m.map_noise - 1e-9)
+    assert np.all(v[outside] >= 1.0 + m.noise.map_noise - 1e-9)
 
 
 # surface(): Hausdorff distance to the true walls <= 10 cm in the observed area

@@ -7,21 +7,22 @@ import pytest
 
 from polar_sim.errors import NotUpdatedError
 from polar_sim.gpis import GPISMap2D, GPISMap3D
+from polar_sim.gpis.config import DistanceConfig2D, LocalGPConfig2D
 
 from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
 
 ANG = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
 
 
-def _map2d(n=6, **kw):
-    m = GPISMap2D(**kw)
+def _map2d(n=6, published=False, **kw):
+    m = GPISMap2D.published(**kw) if published else GPISMap2D(**kw)
     for pose in room_path(n):
         m.update(ANG, scan_2d(pose, ANG), pose)
     return m
 
 
-def _map3d(n=2, **kw):
-    m = GPISMap3D(**kw)
+def _map3d(n=2, published=False, **kw):
+    m = GPISMap3D.published(**kw) if published else GPISMap3D(**kw)
     K = intrinsics(160, 120, 130.0)
     for T in orbit_poses(n):
         m.update(render_sphere(T, K, 160, 120), K, T)
@@ -48,10 +49,11 @@ def _same(a, b):
 def test_constructor_stores_params(cls):
     m = cls()
     assert not [k for k in vars(m) if k.endswith("_")]
-    assert m.get_params()["map_scale"] == (1.2 if cls is GPISMap2D else 0.04)
-    assert m.get_params()["fbias"] == 0.2
-    m2 = cls(map_scale=0.5, legacy=True)
-    assert m2.map_scale == 0.5 and m2.legacy is True
+    assert m.get_params()["local_gp__map_scale"] == (1.2 if cls is GPISMap2D else 0.04)
+    assert m.get_params()["local_gp__fbias"] == 0.2
+    gp = cls._STAGES["local_gp"](map_scale=0.5)
+    m2 = cls(local_gp=gp)
+    assert m2.local_gp is gp and m2.get_params()["local_gp__map_scale"] == 0.5
 
 
 # query before any update raises NotUpdatedError (a ValueError)
@@ -200,23 +202,24 @@ def test_load_bad_files(tmp_path):
         GPISMap3D.load(good)
 
 
-# invalid parameters are reported by name at the first update
+# invalid parameters are reported by name when the map (or its stage config) is made
 def test_bad_params():
-    pose = room_path(2)[0]
-    for kw, name in [({"map_scale": -1.0}, "map_scale"), ({"blend_near": 1.0}, "blend_near"),
-                     ({"sensor_offset": (1, 2, 3)}, "sensor_offset")]:
-        with pytest.raises(ValueError, match=name):
-            GPISMap2D(**kw).update(ANG, scan_2d(pose, ANG), pose)
+    with pytest.raises(ValueError, match="map_scale"):
+        LocalGPConfig2D(map_scale=-1.0)
+    with pytest.raises(ValueError, match="blend_near"):
+        DistanceConfig2D(blend_near=1.0)
+    with pytest.raises(ValueError, match="sensor_offset"):
+        GPISMap2D(sensor_offset=(1, 2, 3))
     with pytest.raises(ValueError, match="obs_skip"):
-        GPISMap3D(obs_skip=0).update(np.ones((4, 4)), intrinsics(4, 4, 3.0), np.eye(4))
+        GPISMap3D(obs_skip=0)
 
 
-# the default takes the sensor pose (sensor_offset (0, 0), legacy too); a base pose with the
-# laser's mounting as sensor_offset builds the same map (issue 14 item 4; legacy mode searches
+# the default takes the sensor pose (sensor_offset (0, 0), published() too); a base pose with the
+# laser's mounting as sensor_offset builds the same map (issue 14 item 4; the published scan model searches
 # for re-evaluation around the base, as published, so only the default mode is equivalent)
 def test_default_takes_the_sensor_pose():
     assert tuple(GPISMap2D().sensor_offset) == (0.0, 0.0)
-    assert tuple(GPISMap2D(legacy=True).sensor_offset) == (0.0, 0.0)
+    assert tuple(GPISMap2D.published().sensor_offset) == (0.0, 0.0)
     off = np.array([0.08, 0.0])
     a = GPISMap2D()
     b = GPISMap2D(sensor_offset=off)

@@ -9,10 +9,11 @@ import pytest
 
 from polar_sim.gpis import GPISMap2D, GPISMap3D
 from polar_sim.gpis._base import FAR_COORD
+from polar_sim.gpis.config import DistanceConfig2D, TreeConfig2D, TreeConfig3D
 from polar_sim.gpis._surface import MAX_SURFACE_NODES
 from polar_sim.gpis.localize import localize
 
-from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
+from .scenes import intrinsics, room_path, scan_2d
 from .test_behaviour import ANG, _map2d, _map3d
 
 
@@ -49,7 +50,7 @@ def test_far_pose_3d_bounded(x):
 
 # surface() on samples spread over metres at the default 2 mm refuses by name, map unchanged
 def test_surface_refuses_huge_grid(tmp_path):
-    m = GPISMap3D(init_half=1.6, max_half=3.2)
+    m = GPISMap3D(tree=TreeConfig3D(init_half=1.6, max_half=3.2))
     K = intrinsics(160, 120, 130.0)
     T = np.eye(4)
     # a plane 2.5 m ahead spanning about 3 x 2.3 m: (1500 x 1150 x 10+) nodes at 2 mm
@@ -70,37 +71,35 @@ def test_surface_refuses_huge_grid(tmp_path):
         m.surface(band=np.nan)
 
 
-# parameters whose cluster subtree would explode are refused by name, no state created
+# parameters whose cluster subtree would explode are refused by name, before any map exists;
+# set_params on a map names the stage and leaves the map unchanged
 def test_param_limits():
-    m = GPISMap2D(min_half=1e-6)
-    pose = room_path(2)[0]
     with pytest.raises(ValueError, match="cluster_half/min_half"):
-        m.update(ANG, scan_2d(pose, ANG), pose)
-    assert not [k for k in vars(m) if k.endswith("_")]
+        TreeConfig2D(min_half=1e-6)
+    m = GPISMap2D()
+    with pytest.raises(ValueError, match="^tree__cluster_half/min_half"):
+        m.set_params(tree__min_half=1e-6)
+    assert m.tree == TreeConfig2D() and not [k for k in vars(m) if k.endswith("_")]
 
 
 # issue 34's probe: numbers beyond what memory or arithmetic allow are ValueErrors naming the
-# argument and its limit (they were OverflowError / ZeroDivisionError), raised by the first
-# update with no state created; the limits themselves are accepted
-def _first_update(m):
-    if m.dim == 2:
-        pose = room_path(2)[0]
-        return m.update(ANG, scan_2d(pose, ANG), pose)
-    K, T = intrinsics(160, 120, 130.0), orbit_poses(1)[0]
-    return m.update(render_sphere(T, K, 160, 120), K, T)
-
-
-@pytest.mark.parametrize("cls,name,bad,ok,limit", [
-    (GPISMap2D, "train_cap", 2**63, 4096, "4096"), (GPISMap3D, "train_cap", 4097, 4096, "4096"),
-    (GPISMap2D, "range_noise", 1e300, 100.0, "100 m"), (GPISMap2D, "range_noise", 100.5, 100.0, "100 m"),
-    (GPISMap2D, "sample_spacing", 1e-300, 1e-6, "1e-06 m"), (GPISMap3D, "sample_spacing", 1e-300, 1e-6, "1e-06 m")])
-def test_probe_limits_name_the_argument(cls, name, bad, ok, limit):
-    m = cls(**{name: bad})
+# argument and its limit (they were OverflowError / ZeroDivisionError), raised by the stage
+# config (by set_params as stage__field, the map unchanged); the limits themselves are accepted
+@pytest.mark.parametrize("cls,stage,name,bad,ok,limit", [
+    (GPISMap2D, "local_gp", "train_cap", 2**63, 4096, "4096"), (GPISMap3D, "local_gp", "train_cap", 4097, 4096, "4096"),
+    (GPISMap2D, "noise", "range_noise", 1e300, 100.0, "100 m"), (GPISMap2D, "noise", "range_noise", 100.5, 100.0, "100 m"),
+    (GPISMap2D, "tree", "sample_spacing", 1e-300, 1e-6, "1e-06 m"),
+    (GPISMap3D, "tree", "sample_spacing", 1e-300, 1e-6, "1e-06 m")])
+def test_probe_limits_name_the_argument(cls, stage, name, bad, ok, limit):
+    config = cls._STAGES[stage]
     with pytest.raises(ValueError, match=f"^{name}: .*{limit}"):
-        _first_update(m)
-    assert not [k for k in vars(m) if k.endswith("_")]
-    m.set_params(**{name: ok})
-    m._check_params()                     # the limit itself is a valid value
+        config(**{name: bad})
+    m = cls()
+    with pytest.raises(ValueError, match=f"^{stage}__{name}: .*{limit}"):
+        m.set_params(**{f"{stage}__{name}": bad})
+    assert getattr(m, stage) == config()
+    m.set_params(**{f"{stage}__{name}": ok})  # the limit itself is a valid value
+    assert getattr(getattr(m, stage), name) == ok
 
 
 # 10**9 query points (an array that costs nothing until read) are refused naming points and the
@@ -121,11 +120,12 @@ def test_query_refuses_more_points_than_the_limit(tmp_path):
 # state changes (first scan: no learned state; later scan: the saved map is unchanged)
 def test_grid_limits_refuse_before_state(tmp_path):
     pose = room_path(2)[0]
-    m = GPISMap2D(free_res=1e-4)
+    m = GPISMap2D(distance=DistanceConfig2D(free_res=1e-4))
     with pytest.raises(ValueError, match="pose2d.*MAX_FREE_CELLS"):
         m.update(ANG, scan_2d(pose, ANG), pose)
     assert not [k for k in vars(m) if k.endswith("_")]
-    m = GPISMap2D(max_half=1e5, cluster_half=0.1, min_half=0.05, init_half=0.1, free_res=20.0)
+    m = GPISMap2D(tree=TreeConfig2D(max_half=1e5, cluster_half=0.1, min_half=0.05, init_half=0.1),
+                  distance=DistanceConfig2D(free_res=20.0))
     m.update(ANG, scan_2d(pose, ANG), pose)
     before = _digest(m, tmp_path)
     with pytest.raises(ValueError, match="pose2d.*MAX_CLUSTER_CELLS"):
@@ -150,15 +150,15 @@ def test_huge_points_get_the_prior(make, dim):
     expect = np.zeros((3, dim))
     expect[0, 0], expect[1, 0], expect[2, -1] = 1.0, -1.0, 1.0
     np.testing.assert_array_equal(g[5:], expect)
-    np.testing.assert_array_equal(v[5:], 1.0 + m.map_noise)
+    np.testing.assert_array_equal(v[5:], 1.0 + m.noise.map_noise)
     assert np.isfinite(d).all() and np.isfinite(g).all() and np.isfinite(v).all()
 
 
-# legacy maps answer the same way
+# published maps answer the same way
 def test_huge_points_legacy():
-    m = _map2d(3, legacy=True)
+    m = _map2d(3, published=True)
     d, g, v = m.query(np.array([[1e300, 0.0]]))
-    assert d[0] == 1e300 and v[0] == 1.0 + m.map_noise
+    assert d[0] == 1e300 and v[0] == 1.0 + m.noise.map_noise
 
 
 # localisation from a pose 1e300 m away returns without an exception, the map unchanged

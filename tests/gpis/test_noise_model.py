@@ -27,7 +27,7 @@ def _scan(pose, rng):
 
 def _map(legacy):
     rng = np.random.default_rng(0)
-    m = GPISMap2D(sensor_offset=(0.0, 0.0), legacy=legacy)
+    m = GPISMap2D.published() if legacy else GPISMap2D()
     for x in np.linspace(0.0, 1.0, 11):       # 1 m along the wall, 1 m above it
         pose = (x, 1.0, 0.0)
         m.update(ANG, _scan(pose, rng), pose)

@@ -1,4 +1,4 @@
-"""Legacy mode against the published GPisMap outputs, shipped in ``polar_sim/data/gpismap/`` (read
+"""``GPISMap2D.published()`` against the published GPisMap outputs, shipped in ``polar_sim/data/gpismap/`` (read
 through ``polar_sim.datasets.data_path``; how they were produced: ``docs/specs/gpis.md`` section 12)."""
 
 import numpy as np
@@ -14,7 +14,7 @@ from polar_sim.gpis._obsgp import ObsGP1D
 def demo_map():
     g = load_gazebo1()
     ref = np.load(data_path("gpismap/ref2d_demo.npz"), allow_pickle=False)
-    m = GPISMap2D(legacy=True, sensor_offset=g["sensor_offset"])   # the log gives base poses
+    m = GPISMap2D.published(sensor_offset=g["sensor_offset"])   # the log gives base poses
     counts = []
     for k in g["demo_frames"]:
         m.update(g["thetas"], g["ranges"][k], g["poses"][k])

@@ -13,6 +13,7 @@ from scipy.linalg import solve_triangular
 from polar_sim.gpis import GPISMap2D, GPISMap3D
 from polar_sim.gpis._numeric import _exp_neg
 from polar_sim.gpis._query import _nearest3
+from polar_sim.gpis._shells import SHELL_STATE, shell_next, shell_start
 from polar_sim.gpis._localgp import _var_consts
 
 from .scenes import intrinsics, orbit_poses, render_sphere, room_path, scan_2d
@@ -22,11 +23,11 @@ ANG = np.deg2rad(np.arange(-135.0, 135.0, 1.0))
 
 def _map(dim, legacy):
     if dim == 2:
-        m = GPISMap2D(legacy=legacy)
+        m = GPISMap2D.published() if legacy else GPISMap2D()
         for pose in room_path(8):
             m.update(ANG, scan_2d(pose, ANG), pose)
         return m
-    m = GPISMap3D(legacy=legacy)
+    m = GPISMap3D.published() if legacy else GPISMap3D()
     K = intrinsics(160, 120, 130.0)
     for T in orbit_poses(3):
         m.update(render_sphere(T, K, 160, 120), K, T)
@@ -42,16 +43,16 @@ def _near_points(m, n, spread, seed=0):
 def _nearest_gp(m, x):
     """Slot of the nearest cluster with a current GP (the kernel's first choice), or -1."""
     tr, g = m.tree_, m.gps_
-    W = m._QUERY_W if m._QUERY_W is not None else 4.0 * m.map_scale
+    W = m._QUERY_W if m._QUERY_W is not None else 4.0 * m.local_gp.map_scale
     best_s, best_d = np.zeros(3, np.int64), np.zeros(3)
     n = _nearest3(x, float(W), tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.node_sample,
                   tr.node_internal, best_s, best_d, np.zeros(3, np.int64),
-                  np.zeros(6 * m.dim, np.int64))
+                  np.zeros(6 * m.dim + SHELL_STATE, np.int64))
     for j in range(n):
         s = best_s[j]
         if g.gp_m[s] > 0 and m.gp_gen_[s] == m.slot_gen_[s]:
             return s
-        if m.legacy:
+        if m._pub("query_mode"):
             return -1
     return -1
 
@@ -63,7 +64,7 @@ def _reference(m, s, x):
     X, kinds, alpha = g.X[ob:ob + n], g.kinds[ob:ob + n], g.alpha[ob:ob + n]
     L = np.zeros((n, n))
     L[np.tril_indices(n)] = g.Lbuf[tri:tri + n * (n + 1) // 2]      # packed by rows
-    a = np.sqrt(3.0) / m.map_scale
+    a = np.sqrt(3.0) / m.local_gp.map_scale
     d = x - X                                   # (n, dim)
     r = np.linalg.norm(d, axis=1)
     e = np.exp(-a * r)
@@ -79,7 +80,7 @@ def _reference(m, s, x):
                          a * a * ((cc == i) - a * d[:, i] * dc * inv_r) * e,
                          -a * a * d[:, i] * e)
     v = solve_triangular(L, kf, lower=True)
-    var_f0, _ = _var_consts(dim, float(m.map_scale))
+    var_f0, _ = _var_consts(dim, float(m.local_gp.map_scale))
     return np.concatenate([[kf @ alpha], kg @ alpha, [var_f0 - v @ v]])
 
 
@@ -194,3 +195,28 @@ def test_planar_line_search_kernel_matches_general_form():
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
     live, _, _, _, found = got
     assert 0.3 * k < live.sum() and 0 < found.sum() < live.sum()   # both outcomes exercised
+
+
+# the shell walk (knn's and the query's one enumeration) visits every cell of the box exactly once,
+# each in the shell of its Chebyshev distance from the centre, rows of axes 1.. in order with axis 1
+# fastest and axis 0 increasing within a row: checked against a brute-force listing of the box
+@pytest.mark.parametrize("dim", [2, 3])
+def test_shell_walk_visits_each_cell_once_in_order(dim):
+    rng = np.random.default_rng(dim)
+    for _ in range(20):
+        lo = rng.integers(-4, 2, dim)
+        hi = lo + rng.integers(0, 6, dim)
+        c0 = rng.integers(lo - 2, hi + 3)         # the centre may lie outside the box
+        a0, a1, cc = (np.zeros(dim, np.int64) for _ in range(3))
+        st = np.zeros(SHELL_STATE, np.int64)
+        rmax = int(np.max(np.maximum(np.abs(c0 - lo), np.abs(hi - c0))))
+        for r in range(rmax + 1):
+            got = []
+            if shell_start(r, c0, lo, hi, a0, a1, st):
+                while shell_next(r, c0, lo, hi, a0, a1, cc, st):
+                    got.append(tuple(int(v) for v in cc))
+            box = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(lo, hi)], indexing="ij"), -1)
+            box = box.reshape(-1, dim)
+            on = box[np.abs(box - c0).max(1) == r]
+            want = sorted(map(tuple, on.tolist()), key=lambda c: (c[:0:-1], c[0]))
+            assert got == want, (lo, hi, c0, r)

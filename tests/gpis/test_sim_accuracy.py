@@ -38,7 +38,7 @@ def office():
     d, = recorded_drives("office2d", SEED, [dict(route_seed=SEED, n_rooms=5, duration=60.0, speed=1.0, every_steps=every)])
     w = lidar_world("office2d", SEED, noise=False)
     m = GPISMap2D(sensor_offset=(0.0, 0.0))
-    leg = GPISMap2D(sensor_offset=(0.0, 0.0), legacy=True)
+    leg = GPISMap2D.published()
     for p, r in zip(d.poses, d.ranges):
         m.update(d.angles, r, p)
         leg.update(d.angles, r, p)

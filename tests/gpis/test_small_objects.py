@@ -40,17 +40,20 @@ def _post_distance(lines):
     return np.linalg.norm(pts - POST, axis=1) - R_POST if len(pts) else np.zeros(0)
 
 
-def test_small_post_is_in_the_surface(post_map):
-    d = _post_distance(post_map.surface())
+@pytest.mark.parametrize("evidence", [None, False])
+def test_small_post_is_in_the_surface(post_map, evidence):
+    # the level itself (evidence=False: the refinement alone, no lone samples) and the gated surface
+    d = _post_distance(post_map.surface(evidence=evidence))
     near = d[np.abs(d) < 0.1]
     assert len(near) >= 1                              # a polyline or a point on the post
     assert np.abs(near).max() < 0.01                   # within 1 cm of the exact circle
 
 
 def test_without_refinement_the_post_is_lost(post_map, monkeypatch):
-    # the test can fail: the grid alone (bubble filter, no refinement) drops the post
+    # the test can fail: the grid alone (bubble filter, no refinement) drops the post from the
+    # level (the gated surface would still return its sample as a lone point)
     monkeypatch.setattr(_surface, "_refined", lambda m, lines, res: [])
-    d = _post_distance(post_map.surface())
+    d = _post_distance(post_map.surface(evidence=False))
     assert not (np.abs(d) < 0.02).any()
 
 

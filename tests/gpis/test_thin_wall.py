@@ -22,7 +22,7 @@ def _scan(pose):
 
 
 def _map(legacy=False):
-    m = GPISMap2D(sensor_offset=(0.0, 0.0), legacy=legacy)
+    m = GPISMap2D.published() if legacy else GPISMap2D()
     for x in (-1.5, 1.5):
         for y in np.linspace(-1.0, 1.0, 5):
             pose = (x, y, 0.0 if x < 0 else np.pi)

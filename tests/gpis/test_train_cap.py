@@ -10,10 +10,15 @@ import numpy as np
 import pytest
 
 from polar_sim.gpis import GPISMap2D
+from polar_sim.gpis.config import LocalGPConfig2D
 
 from .scenes import room_path, scan_2d
 
 ANGLES = np.linspace(-np.pi * 0.75, np.pi * 0.75, 271)
+
+
+def _capped(cap):
+    return GPISMap2D(local_gp=LocalGPConfig2D(train_cap=cap))
 
 
 def _scans(n):
@@ -52,7 +57,7 @@ def _as_set(p):
 
 @pytest.mark.parametrize("cap", [None, 12])
 def test_every_gp_holds_the_nearest_samples(cap):
-    m = GPISMap2D(train_cap=cap, retrain_tol=0.0)
+    m = GPISMap2D(local_gp=LocalGPConfig2D(train_cap=cap, retrain_tol=0.0))
     checked = 0
     for a, r, pose in _scans(30):
         m.update(a, r, pose)
@@ -73,7 +78,7 @@ def test_every_gp_holds_the_nearest_samples(cap):
 def test_cap_bounds_the_gp_size_and_keeps_accuracy():
     from .scenes import eval_sets_2d, sdf_2d
 
-    full, capped = GPISMap2D(train_cap=None), GPISMap2D(train_cap=12)
+    full, capped = _capped(None), _capped(12)
     path = []
     for a, r, pose in _scans(60):
         full.update(a, r, pose)
@@ -91,12 +96,12 @@ def test_cap_bounds_the_gp_size_and_keeps_accuracy():
 
 
 def test_published_retraining_ignores_the_cap():
-    a_map, b_map = GPISMap2D(legacy=True), GPISMap2D(legacy=True, train_cap=4)
+    a_map, b_map = GPISMap2D.published(), GPISMap2D.published(local_gp__train_cap=4)
     for a, r, pose in _scans(8):
         a_map.update(a, r, pose)
         b_map.update(a, r, pose)
     assert np.array_equal(a_map.gps_.X[: a_map.gps_.n_obs], b_map.gps_.X[: b_map.gps_.n_obs])
-    c, d = GPISMap2D.published(), GPISMap2D.published(train_cap=None)
+    c, d = GPISMap2D.published(), GPISMap2D.published(local_gp__train_cap=None)
     for a, r, pose in _scans(8):
         c.update(a, r, pose)
         d.update(a, r, pose)
@@ -105,15 +110,15 @@ def test_published_retraining_ignores_the_cap():
 
 def test_save_load_keeps_the_capped_retraining(tmp_path):
     scans = list(_scans(16))
-    ref = GPISMap2D(train_cap=10)
+    ref = _capped(10)
     for a, r, pose in scans:
         ref.update(a, r, pose)
-    m = GPISMap2D(train_cap=10)
+    m = _capped(10)
     for a, r, pose in scans[:8]:
         m.update(a, r, pose)
     m.save(tmp_path / "m.npz")
     m = GPISMap2D.load(tmp_path / "m.npz")
-    assert m.train_cap == 10
+    assert m.local_gp.train_cap == 10
     for a, r, pose in scans[8:]:
         m.update(a, r, pose)
     pts = np.random.default_rng(1).uniform([0, 0], [8, 6], (500, 2))
@@ -122,13 +127,13 @@ def test_save_load_keeps_the_capped_retraining(tmp_path):
 
 @pytest.mark.parametrize("bad", [0, -3, 2.5, True, "8", np.nan])
 def test_bad_cap_is_refused_and_the_map_kept(bad):
-    m = GPISMap2D(train_cap=16)
+    m = _capped(16)
     a, r, pose = next(_scans(2))
     m.update(a, r, pose)
     before = m.query(np.array([[1.0, 1.0]]))[0]
-    with pytest.raises(ValueError, match="train_cap"):
-        m.set_params(train_cap=bad)
-    assert m.train_cap == 16
+    with pytest.raises(ValueError, match="^local_gp__train_cap"):
+        m.set_params(local_gp__train_cap=bad)
+    assert m.local_gp.train_cap == 16
     assert np.array_equal(m.query(np.array([[1.0, 1.0]]))[0], before)
-    with pytest.raises(ValueError, match="train_cap"):
-        GPISMap2D(train_cap=bad).update(a, r, pose)
+    with pytest.raises(ValueError, match="^train_cap"):
+        LocalGPConfig2D(train_cap=bad)

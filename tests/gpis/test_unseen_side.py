@@ -38,7 +38,7 @@ def test_far_side_has_the_prior_variance(one_sided):
     shadow = np.stack([x.ravel(), y.ravel()], 1)   # behind the disc, in its shadow from every pose
     assert np.all(np.linalg.norm(shadow - DISC, axis=1) - R > 0.55)   # truly free space, never seen
     _, _, v = m.query(shadow)
-    np.testing.assert_array_equal(v, np.full(len(v), 1.0 + m.map_noise))
+    np.testing.assert_array_equal(v, np.full(len(v), 1.0 + m.noise.map_noise))
     front = np.stack([np.linspace(0.6, 1.4, 9), np.zeros(9)], 1)   # seen free space between robot and disc
     d, _, vf = m.query(front)
     assert np.all(vf < 0.1)

@@ -28,7 +28,9 @@ def test_a_model_that_is_not_a_string_names_model(model):
 
 
 @pytest.mark.parametrize("kw, name", [(dict(seed=-1), "seed"), (dict(seed="0"), "seed"), (dict(camera_pitch=2.0), "camera_pitch"),
-                                      (dict(camera_pitch=True), "camera_pitch"), (dict(sampling=None), "sampling")])
+                                      (dict(camera_pitch=True), "camera_pitch"), (dict(sampling=None), "sampling"),
+                                      (dict(camera_pitch=1e30), "camera_pitch"), (dict(downsample=2.0), "downsample"),
+                                      (dict(downsample=np.array([2, 2])), "downsample")])
 def test_bad_top_level_parameters_name_the_argument(kw, name):
     with pytest.raises((TypeError, ValueError), match=name):
         GroundVO(K, 1.0, **kw)

@@ -25,14 +25,14 @@ def drive(tmp_path_factory):
 
     rgb, t = [], []
     with World("rover_terrain", seed=0) as w:
-        pp = PurePursuit(w.meta["route"], lookahead=8.0, closed=True)
+        pp = PurePursuit(w.meta.route, lookahead=8.0, closed=True)
         for k in range(N_FRAMES):
             f = w.camera("front")
             rgb.append(f.rgb)
             t.append(f.t)
             v = min(0.1 * (k + 1), 6.0)
             w.step((v, float(np.clip(pp.steer(w.truth()["robot_pose2d"], v), -0.5, 0.5))))
-        frames = dict(rgb=np.stack(rgb), t=np.array(t), K=f.K, h=w.meta["rover_config"].camera_height)
+        frames = dict(rgb=np.stack(rgb), t=np.array(t), K=f.K, h=w.meta.rover_config.camera_height)
     path = tmp_path_factory.mktemp("drive") / "frames.npz"
     np.savez(path, **frames)
     return frames, path

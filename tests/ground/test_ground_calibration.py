@@ -40,6 +40,27 @@ def test_balance_removes_the_sample_class_ratio():
     np.testing.assert_allclose(fits[1], [2.0, 0.0], atol=0.1)  # equal-variance Gaussians: a = 2, b = 0
 
 
+# Adversarial self-labels (ground labelled where the classifier scores low, as paint the colour of the
+# sky): the unconstrained fit's slope is negative, and the map in use falls back to the identity, so the
+# calibrated probability still increases with the score; labels that rank with the score again bring the
+# fit back.
+def test_platt_never_inverts_the_score():
+    rng = np.random.default_rng(2)
+    cal = PlattCalibrator(decay=0.9, prior_weight=5.0)
+    for _ in range(10):
+        z = rng.normal(0, 3, 4000)
+        cal.update(z, rng.random(4000) < sigmoid(-1.5 * z))
+    assert cal.fit_[0] < 0 and cal.fallback_ == "slope_not_positive"
+    z = np.linspace(-14, 14, 2001)
+    p = cal.transform(z)
+    assert np.all(np.diff(p.astype(np.float64)) >= 0) and p[-1] - p[0] > 0.99
+    np.testing.assert_allclose(p, sigmoid(z), atol=1e-6)  # the identity: the classifier's own posterior
+    for _ in range(40):
+        z = rng.normal(0, 3, 4000)
+        cal.update(z, rng.random(4000) < sigmoid(1.5 * z))
+    assert cal.fallback_ is None and cal.coef_[0] > 1.0 and np.array_equal(cal.coef_, cal.fit_)
+
+
 # Evidence-weighted decay: an update with few samples keeps most of the histogram.
 def test_decay_samples_forgets_in_proportion_to_the_evidence():
     labels = np.zeros((20, 20), np.uint8)

@@ -144,6 +144,20 @@ def test_timeout_and_dead_worker(tmp_path):
     assert not res.passed
 
 
+# The trial's clock starts when a worker has the trial in hand: a worker that takes longer than
+# trial_timeout to start (spawn, imports; here a module that sleeps 3 s at import) does not time
+# out the quick trial it was sent.
+def test_a_slow_worker_start_is_not_the_trials_time(tmp_path, monkeypatch):
+    (tmp_path / "slow_import_trial.py").write_text(
+        "import time\ntime.sleep(3.0)\n\ndef trial(params, seed, ctx):\n    return {'value': float(seed)}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import slow_import_trial
+
+    exp = Experiment("slow_start", "", grid={"a": [1]}, trial=slow_import_trial.trial, splits={"dev": {"seeds": [0, 1]}})
+    res = run_experiment(exp, out=tmp_path / "run", workers=2, trial_timeout=2, progress=False)
+    assert [r["status"] for r in res.table] == ["ok", "ok"], [r["error"] for r in res.table]
+
+
 # One folder holds one size and split: a full run into a quick run's folder is refused, and a
 # corrupt results.csv is reported and left as it was.
 def test_folder_guards(tmp_path):

@@ -54,9 +54,9 @@ def test_routes_and_bad_legs(cache):
     w = D.lidar_world("warehouse2d", 10_001, noise=False)
     path = D.plan_route(w, 3, n_rooms=6)
     assert w.sdf(path).min() > 0.3
-    x0, x1, y0, y1 = w.meta["regions"]["yard"]
+    x0, x1, y0, y1 = w.meta.regions["yard"]
     assert len(D.regions(w)) >= 5
-    np.testing.assert_array_equal(D.section_corners(w), w.meta["corners"])
+    np.testing.assert_array_equal(D.section_corners(w), w.meta.corners)
     w.close()
     with pytest.raises(ValueError, match="unknown keys"):
         D.recorded_drives("office2d", 0, [dict(route_seed=0, speeed=1.0)])
@@ -80,7 +80,7 @@ def test_recorded_orbit(cache):
     c = recorded_orbit(World("object_orbit", seed=2, object="mug" if a.name != "mug" else "box"), 4, seed=2)
     assert c.render_s > 0 and c.name != a.name
     wd = World("object_orbit", seed=2, object=a.name)        # same object from the seed, other colours
-    assert wd.meta["colours"] != w.meta["colours"]
+    assert wd.meta.colours != w.meta.colours
     assert recorded_orbit(wd, 4, seed=2).render_s > 0           # so not the cached recording of ``w``
     with pytest.raises(ValueError, match="freshly"):
         w.step()

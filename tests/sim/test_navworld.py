@@ -10,9 +10,9 @@ from polar_sim.sim import World
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_start_goal(seed):
     with World("navworld", seed=seed, kinematic=True) as w:
-        start, goal = w.meta["start_pose2d"], w.meta["goal"]
+        start, goal = w.meta.start_pose2d, w.meta.goal
         assert np.linalg.norm(goal - start[:2]) >= 5.0
-        r = w.meta["robot_radius"]
+        r = w.meta.robot_radius
         d = w.sdf(np.array([start[:2], goal]))
         assert np.all(d > r)
         np.testing.assert_allclose(w.truth()["robot_pose2d"][:2], start[:2], atol=1e-9)
@@ -43,7 +43,7 @@ def test_relayout_gives_the_compiled_world(rooms, clutter):
         assert pooled.relayout(seed) is pooled
         ref = World("navworld", seed=seed, kinematic="planar", **kw)
         for key in ("start_pose2d", "goal", "occupancy", "bounds"):
-            np.testing.assert_array_equal(pooled.meta[key], ref.meta[key])
+            np.testing.assert_array_equal(getattr(pooled.meta, key), getattr(ref.meta, key))
         np.testing.assert_array_equal(pooled.truth()["robot_pose2d"], ref.truth()["robot_pose2d"])
         pts = rng.uniform(-kw["room_size"] * rooms / 2, kw["room_size"] * rooms / 2, (500, 2))
         np.testing.assert_array_equal(pooled.sdf(pts), ref.sdf(pts))
@@ -70,8 +70,8 @@ def test_relayout_refuses_and_keeps_the_world():
         with pytest.raises(ValueError, match="pooled"):
             w.relayout(2)
     w = World("navworld", seed=1, kinematic="planar", pooled=True, rooms=1, room_size=6.0, clutter=6)
-    before = w.model.geom_pos.copy(), dict(w.meta)
+    before = w.model.geom_pos.copy(), w.meta
     with pytest.raises(ValueError, match="seed"):
         w.relayout(-1)
     np.testing.assert_array_equal(w.model.geom_pos, before[0])
-    assert w.meta["goal"] is before[1]["goal"]
+    assert w.meta is before[1]

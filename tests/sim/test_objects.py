@@ -61,7 +61,7 @@ def test_mujoco_loads_the_shipped_meshes():
 
     w = World("tabletop", seed=3, n_objects=6, script="touch")
     try:
-        for name in w.meta["objects"]:
+        for name in w.meta.objects:
             mj = w.object_mesh(name)
             ref = O.load_mesh(name)
             _, dist, _ = trimesh.proximity.closest_point(ref, np.asarray(mj.vertices)[::7])

@@ -42,7 +42,7 @@ def test_ground_labels_agree_with_geometry(appearance):
 # The geometry, the route and the truth do not depend on the appearance: one seed, one world.
 def test_geometry_is_independent_of_the_appearance():
     with World("rover_flat", seed=7) as a, World("rover_flat", seed=7, appearance="checker") as b:
-        np.testing.assert_array_equal(a.meta["route"], b.meta["route"])
+        np.testing.assert_array_equal(a.meta.route, b.meta.route)
         np.testing.assert_array_equal(a.model.geom_pos, b.model.geom_pos)
         np.testing.assert_array_equal(a.model.geom_size, b.model.geom_size)
         _drive(a)
@@ -52,7 +52,7 @@ def test_geometry_is_independent_of_the_appearance():
         np.testing.assert_array_equal(fa.labels, fb.labels)
         np.testing.assert_array_equal(fa.depth, fb.depth)
         assert not np.array_equal(fa.rgb, fb.rgb)
-        assert a.meta["appearance"] is None and b.meta["zones"] == ["checker"] * 4
+        assert a.meta.appearance is None and b.meta.zones == ["checker"] * 4
 
 
 # Same seed, same pixels; the resolved spec in meta rebuilds the same pixels under another world seed's
@@ -60,7 +60,7 @@ def test_geometry_is_independent_of_the_appearance():
 def test_determinism_and_round_trip_of_the_resolved_spec():
     def render(seed, appearance):
         with World("rover_flat", seed=seed, appearance=appearance) as w:
-            return w.camera("front", width=160, height=120).rgb, w.meta["appearance"]
+            return w.camera("front", width=160, height=120).rgb, w.meta.appearance
 
     a, spec = render(3, "random")
     b, spec_b = render(3, "random")

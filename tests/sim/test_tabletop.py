@@ -174,7 +174,7 @@ def test_pass_never_touches_and_light_ramps():
 def test_reset_replays_the_script_exactly():
     # reset() restores the initial state: the same poses step by step.
     w = World("tabletop", seed=4, script="push")
-    tgt = w.meta["target"]
+    tgt = w.meta.target
     a = [(w.step(), w.truth()["objects"][tgt])[1] for _ in range(150)]
     w.reset()
     b = [(w.step(), w.truth()["objects"][tgt])[1] for _ in range(150)]
@@ -274,7 +274,7 @@ def test_appearance_changes_colours_only(looks):
             assert np.array_equal(getattr(x["f"], k), getattr(ref["f"], k)), (a, k)
         assert np.array_equal(x["full"], ref["full"]), a
         assert np.abs(x["f"].rgb.astype(int) - ref["f"].rgb).mean() > 3, a
-        assert x["meta"]["appearance"]["family"] == a
+        assert x["meta"].appearance["family"] == a
 
 
 def test_labels_come_from_geoms_under_every_appearance(looks):
@@ -330,7 +330,7 @@ def test_explicit_spec_sets_flat_part_colours_hand_and_light():
         p0 = ref.model.light_pos[k0]
         assert np.allclose(w.model.light_pos[k1], [-p0[1], p0[0], p0[2]], atol=1e-9)
         assert np.allclose(w.model.light_diffuse[k1], 0.5 * ref.model.light_diffuse[k0])
-        assert w.meta["colours"]["blocks"] == ["blue", "yellow", "red"]
+        assert w.meta.colours["blocks"] == ["blue", "yellow", "red"]
     finally:
         w.close()
         ref.close()

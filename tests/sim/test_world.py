@@ -21,7 +21,7 @@ def test_list_scenes():
 # The kinematic rover follows the exact unicycle model to 1e-9 over turns and straights.
 def test_kinematic_unicycle_exact(flat):
     flat.reset()
-    x, y, th = flat.meta["start_pose2d"]
+    x, y, th = flat.meta.start_pose2d
     rng = np.random.default_rng(3)
     for _ in range(50):
         v, w = rng.uniform(0, 9), rng.uniform(-0.8, 0.8)
@@ -146,7 +146,7 @@ def test_determinism():
     for a, b in zip(*outs):
         np.testing.assert_array_equal(a, b)
     with World("rover_terrain", seed=6) as w:
-        assert not np.array_equal(w.meta["route"][:10], World("rover_terrain", seed=5).meta["route"][:10])
+        assert not np.array_equal(w.meta.route[:10], World("rover_terrain", seed=5).meta.route[:10])
 
 
 # close() frees renderers, is safe twice, and a closed world refuses to step.

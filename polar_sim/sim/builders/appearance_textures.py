@@ -11,15 +11,9 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from polar_sim.sim.builders.textures import _noise
+
 __all__ = ["GROUND_GENERATORS", "ground_family_texture", "sky_cube", "SKY_FACE_AZIMUTH"]
-
-
-def _noise(rng, size, sigma):
-    """Zero-mean, unit-variance seamless noise of blur ``sigma`` texels, (size, size) float32."""
-    n = rng.standard_normal((size, size)).astype(np.float32)
-    if sigma > 0:
-        n = gaussian_filter(n, sigma, mode="wrap")
-    return n / (n.std() + 1e-9)
 
 
 def _rgb(c):

@@ -14,7 +14,7 @@
 
 The geometry (terrain, route, obstacles) never depends on the appearance: one seed gives the same
 world under every appearance, so a route's truth is the same. The resolved spec (every field
-filled in, including the seed of the texture noise) is in ``World.meta["appearance"]``; passing it
+filled in, including the seed of the texture noise) is in ``World.meta.appearance``; passing it
 back builds the same pixels. Everything is generated procedurally; no image asset ships.
 """
 

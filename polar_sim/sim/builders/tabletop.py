@@ -18,7 +18,7 @@ fast      grasp and shake: +-7 cm, +-25 deg moves of 0.5 s (peaks ~0.7 m/s, ~190
 light     the key light dims to 30 % and brightens to 130 % while the hand touches and turns
 pass      the hand sweeps across in front of the target without touching it, twice
 demo      touch, pass, lift, turn, push, and again (cycles for ever)
-reach     the hand is driven from outside (``meta["script"].command(velocity, yaw_rate)``) and a
+reach     the hand is driven from outside (``World.meta.script.command(velocity, yaw_rate)``) and a
           scripted disturbance slides the target about the front of the table
           (:class:`polar_sim.sim.actors.hand.ReachScript`; used by the ``ObjectTrack-v0`` environment)
 ========  =====================================================================================

@@ -29,6 +29,7 @@ OBSTACLE_COLOURS = {
 
 
 def _noise(rng, size, sigma):
+    """Zero-mean, unit-variance seamless noise of blur ``sigma`` texels, (size, size) float32."""
     n = rng.standard_normal((size, size)).astype(np.float32)
     if sigma > 0:
         # Wrap-around blur keeps the texture seamless when it repeats across the ground.

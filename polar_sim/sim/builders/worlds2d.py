@@ -80,7 +80,7 @@ def layout_sdf(boxes, discs, points):
 
     ``boxes`` (k, 5): centre x, y, half sizes hx, hy, yaw (rad); ``discs`` (m, 3): centre x, y,
     radius. Exact outside the shapes and inside any shape that overlaps no other (as
-    ``World.sdf``); ``World.meta["layout"]`` holds a world's arrays.
+    ``World.sdf``); ``World.meta.layout`` holds a world's arrays.
     """
     P = np.asarray(points, float).reshape(-1, 2)
     boxes = np.asarray(boxes, float).reshape(-1, 5)

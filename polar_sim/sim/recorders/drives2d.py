@@ -4,9 +4,9 @@ kinematic indoor rover, cached as recordings.
 - :func:`plan_route` visits a scene's named regions (office2d: its rooms; warehouse2d: its
   aisles, main aisle, partition zone and yard) in a seeded random order, each at a random point
   with 0.9 m clearance, along the cheapest path on the exact clearance map (``World.sdf``);
-- :class:`Follower` is a forward-only pure-pursuit follower for a unicycle;
-- :func:`drive` follows a path and takes scans: noisy and noise-free ranges of the same instant,
-  the true sensor pose, the travelled distance;
+- :func:`drive` follows a path (:class:`polar_sim.control.PurePursuit` on waypoints: forward only,
+  slowing in turns, on the spot when the target is behind) and takes scans: noisy and noise-free
+  ranges of the same instant, the true sensor pose, the travelled distance;
 - :func:`recorded_drives` records one or more legs in one world (a leg after the first starts from
   a reset world whose noise stream continues) through :mod:`polar_sim.sim.recorders.sequences`, so an
   experiment replays a drive without MuJoCo;
@@ -22,10 +22,12 @@ import dataclasses
 
 import numpy as np
 
+from polar_sim.control import PurePursuit
 from polar_sim.geometry import T_to_pose2d
+from polar_sim.sim.meta import Office2DMeta, Warehouse2DMeta
 
-__all__ = ["LIDAR_SIGMA", "ROBOT_CLEARANCE", "Drive", "lidar_world", "clearance_map", "plan_route", "Follower",
-           "drive", "recorded_drives", "snake_route", "section_corners", "regions"]
+__all__ = ["LIDAR_SIGMA", "ROBOT_CLEARANCE", "Drive", "lidar_world", "clearance_map", "plan_route", "drive",
+           "recorded_drives", "snake_route", "section_corners", "regions"]
 
 LIDAR_SIGMA = 0.01          # 2D lidar range noise of the GPIS experiments, m (issue 3)
 ROBOT_CLEARANCE = 0.45      # m, clearance below which a route cell costs 1e6 (crossed only in doors)
@@ -57,16 +59,16 @@ def lidar_world(scene, seed, *, noise=True, **options):
 def regions(world):
     """The named regions (x0, x1, y0, y1) a route visits: office2d's rooms, warehouse2d's regions."""
     meta = world.meta
-    if "regions" in meta:
-        return dict(meta["regions"])
-    if "rooms" in meta:
-        return dict(meta["rooms"])
+    if isinstance(meta, Warehouse2DMeta):
+        return dict(meta.regions)
+    if isinstance(meta, Office2DMeta):
+        return dict(meta.rooms)
     raise ValueError(f"world: scene {world.scene!r} has no rooms or regions to plan a route through")
 
 
 def clearance_map(world, res=0.1, bounds=None):
     """Exact clearance (signed distance) on a grid over the scene: ``(xs, ys, C[ix, iy])``, m."""
-    x0, x1, y0, y1 = bounds if bounds is not None else world.meta["bounds"]
+    x0, x1, y0, y1 = bounds if bounds is not None else world.meta.bounds
     xs = np.arange(x0 + res / 2, x1, res)
     ys = np.arange(y0 + res / 2, y1, res)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
@@ -98,7 +100,7 @@ def plan_route(world, seed, *, n_rooms=5, start=None, clearance=None, res=0.1):
         return (int(np.clip(np.round((p[0] - xs[0]) / res), 0, len(xs) - 1)),
                 int(np.clip(np.round((p[1] - ys[0]) / res), 0, len(ys) - 1)))
 
-    start = np.asarray(world.meta["start_pose2d"][:2] if start is None else start, float)
+    start = np.asarray(world.meta.start_pose2d[:2] if start is None else start, float)
     pts = [start]
     names = list(rooms)
     order = []
@@ -120,36 +122,6 @@ def plan_route(world, seed, *, n_rooms=5, start=None, clearance=None, res=0.1):
                             gaussian_filter1d(p[:, 1], 3, mode="nearest")])
 
 
-class Follower:
-    """Forward-only path follower for a unicycle: pure pursuit on a point ``lookahead`` metres
-    ahead along the path (progress never goes back, so routes that pass near themselves are safe);
-    slows down and turns on the spot when the target is behind."""
-
-    def __init__(self, path, lookahead=0.5, max_yaw_rate=2.0):
-        self.path = np.asarray(path, float)
-        self.i = 0
-        self.lookahead = float(lookahead)
-        self.max_yaw_rate = float(max_yaw_rate)
-
-    @property
-    def done(self):
-        return self.i >= len(self.path) - 1
-
-    def __call__(self, pose, vmax):
-        """Command (v m/s, omega rad/s) from the pose (x, y, theta), at most ``vmax`` m/s."""
-        x, y, th = pose
-        while self.i < len(self.path) - 1 and np.hypot(*(self.path[self.i] - (x, y))) < self.lookahead:
-            self.i += 1
-        dx, dy = self.path[self.i] - (x, y)
-        a = (np.arctan2(dy, dx) - th + np.pi) % (2 * np.pi) - np.pi
-        v = max(vmax * max(0.0, np.cos(a)) ** 2, 0.05)
-        if abs(a) < np.pi / 3:
-            om = 2.0 * v * np.sin(a) / max(np.hypot(dx, dy), 1e-6)
-        else:
-            om = np.sign(a) * self.max_yaw_rate
-        return float(v), float(np.clip(om, -self.max_yaw_rate, self.max_yaw_rate))
-
-
 def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1, lookahead=0.5, clean=True):
     """Follow ``path`` with the kinematic rover for ``duration`` seconds at up to ``speed`` m/s.
 
@@ -158,7 +130,8 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
     Stops early at the end of the path. ``clean=False`` skips the noise-free twin scans (their
     ranges are then NaN). Returns a :class:`Drive`.
     """
-    follow = Follower(path, lookahead)
+    follow = PurePursuit(path, lookahead, target="waypoint", max_yaw_rate=2.0, turn_in_place=np.pi / 3,
+                         min_speed=0.05)
     n_steps = int(round(duration / world.dt))
     angles = None
     poses, noisy, twins, trav, base = [], [], [], [], []
@@ -166,7 +139,7 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
     prev = world.truth()["robot_pose2d"]
     for k in range(n_steps + 1):
         if k:
-            world.step(follow(prev, speed))
+            world.step(follow.command(prev, speed))
             cur = world.truth()["robot_pose2d"]
             dist += float(np.hypot(*(cur[:2] - prev[:2])))
             prev = cur
@@ -196,7 +169,7 @@ def drive(world, path, *, duration=60.0, speed=1.0, every_m=None, every_steps=1,
 
 def _leg_path(world, leg, clearance):
     if leg.get("route") == "snake":
-        return snake_route(int(world.meta.get("tiles", 1)))
+        return snake_route(world.meta.tiles)
     return plan_route(world, int(leg["route_seed"]), n_rooms=int(leg.get("n_rooms", 5)), clearance=clearance)
 
 
@@ -277,7 +250,7 @@ def snake_route(n, tile=30.0):
 def section_corners(world):
     """Corner points (m, 2) of the scene's section in the lidar plane.
 
-    warehouse2d lists its corners (``meta["corners"]``: convex box vertices on the boundary and
+    warehouse2d lists its corners (``meta.corners``: convex box vertices on the boundary and
     the concave corners). Otherwise: the vertices of every vertical box that the plane cuts
     (walls, desks, cabinets, shelves); where boxes join (a wall junction), the concave corner lies
     within a wall thickness of such a vertex.
@@ -286,8 +259,8 @@ def section_corners(world):
 
     from polar_sim.sim.truth import static_geoms
 
-    if "corners" in world.meta:
-        return np.asarray(world.meta["corners"], float).copy()
+    if isinstance(world.meta, Warehouse2DMeta):
+        return np.asarray(world.meta.corners, float).copy()
     m, dat = world.model, world.data
     z = world.lidar_plane_height()
     out = []

@@ -50,9 +50,9 @@ def _capture(world, n_frames, seed, turns):
 
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 5151]))
     noise = DepthNoise()
-    period = float(world.meta["script"].period)
+    period = float(world.meta.script.period)
     steps = max(1, int(round(turns * period / world.dt / n_frames)))
-    rec = Recording(meta={"object": world.meta["target"], "render_s": 0.0})
+    rec = Recording(meta={"object": world.meta.target, "render_s": 0.0})
     t_render = 0.0
     for k in range(n_frames):
         if k:
@@ -79,11 +79,11 @@ def recorded_orbit(world, n_frames, seed, *, turns=1.0):
 
     if world.time != 0.0:
         raise ValueError(f"world: record an orbit from a freshly built or reset world (its time is {world.time:g} s)")
-    sc, name = world.meta["script"], world.meta["target"]
+    sc, name = world.meta.script, world.meta.target
     # Everything that shapes the frames: the same seed with other options is another world (the
     # object, its yaw and colours and the orbit's phase all come from one seeded stream).
     key = {"scene": world.scene, "world_seed": int(world.seed), "object": name, "n_frames": int(n_frames),
-           "seed": int(seed), "turns": float(turns), "colours": list(world.meta.get("colours", {}).get(name, [])),
+           "seed": int(seed), "turns": float(turns), "colours": list(world.meta.colours.get(name, [])),
            "orbit": [float(sc.radius), float(sc.period), float(sc.phase0), float(sc.elevation)] + [float(c) for c in sc.centre],
            "object_pose": np.round(world.truth()["objects"][name], 12).ravel().tolist()}
     fresh = []
@@ -100,7 +100,7 @@ def recorded_orbit(world, n_frames, seed, *, turns=1.0):
             poses.append(f["T"])
             obs.append(_backproject(f["clean"].astype(np.float64), f["K"], f["T"]))
         render_s = float(r.meta["render_s"]) if fresh else 0.0
-    return Orbit(world.meta["target"], depths, Ks, poses, np.vstack(obs), render_s)
+    return Orbit(world.meta.target, depths, Ks, poses, np.vstack(obs), render_s)
 
 
 class ObjectTruth:

@@ -180,14 +180,14 @@ def record_route(name, *, max_frames=None, progress=None):
     look = {} if spec.appearance is None else {"appearance": spec.appearance}
     w = World(spec.scene, seed=spec.seed, camera_fovy=KITTI_FOVY_DEG, **look)
     try:
-        route = w.meta["route"]
+        route = w.meta.route
         follower = PurePursuit(route, lookahead=8.0, closed=True)
         loop = follower.length
         length = spec.laps * loop
         dt = w.dt
         n_max = int(length / spec.v_min / dt) + 200
         profile = _speed_profile(rng, spec, n_max, dt)
-        cfg = w.meta["rover_config"]
+        cfg = w.meta.rover_config
         K_full = None
         rec = None
         frames = 0
@@ -209,8 +209,8 @@ def record_route(name, *, max_frames=None, progress=None):
                                       "fovy_deg": KITTI_FOVY_DEG, "full_size": [FULL_W, FULL_H],
                                       "length_m": length, "laps": spec.laps,
                                       "speed_range": [spec.v_min, spec.v_max],
-                                      "appearance": w.meta["appearance"],
-                                      "zones": [str(z) for z in w.meta["zones"]]})
+                                      "appearance": w.meta.appearance,
+                                      "zones": [str(z) for z in w.meta.zones]})
             T = f.T_world_cam
             tw = w.truth()["robot_twist"]  # body frame (v, omega); camera sits on the body's z axis
             Rb = w.truth()["robot_pose"][:3, :3]
@@ -281,8 +281,8 @@ def route_layout(name):
     spec = route_spec(name)
     look = {} if spec.appearance is None else {"appearance": spec.appearance}
     with World(spec.scene, seed=spec.seed, camera_fovy=KITTI_FOVY_DEG, **look) as w:
-        return {"route": np.array(w.meta["route"]), "zone_of_route": np.array(w.meta["zone_of_route"]),
-                "zones": [str(z) for z in w.meta["zones"]]}
+        return {"route": np.array(w.meta.route), "zone_of_route": np.array(w.meta.zone_of_route),
+                "zones": [str(z) for z in w.meta.zones]}
 
 
 def route_zones(rec, margin_m=40.0):

@@ -290,7 +290,7 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
     width, height = as_int(width, "width", minimum=16), as_int(height, "height", minimum=16)
     w = sequence_world(name, seed)
     try:
-        target = w.meta["target"]
+        target = w.meta.target
         mesh = _objects.load_mesh(target)
         info = _objects.object_info(target)
         rng = np.random.default_rng(np.random.SeedSequence([seed, 7103, zlib.crc32(name.encode())]))
@@ -298,15 +298,15 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
         K = f0.K
         meta = {
             "sequence": name, "description": s.description, "scene": s.scene, "options": dict(s.options),
-            "script": w.meta.get("script_name"), "seed": seed, "object": target,
-            "objects": list(w.meta["objects"]), "diameter": _objects.diameter(mesh),
+            "script": w.meta.script_name, "seed": seed, "object": target,
+            "objects": list(w.meta.objects), "diameter": _objects.diameter(mesh),
             "symmetry": info.symmetry, "mesh": f"assets/objects/{target}.obj",
             "K": K.tolist(), "width": width, "height": height, "fps": round(1.0 / w.dt, 6),
             "noise": dataclasses.asdict(NOISE) | {"max_incidence_deg": 75.0} if noise else None,
             "depth_unit": "m", "depth_missing": "inf", "phases": list(PHASES),
         }
-        if s.split != "dev" or "appearance" in w.meta:  # (the dev recordings' headers stay as they were)
-            meta.update(split=s.split, appearance=w.meta.get("appearance"))
+        if s.split != "dev" or w.meta.appearance is not None:  # (the dev recordings' headers stay as they were)
+            meta.update(split=s.split, appearance=w.meta.appearance)
         rec = Recording(meta)
         tick = progress if callable(progress) else None
         frames = progress_bar(range(n), enabled=False if tick is not None else progress, desc=f"recording {name}",
