@@ -157,8 +157,8 @@ def _with_lone_samples(m, ev, reach, gates):
     idx = m.tree_.alive()
     P = m.tree_.pos[idx]
     if ev.lines:
-        P, idx = (a[cKDTree(np.vstack(ev.lines)).query(P, distance_upper_bound=reach)[0] > reach]
-                  for a in (P, idx))
+        far = cKDTree(np.vstack(ev.lines)).query(P, distance_upper_bound=reach)[0] > reach
+        P, idx = P[far], idx[far]
     if not len(P):
         return ev
     kd, kidx = m._kd()
