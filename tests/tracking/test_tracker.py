@@ -206,21 +206,43 @@ def test_lost_when_fully_occluded_then_recovers():
     assert np.all(add < 0.1 * metrics.object_diameter(P))
 
 
-def test_mostly_hidden_object_is_tracked_not_lost():
-    # a board in front hides all but about 12 % of a static mug from frame 10 on. Its visible part
-    # still fits, so with guard.coverage="visible" (the default) the tracker keeps it: never lost, the
-    # mask covers the visible part (IoU > 0.5 against the true visible mask) and the pose holds.
-    # Counting the hidden pixels as expected (guard.coverage="silhouette", the rule before) declares it lost
+def _behind_board(n, obj, *, board_dx, **kw):
+    """A synthetic sequence of ``obj`` (``make_sequence(n, obj, **kw)``) and the same sequence with a
+    30 cm board in front of it, at 0.6 of its distance from the camera and ``board_dx`` m to the side."""
     import trimesh
 
     from polar_sim.geometry import make_pose
     from polar_sim.tracking.synthetic import OCCLUDER, Part
 
-    n = 25
-    seq = make_sequence(n, "mug", speed=0.0, hand=False, shape=(240, 320))
-    occ = make_sequence(n, "mug", speed=0.0, hand=False, shape=(240, 320))
+    seq = make_sequence(n, obj, **kw)
+    occ = make_sequence(n, obj, **kw)
     board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
-    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.12, 0.0, 0.0]))]
+    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [board_dx, 0.0, 0.0]))]
+    return seq, occ
+
+
+def _spy_deadzones(monkeypatch):
+    """The tangential dead zone of every ICP call the tracker makes, appended to the returned list."""
+    from polar_sim.tracking import tracker as tracker_mod
+
+    used = []
+    icp = tracker_mod.weighted_icp
+
+    def spy(*a, **kw):
+        used.append(kw["tangential_deadzone"])
+        return icp(*a, **kw)
+
+    monkeypatch.setattr(tracker_mod, "weighted_icp", spy)
+    return used
+
+
+def test_mostly_hidden_object_is_tracked_not_lost():
+    # a board in front hides all but about 12 % of a static mug from frame 10 on. Its visible part
+    # still fits, so with guard.coverage="visible" (the default) the tracker keeps it: never lost, the
+    # mask covers the visible part (IoU > 0.5 against the true visible mask) and the pose holds.
+    # Counting the hidden pixels as expected (guard.coverage="silhouette", the rule before) declares it lost
+    n = 25
+    seq, occ = _behind_board(n, "mug", speed=0.0, hand=False, shape=(240, 320), board_dx=-0.12)
     frames = [seq.frame(i) if i < 10 else occ.frame(i) for i in range(n)]
     seen = [f["mask"].sum() / frames[0]["mask"].sum() for f in frames[10:]]
     assert 0.05 < min(seen) and max(seen) < 0.2, seen
@@ -242,16 +264,8 @@ def test_still_object_almost_all_hidden_is_held_still():
     # truth stays under 2 deg, the track is never lost and ADD stays < 0.1 d. Without the tangential
     # term's dead zone the sampling gaps of the model pull the few visible points' weak directions and
     # the estimate turns by about 5 deg (so the test can fail)
-    import trimesh
-
-    from polar_sim.geometry import make_pose
-    from polar_sim.tracking.synthetic import OCCLUDER, Part
-
     n = 25
-    seq = make_sequence(n, "mug", speed=0.0, hand=True)
-    occ = make_sequence(n, "mug", speed=0.0, hand=True)
-    board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
-    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.10, 0.0, 0.0]))]
+    seq, occ = _behind_board(n, "mug", speed=0.0, hand=True, board_dx=-0.10)
     frames = [seq.frame(i) if i < 10 else occ.frame(i) for i in range(n)]
     seen = [f["mask"].sum() / frames[0]["mask"].sum() for f in frames[10:]]
     assert 0.01 < min(seen) and max(seen) < 0.05, seen
@@ -272,24 +286,8 @@ def test_dead_zone_scales_with_the_hidden_fraction(monkeypatch):
     # the ICP's dead zone is the configured one times the fraction of the predicted silhouette seen
     # behind something: ~0 for a mug with nothing in front (edge pixels only), ~1 behind a board that
     # leaves 3 % of it visible (the exact visible mask of the synthetic frames says how much)
-    import trimesh
-
-    from polar_sim.geometry import make_pose
-    from polar_sim.tracking import tracker as tracker_mod
-    from polar_sim.tracking.synthetic import OCCLUDER, Part
-
-    used = []
-    icp = tracker_mod.weighted_icp
-
-    def spy(*a, **kw):
-        used.append(kw["tangential_deadzone"])
-        return icp(*a, **kw)
-
-    monkeypatch.setattr(tracker_mod, "weighted_icp", spy)
-    seq = make_sequence(6, "mug", speed=0.0, hand=False)
-    occ = make_sequence(6, "mug", speed=0.0, hand=False)
-    board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
-    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.10, 0.0, 0.0]))]
+    used = _spy_deadzones(monkeypatch)
+    seq, occ = _behind_board(6, "mug", speed=0.0, hand=False, board_dx=-0.10)
     frames = [seq.frame(i) for i in range(3)] + [occ.frame(i) for i in range(3, 6)]
     hidden = 1.0 - np.array([f["mask"].sum() for f in frames]) / frames[0]["mask"].sum()
     assert hidden[:3].max() < 1e-9 and hidden[3:].min() > 0.9, hidden
@@ -309,25 +307,10 @@ def test_hidden_pushed_object_keeps_its_tangential_pull(monkeypatch):
     # the board (the truth moves there by > 2 x deadzone_rest_speed spacings per frame), and the track is
     # as good as without a dead zone: rotation error within 0.5 deg of it on every frame of the
     # sequence, ADD < 0.1 d, never lost. The ungated dead zone misses that bound (by about 1.4 deg)
-    import trimesh
-
-    from polar_sim.geometry import inv_pose, make_pose, se3_log
-    from polar_sim.tracking import tracker as tracker_mod
-    from polar_sim.tracking.synthetic import OCCLUDER, Part
-
-    used = []
-    icp = tracker_mod.weighted_icp
-
-    def spy(*a, **kw):
-        used.append(kw["tangential_deadzone"])
-        return icp(*a, **kw)
-
-    monkeypatch.setattr(tracker_mod, "weighted_icp", spy)
+    from polar_sim.geometry import inv_pose, se3_log
+    used = _spy_deadzones(monkeypatch)
     n, start = 40, 10
-    seq = make_sequence(n, "mug", speed=3.0, hand=True)
-    occ = make_sequence(n, "mug", speed=3.0, hand=True)
-    board = Part.from_trimesh(trimesh.creation.box([0.3, 0.3, 0.01]), (128, 128, 128), OCCLUDER)
-    occ.extras = [(board, make_pose(None, 0.6 * seq.poses[0][:3, 3] + [-0.10, 0.0, 0.0]))]
+    seq, occ = _behind_board(n, "mug", speed=3.0, hand=True, board_dx=-0.10)
     frames = [seq.frame(i) if i < start else occ.frame(i) for i in range(n)]
     seen = np.array([f["mask"].sum() for f in frames[start:]]) / frames[0]["mask"].sum()
     assert 0.1 < seen.min() and seen.max() < 0.55, seen
