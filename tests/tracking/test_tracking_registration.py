@@ -103,22 +103,28 @@ def test_icp_too_few_points_fails_cleanly():
     assert not res.ok and np.array_equal(res.T, T_true)
 
 
+def _random_problem(seed, n):
+    # a random point-to-plane problem: model points P with unit normals N, their correspondences Y (P plus
+    # 5 cm noise) seen as X = T Y, the point-to-plane residuals and random IRLS weights
+    rng = np.random.default_rng(seed)
+    P = rng.normal(size=(n, 3))
+    N = rng.normal(size=(n, 3))
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    T = make_pose(so3_exp(rng.normal(size=3) * 0.3), rng.normal(size=3))
+    Y = P + rng.normal(size=(n, 3)) * 0.05
+    X = Y @ T[:3, :3].T + T[:3, 3]
+    res = np.einsum("ij,ij->i", N, P - Y)
+    return P, N, T, Y, X, res, rng.random(n)
+
+
 def test_normal_equations_kernel_matches_brute_force():
     # the numba accumulation (point-to-plane + tangential term) equals an explicit 3x6-Jacobian sum
     from polar_sim.tracking._kernels import icp_normal_equations
     from polar_sim.tracking.icp import _normal_equations
 
-    rng = np.random.default_rng(0)
     n_ = 60
-    P = rng.normal(size=(n_, 3))
-    N = rng.normal(size=(n_, 3))
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    T = make_pose(so3_exp(rng.normal(size=3) * 0.3), rng.normal(size=3))
-    Y = P + rng.normal(size=(n_, 3)) * 0.05
-    X = Y @ T[:3, :3].T + T[:3, 3]
+    P, N, T, Y, X, res, w = _random_problem(0, n_)
     idx = np.arange(n_)
-    res = np.einsum("ij,ij->i", N, P - Y)
-    w = rng.random(n_)
     H, g = np.zeros((6, 6)), np.zeros(6)
     icp_normal_equations(X, T[:3, :3].copy(), T[:3, 3].copy(), P, N, idx, res, w, 0.09, np.zeros(len(P)), H, g)
     Hb = np.zeros((6, 6))
@@ -205,16 +211,8 @@ def test_normal_equations_kernel_with_a_tangential_dead_zone():
     # dz (explicit 3x6-Jacobian sums); dz = 0 is the plain tangential term
     from polar_sim.tracking._kernels import icp_normal_equations
 
-    rng = np.random.default_rng(1)
     n_ = 80
-    P = rng.normal(size=(n_, 3))
-    N = rng.normal(size=(n_, 3))
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    T = make_pose(so3_exp(rng.normal(size=3) * 0.3), rng.normal(size=3))
-    Y = P + rng.normal(size=(n_, 3)) * 0.05
-    X = Y @ T[:3, :3].T + T[:3, 3]
-    res = np.einsum("ij,ij->i", N, P - Y)
-    w = rng.random(n_)
+    P, N, T, Y, X, res, w = _random_problem(1, n_)
     et = (P - Y) - N * res[:, None]
     dz = np.full(n_, np.median(np.linalg.norm(et, axis=1)))   # about half the points in the dead zone
     H, g = np.zeros((6, 6)), np.zeros(6)
