@@ -213,6 +213,12 @@ class GuardConfig:
     lost_after : int >= 1, default=10
         Poor or unusable frames in a row after which the tracker is in lost mode (appearance off,
         the prediction reported) until a good fit.
+    confident_fitness : float in [0, 1] or None, default=0.9
+        A registration with at least this fitness that also covers ``learn_coverage`` of the
+        silhouette passes the Mahalanobis gate up to 4 x ``max_mahalanobis`` (twice the predicted
+        spread, the widening of a poor fit): a sudden push, measured cleanly while the motion
+        prior still expects the slow slide before it, is fused rather than coasted through. None
+        keeps the single gate.
     """
 
     fitness_min: float = 0.5
@@ -223,6 +229,7 @@ class GuardConfig:
     max_jump: tuple = (0.5, 0.1)
     max_mahalanobis: float = 50.0
     lost_after: int = 10
+    confident_fitness: float | None = 0.9
 
     def __post_init__(self):
         for name in ("fitness_min", "min_coverage", "learn_coverage"):
@@ -235,6 +242,8 @@ class GuardConfig:
             as_float(v, f"max_jump ({what})", minimum=0.0, exclusive_minimum=True)
         as_float(self.max_mahalanobis, "max_mahalanobis", minimum=0.0, exclusive_minimum=True, allow_inf=True)
         as_int(self.lost_after, "lost_after", minimum=1)
+        if self.confident_fitness is not None:
+            _unit(self.confident_fitness, "confident_fitness")
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,8 @@ APPEARANCE_VARIANTS = ("h", "su", "sw", "wu", "ww", "none")
 #: Pose spread assumed by the second E-step (``registration.em_refine``): 3 mm and 1 degree.
 _EM_SIGMA_TR = 0.003
 _EM_SIGMA_ROT = np.deg2rad(1.0)
+#: Widening of the filter after a poor fit, and of the Mahalanobis gate for a confident one (x4 in d2).
+_COAST_INFLATE = 4.0
 #: Longest frame interval the motion filter predicts over, s (see :meth:`ObjectTracker.process`).
 MAX_GAP_S = 1.0
 _STAGES = {"motion": MotionConfig, "attention": AttentionConfig, "registration": RegistrationConfig,
@@ -488,7 +490,10 @@ class ObjectTracker(Parameterised):
         e = se3_log(inv_pose(T_bar) @ res.T)
         S_e = self.filter_.P_bar[:6, :6] + np.diag(self.filter_.floor)
         d2 = float(e @ np.linalg.solve(S_e, e))
-        ok = (rot_jump < g.max_jump[0] and tr_jump < g.max_jump[1] and d2 < g.max_mahalanobis
+        limit = g.max_mahalanobis
+        if g.confident_fitness is not None and res.fitness >= g.confident_fitness and coverage >= g.learn_coverage:
+            limit = _COAST_INFLATE * limit  # a clean fit of a sudden push: the prior's spread lags the motion
+        ok = (rot_jump < g.max_jump[0] and tr_jump < g.max_jump[1] and d2 < limit
               and tracked >= g.min_coverage)
         return coverage if ok else None
 
@@ -514,7 +519,7 @@ class ObjectTracker(Parameterised):
             self.filter_.update(T_hat, res.cov, fr.dt, hold=hold)
             self.rejections_ = 0
         else:
-            self.filter_.coast(velocity_decay=self.motion.velocity_decay, inflate=4.0)
+            self.filter_.coast(velocity_decay=self.motion.velocity_decay, inflate=_COAST_INFLATE)
             self.rejections_ += 1
         lost = self.rejections_ >= g.lost_after
         if lost:

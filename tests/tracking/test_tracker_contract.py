@@ -198,6 +198,9 @@ BAD_FIELDS = [
     (GuardConfig, dict(max_jump=0.5), ValueError, "max_jump"),
     (GuardConfig, dict(max_mahalanobis=0.0), ValueError, "max_mahalanobis"),
     (GuardConfig, dict(lost_after=0), ValueError, "lost_after"),
+    (GuardConfig, dict(confident_fitness=1.5), ValueError, "confident_fitness"),
+    (GuardConfig, dict(confident_fitness=np.nan), ValueError, "confident_fitness"),
+    (GuardConfig, dict(confident_fitness="0.9"), TypeError, "confident_fitness"),
     (GuardConfig, dict(coverage="all"), ValueError, "coverage"),
     (GuardConfig, dict(fitness_min="0.5"), TypeError, "fitness_min"),
     (LearningConfig, dict(lr=np.inf), ValueError, "lr"),
@@ -216,6 +219,8 @@ def test_stage_configs_accept_their_limits_and_inf_gate():
     assert RegistrationConfig(max_points=1_000_000, max_iterations=1000).max_points == 1_000_000
     assert LearningConfig(epochs=0, replay=100, n_samples=10_000).epochs == 0
     assert GuardConfig(max_mahalanobis=np.inf, min_inliers=0).max_mahalanobis == np.inf
+    assert GuardConfig(confident_fitness=None).confident_fitness is None  # the single gate
+    assert GuardConfig(confident_fitness=1.0).confident_fitness == 1.0
     with pytest.raises(dataclasses.FrozenInstanceError):
         RegistrationConfig().tau_y = 0.7
 
