@@ -207,6 +207,16 @@ def test_recorded_sequence_is_deterministic_and_cached(tmp_path, monkeypatch):
     assert f["T_cam_obj"].shape == (4, 4) and f["mask_full"].dtype == bool
 
 
+@pytest.mark.parametrize("name", ["drill_orbit", "blocks_turn_flat", "blocks_push_gloved"])
+def test_every_kind_of_sequence_records_from_an_empty_cache(name, tmp_path, monkeypatch):
+    # a dev orbit (object_orbit: no appearance option), a dev appearance family and a test sequence record
+    # their first frames into an empty cache; the header says the split and appearance where there is one
+    monkeypatch.setenv("POLAR_SIM_CACHE", str(tmp_path))
+    rec = record_sequence(name, seed=0 if name != "blocks_push_gloved" else 10_000, n_frames=2, width=64, height=48)
+    assert len(rec) == 2 and rec[1]["T_cam_obj"].shape == (4, 4)
+    assert ("appearance" in rec.meta) == (name != "drill_orbit"), rec.meta.keys()
+
+
 def test_sequence_suite_covers_the_brief():
     # At least 12 sequences of 300-600 frames over at least 4 objects, with every kind of event.
     assert len(SEQUENCES) >= 12

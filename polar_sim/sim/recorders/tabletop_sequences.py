@@ -305,8 +305,9 @@ def record_sequence(name, seed=0, n_frames=None, noise=True, out=None, *, width=
             "noise": dataclasses.asdict(NOISE) | {"max_incidence_deg": 75.0} if noise else None,
             "depth_unit": "m", "depth_missing": "inf", "phases": list(PHASES),
         }
-        if s.split != "dev" or w.meta.appearance is not None:  # (the dev recordings' headers stay as they were)
-            meta.update(split=s.split, appearance=w.meta.appearance)
+        appearance = getattr(w.meta, "appearance", None)  # object_orbit has no appearance option
+        if s.split != "dev" or appearance is not None:  # (the dev recordings' headers stay as they were)
+            meta.update(split=s.split, appearance=appearance)
         rec = Recording(meta)
         tick = progress if callable(progress) else None
         frames = progress_bar(range(n), enabled=False if tick is not None else progress, desc=f"recording {name}",
