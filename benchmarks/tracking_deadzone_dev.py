@@ -1,4 +1,4 @@
-"""Dev diagnosis of the ICP's tangential dead zone (issue 35 item 3): per (sequence, seed, setting)
+"""Dev diagnosis of the ICP's tangential dead zone and of the guard's confident gate (issue 35 item 3): per (sequence, seed, setting)
 the largest rest-window rotation drift, ADD(-S) < 0.1 d and IoU > 0.5 over every frame at 640x480,
 and per frame the dead zone applied, the filter's velocity and the truth (saved as .npz).
 
@@ -9,8 +9,13 @@ and per frame the dead zone applied, the filter's velocity and the truth (saved 
 Settings are ``ObjectTracker.set_params`` keyword sets; a setting's ``"revert"`` list undoes the other two
 changes of issue 35 one at a time: ``"first_frame"`` (predict 1/fps before the first frame, as before) and
 ``"in_front"`` (count splat gaps as something in front, as before). Dev only: besides the dev sequences it knows
-``blocks_push_flat``, the test split's blocks push in the dev appearance family ``flat`` (the dev
-split has no pushed blocks), recorded at the seed given (dev seeds only, < 10,000).
+``blocks_push_default``, ``blocks_push_textured`` and ``blocks_push_flat``, the test split's blocks push in the
+dev appearance families (the dev split has no pushed blocks), recorded at the seed given (dev seeds only,
+< 10,000). The sudden push of issue 35 (seed 1), over the tracker's own randomness, with and without the
+confident gate::
+
+    python benchmarks/tracking_deadzone_dev.py blocks_push_default:1,blocks_push_textured:1,blocks_push_flat:1 \
+        '{"new0": {"random_state": 0}, "old0": {"random_state": 0, "guard__confident_fitness": null}, ...}' OUT_DIR
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ import numpy as np  # noqa: E402
 from polar_sim import metrics  # noqa: E402
 from polar_sim.sim.recorders import tabletop_sequences as TS  # noqa: E402
 
-TS.DEV_APPEARANCE_SEQUENCES.setdefault(
-    "blocks_push_flat", TS._tt("push", "blocks", 450, "dev analogue of blocks_push_gloved", appearance="flat"))
+for _family in ("default", "textured", "flat"):
+    TS.DEV_APPEARANCE_SEQUENCES.setdefault(f"blocks_push_{_family}", TS._tt(
+        "push", "blocks", 450, "dev analogue of blocks_push_gloved", appearance=_family))
 
 from polar_sim.experiments import _tracking_common as C  # noqa: E402
 from polar_sim.tracking import ObjectTracker  # noqa: E402
