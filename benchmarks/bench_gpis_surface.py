@@ -4,6 +4,7 @@ per point class, with and without the gates.
     python benchmarks/bench_gpis_surface.py --split dev                      # office2d + warehouse2d, seeds 0-4
     python benchmarks/bench_gpis_surface.py --split dev --sweep              # the gate choices (dev only)
     python benchmarks/bench_gpis_surface.py --split test                     # held-out seeds 10,000-10,004
+    python benchmarks/bench_gpis_surface.py --split test --reevaluation on_returns   # NoiseConfig2D's opt-in
 
 Each map is the ``gpis_accuracy`` drive (60 s, 1081-beam lidar at 10 Hz, sigma 1 cm, true poses),
 built once and cached as a map file (``--cache``). Scores of the surface (points every 1 cm along
@@ -45,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 import _gpis_common as C  # noqa: E402
 
 from polar_sim.gpis import GPISMap2D, _surface  # noqa: E402
+from polar_sim.gpis.config import REEVALUATIONS  # noqa: E402
 from polar_sim.metrics.maps import ObservedArea, map_scores_2d, sdf_gradient  # noqa: E402
 from polar_sim.sim.recorders.drives2d import recorded_drives, section_corners  # noqa: E402
 
@@ -56,13 +58,13 @@ SWEEP = [("off", {"evidence": False}), ("default", {})] + [
     (f"fd{fd}_end{e}", {"free_depth": fd, "face_end": e}) for fd in (0.05, 0.1) for e in (0.125, 0.15, 0.175, 0.2, 0.25)]
 
 
-def build(scene, seed, cache):
+def build(scene, seed, cache, reevaluation="gated"):
     """The map of the ``gpis_accuracy`` drive of (scene, seed), cached; and its drive."""
     d, = recorded_drives(scene, seed, [dict(route_seed=seed, every_steps=1, **C.ROUTE)])
-    f = Path(cache) / f"{scene}_{seed}.npz"
+    f = Path(cache) / f"{scene}_{seed}{'' if reevaluation == 'gated' else '_' + reevaluation}.npz"
     if f.exists():
         return GPISMap2D.load(f), d
-    m = C.make("mapper2d", "gpis", seed=seed)
+    m = C.make("mapper2d", "gpis", seed=seed).set_params(noise__reevaluation=reevaluation)
     C.fuse(m, d.angles, d.poses, d.ranges)
     f.parent.mkdir(parents=True, exist_ok=True)
     m.save(f)
@@ -156,8 +158,8 @@ class Level:
         return out
 
 
-def trial(scene, seed, cache, settings, near=True):
-    m, d = build(scene, seed, cache)
+def trial(scene, seed, cache, settings, near=True, reevaluation="gated"):
+    m, d = build(scene, seed, cache, reevaluation)
     w = C.truth_world(scene, seed)
     obs = ObservedArea(d.angles, d.poses, d.clean)
     corners = section_corners(w)
@@ -223,6 +225,8 @@ def main(argv=None):
     ap.add_argument("--sweep", action="store_true", help="score every gate setting of SWEEP (dev only)")
     ap.add_argument("--cache", default="polar_sim_out/bench_gpis_surface")
     ap.add_argument("--json", default=None, help="write the per-seed rows here")
+    ap.add_argument("--reevaluation", choices=REEVALUATIONS, default="gated",
+                    help="the maps' NoiseConfig2D.reevaluation")
     a = ap.parse_args(argv)
     if a.sweep and a.split != "dev":
         ap.error("--sweep: the gates are chosen on dev seeds only")
@@ -233,7 +237,7 @@ def main(argv=None):
     rows = []
     for scene in a.scenes.split(","):
         for seed in seeds:
-            rows += trial(scene, seed, a.cache, settings, near=not a.sweep)
+            rows += trial(scene, seed, a.cache, settings, near=not a.sweep, reevaluation=a.reevaluation)
             print(json.dumps(rows[-1]), flush=True)
     print(f"# load {os.getloadavg()[0]:.1f}")
     for s in summary(rows):

@@ -205,6 +205,12 @@ class GPISMapBase(Parameterised):
         """Half-width (m) of the box around the origin that the tree's root can ever cover."""
         return 4.0 * p["max_half"] + p["init_half"]
 
+    def _singletons(self, scan):
+        """Whether re-evaluation takes the sample of a cluster that holds only one (spec §6.1's
+        [quirk] leaves it as it was born, forever). Off here; 2D ``noise.reevaluation="on_returns"``
+        turns it on."""
+        return False
+
     def _precheck(self, scan):
         """Refuse (``ValueError`` naming the pose argument) a scan that would grow the dense
         cluster grid or the free-space grid past their limits, before any state changes.
@@ -292,7 +298,8 @@ class GPISMapBase(Parameterised):
         # stage 2: re-evaluate visible samples
         cent, ptr, samp = K.candidates(np.ascontiguousarray(scan.origin, np.float64), scan.rmax, tr.geo, tr.cgrid, tr.gshape,
                                      tr.goff, tr.node_internal, tr.level_off, self._hc(),
-                                     tr.slot_head, tr.link, tr.s_node)
+                                     tr.slot_head, tr.link, tr.s_node,
+                                     tr.node_sample, self._singletons(scan))
         if len(cent):
             vis = self._child_visible(cent, scan)
             sel = np.repeat(vis, np.diff(ptr))

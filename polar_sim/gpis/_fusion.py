@@ -157,13 +157,14 @@ def normal_noise_one(g, obar, s, r_term, smin_p, smin_g, R, on, sigma_r, dtheta,
     return (sp, sg) if good else (100.0, 1.0)
 
 
-def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None):
+def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None, keep_position=False):
     """Stage 2 (spec §6.2) for candidates with sensor-frame positions p and normals n (k, d)
     and world positions P, normals N and noises ``sp_old``, ``sg_old``.
 
     ``search(p, n)`` is the line search (:func:`polar_sim.gpis._linesearch.line_search` or the
     planar scan's kernel) and ``fd_fn(q, gp)`` the finite-difference occupancy; sensor-frame
-    points map to the world as ``R q + t``. Returns (action, P_new, N_new, sp_new, sg_new); see
+    points map to the world as ``R q + t``. With ``keep_position`` (and a model) a sample whose
+    position is trusted but whose normal is not is fused instead of replaced. Returns (action, P_new, N_new, sp_new, sg_new); see
     ``apply_reeval`` for the actions.
     """
     k, d = p.shape
@@ -181,7 +182,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None
                  c(rhat, np.float64), P, N, sp_old, sg_old, c(R, np.float64), c(t, np.float64),
                  float(m.observation.delx), legacy, legacy and d == 3,
                  float(m.noise.min_position_noise), float(m.noise.min_grad_noise),
-                 float(m.noise.map_noise), *model_args(model), _beta(model),
+                 float(m.noise.map_noise), *model_args(model), _beta(model), bool(keep_position),
                  action, Pn, Nn, spn, sgn)
     return action, Pn, Nn, spn, sgn
 
@@ -190,7 +191,7 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None
 @nb.njit(cache=True)
 def _fuse_rows(li, q, A, rnew, found, p, oc, fd_ok, rhat, P, N, sp_old, sg_old, R, t, dx, legacy,
                legacy3d, smin_p, smin_g, map_noise, on, sigma_r, dtheta, floor_p, kappa, c_min, beta,
-               action, Pn, Nn, spn, sgn):
+               keep_position, action, Pn, Nn, spn, sgn):
     """Steps 4-9 for the live candidates li, whose line searches ended at q (sensor frame) and
     whose finite-difference occupancies (oc, fd_ok, rhat; one row per live candidate) were
     taken there: the re-measured normal and noises, their fusion with the stored sample, and
@@ -227,7 +228,13 @@ def _fuse_rows(li, q, A, rnew, found, p, oc, fd_ok, rhat, P, N, sp_old, sg_old, 
                 Pq[j] += q[i, c] * R[j, c]
                 Nq[j] += g[c] * R[j, c]
             Pq[j] += t[j]
-        replace = sp_old[i] > 0.5 or sg_old[i] > 0.6
+        # the spec replaces a sample whose position or normal fails its gate. With the range model
+        # a sample's position is a return measured along its ray and stays trusted when only its
+        # normal (fitted across a corner) is not: keep_position fuses it, so that the new normal
+        # takes over (weight sg_old / (sg_old + sg)) while the position moves by its share only.
+        # Replaced, it followed the untrusted normal to wherever the line search stopped: 5-12 cm
+        # into free space at the corners of the dev warehouse2d maps.
+        replace = sp_old[i] > 0.5 or (sg_old[i] > 0.6 and not (on and keep_position))
         spn[i], sgn[i] = _combine(P[i], N[i], sp_old[i], sg_old[i], Pq, Nq, sp, sg, replace,
                                   legacy, on, smin_g, map_noise, floor_p, Pn[i], Nn[i])
         act = 3 if (spn[i] > 1 and sgn[i] > 0.61) else 2              # step 9

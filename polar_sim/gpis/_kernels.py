@@ -93,10 +93,13 @@ def apply_reeval(cand, action, P, nrm, sp, sg, geo, root, level_off, L, cgrid, g
 @entry
 @nb.njit(cache=True)
 def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, slot_head, link,
-               s_node):
+               s_node, node_sample, singletons):
     """Children of the non-empty, non-leaf clusters near t (spec §6.1).
 
-    Returns (child centres (k, d), CSR pointer (k + 1,), sample indices) in grid order.
+    Returns (child centres (k, d), CSR pointer (k + 1,), sample indices) in grid order. With
+    ``singletons`` a cluster that is itself a leaf contributes its one sample (``node_sample``,
+    the tree's), under the cluster's centre; without, it contributes nothing: the spec's [quirk]
+    by which a sample alone in its cluster is never re-evaluated.
     """
     dim = t.shape[0]
     w = geo[dim]
@@ -106,9 +109,8 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, 
         lo[k] = max(int(np.floor((t[k] - rmax - geo[k]) / w)), goff[k])
         hi[k] = min(int(np.floor((t[k] + rmax - geo[k]) / w)), goff[k] + gshape[k] - 1)
     nch = 1 << dim
-    cap = 64
-    cent = np.empty((cap, dim))
-    ptr = np.zeros(cap + 1, np.int64)
+    cent = np.empty((64, dim))
+    ptr = np.zeros(65, np.int64)
     samp = np.empty(1024, np.int64)
     buf = np.empty(64, np.int64)
     cnt = 0
@@ -129,7 +131,7 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, 
             r //= span
         g = _lin(cc, gshape, goff)
         s = cgrid[g]
-        if s < 0 or not node_internal[s, 0]:
+        if s < 0 or not (node_internal[s, 0] or (singletons and node_sample[s, 0] >= 0)):
             continue
         d2 = 0.0
         for k in range(dim):
@@ -137,15 +139,17 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, 
             d2 += e * e
         if d2 > lim:
             continue
+        if not node_internal[s, 0]:         # a leaf cluster: its one sample, under its centre
+            cent, ptr, samp = _grown(cent, ptr, samp, nc, ns)
+            for k in range(dim):
+                cent[nc, k] = geo[k] + (cc[k] + 0.5) * w
+            samp[ns] = node_sample[s, 0]
+            ns += 1
+            nc += 1
+            ptr[nc] = ns
+            continue
         for b in range(nch):
-            if nc + 1 >= cap:
-                cap *= 2
-                c2 = np.empty((cap, dim))
-                c2[:nc] = cent[:nc]
-                cent = c2
-                p2 = np.zeros(cap + 1, np.int64)
-                p2[: nc + 1] = ptr[: nc + 1]
-                ptr = p2
+            cent, ptr, samp = _grown(cent, ptr, samp, nc, ns)
             for k in range(dim):
                 cent[nc, k] = geo[k] + cc[k] * w + (((b >> k) & 1) + 0.5) * (w / 2)
             # samples whose level-1 ancestor is child b, in node order
@@ -167,14 +171,31 @@ def candidates(t, rmax, geo, cgrid, gshape, goff, node_internal, level_off, hc, 
                 if bb != b:
                     continue
                 if ns >= samp.shape[0]:
-                    s2 = np.empty(2 * samp.shape[0], np.int64)
-                    s2[:ns] = samp[:ns]
-                    samp = s2
+                    cent, ptr, samp = _grown(cent, ptr, samp, nc, ns)
                 samp[ns] = i
                 ns += 1
             nc += 1
             ptr[nc] = ns
     return cent[:nc], ptr[: nc + 1], samp[:ns]
+
+
+@nb.njit(cache=True)
+def _grown(cent, ptr, samp, nc, ns):
+    """The output buffers of :func:`candidates` with room for one more child and one more
+    sample (doubled when full; the first nc children and ns samples kept)."""
+    cap = cent.shape[0]
+    if nc + 1 >= cap:
+        c2 = np.empty((2 * cap, cent.shape[1]))
+        c2[:nc] = cent[:nc]
+        cent = c2
+        p2 = np.zeros(2 * cap + 1, np.int64)
+        p2[: nc + 1] = ptr[: nc + 1]
+        ptr = p2
+    if ns >= samp.shape[0]:
+        s2 = np.empty(2 * samp.shape[0], np.int64)
+        s2[:ns] = samp[:ns]
+        samp = s2
+    return cent, ptr, samp
 
 
 @nb.njit(cache=True)

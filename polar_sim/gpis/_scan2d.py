@@ -11,7 +11,36 @@ from polar_sim.gpis._fusion import model_args, normal_noise_one
 from polar_sim.gpis._native import K, entry
 from polar_sim.gpis._obsgp import _predict_one
 
-__all__ = ["occupancy", "line_search", "new_samples"]
+__all__ = ["occupancy", "line_search", "new_samples", "raw_support"]
+
+
+def raw_support(q, phi, r, dtheta):
+    """The scan's own returns around sensor-frame points q (k, 2): (distance (k,) m, tangent (k, 2)).
+
+    The distance is to the nearest chord between two consecutive returns (beams at most
+    1.5 ``dtheta`` apart, rad) within two beams of the point's bearing, or to the nearest return
+    where a neighbour is missing; the tangent is that chord's unit direction (zero where the
+    nearest is a lone return). ``phi`` (n,) are the sorted beam angles (rad) and ``r`` (n,) the
+    ranges (m) of the valid returns. A point of the observed surface lies on these chords up to
+    the range noise (and, at a corner, the chord's cut across it); the observation GP's smoothed
+    level does not where it interpolates across a corner or a range jump."""
+    H = np.stack([r * np.cos(phi), r * np.sin(phi)], 1)
+    j = np.searchsorted(phi, np.arctan2(q[:, 1], q[:, 0]))
+    last = len(phi) - 1
+    best = np.full(len(q), np.inf)
+    tan = np.zeros((len(q), 2))
+    for k in (-2, -1, 0):
+        a, b = np.clip(j + k, 0, last), np.clip(j + k + 1, 0, last)
+        A, AB = H[a], H[b] - H[a]
+        L2 = np.einsum("ij,ij->i", AB, AB)
+        t = np.clip(np.einsum("ij,ij->i", q - A, AB) / np.maximum(L2, 1e-12), 0.0, 1.0)
+        chord = (b > a) & (phi[b] - phi[a] <= 1.5 * dtheta)
+        d = np.where(chord, np.linalg.norm(q - A - t[:, None] * AB, axis=1),
+                     np.minimum(np.linalg.norm(q - A, axis=1), np.linalg.norm(q - H[b], axis=1)))
+        closer = d < best
+        best[closer] = d[closer]
+        tan[closer] = np.where(chord[closer, None], AB[closer] / np.sqrt(np.maximum(L2[closer], 1e-24))[:, None], 0.0)
+    return best, tan
 
 
 def occupancy(gp, q, var_thre):

@@ -39,12 +39,15 @@ __all__ = ["SWITCHES", "ObservationConfig", "NoiseConfig", "TreeConfig", "LocalG
            "ObservationConfig2D", "ObservationConfig3D", "NoiseConfig2D",
            "NoiseConfig3D", "TreeConfig2D", "TreeConfig3D", "LocalGPConfig2D", "LocalGPConfig3D",
            "DistanceConfig2D", "DistanceConfig3D", "MAX_CLUSTER_NODES", "MAX_TRAIN_CAP",
-           "MAX_RANGE_NOISE", "MIN_SAMPLE_SPACING"]
+           "MAX_RANGE_NOISE", "MIN_SAMPLE_SPACING", "REEVALUATIONS"]
 
 #: Every behaviour switch: (the default, the published C++'s behaviour).
 SWITCHES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
             "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
             "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
+
+#: NoiseConfig2D.reevaluation's choices: the default, then the re-evaluation on the scan's returns.
+REEVALUATIONS = ("gated", "on_returns")
 
 #: Tree nodes a cluster cell may hold (2D default 341, 3D 585): a cluster owns a complete
 #: subtree down to leaves below min_half.
@@ -192,6 +195,13 @@ class NoiseConfig2D(NoiseConfig):
         The range-sigma noise model, the field of view applied to new samples and re-evaluation
         around the laser; or the published ones (the spec's noise model, the field of view for
         re-evaluation only, re-evaluation around the base).
+    reevaluation : {"gated", "on_returns"}, default="gated"
+        With the range model, "on_returns" adds to the gates above: a line search must end
+        within 2 σ of the chords between the scan's own returns (``_scan2d.raw_support``) and
+        the normal it fuses lie within 45° of that chord's, a sample whose position is trusted
+        but whose normal is not is fused instead of replaced, and a sample alone in its cluster
+        is re-evaluated too (spec §6.1's [quirk] never does). Corner samples then stay on the
+        surface; not yet the default (it changes the navigation environments' episodes).
     """
 
     min_position_noise: float = 0.01
@@ -200,9 +210,11 @@ class NoiseConfig2D(NoiseConfig):
     fusion: str = "fixed"
     range_noise: float = 0.01
     scan_model: str = "range"
+    reevaluation: str = "gated"
 
     def __post_init__(self):
         super().__post_init__()
+        check_choice(self.reevaluation, REEVALUATIONS, "reevaluation")
         v = as_positive_float(self.range_noise, "range_noise")
         if v > MAX_RANGE_NOISE:
             raise ValueError(f"range_noise: expected at most {MAX_RANGE_NOISE:g} m (MAX_RANGE_NOISE), "
