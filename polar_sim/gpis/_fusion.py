@@ -164,8 +164,8 @@ def fuse(m, p, n, P, N, sp_old, sg_old, scan, search, fd_fn, R, t, *, model=None
     ``search(p, n)`` is the line search (:func:`polar_sim.gpis._linesearch.line_search` or the
     planar scan's kernel) and ``fd_fn(q, gp)`` the finite-difference occupancy; sensor-frame
     points map to the world as ``R q + t``. With ``keep_position`` (and a model) a sample whose
-    position is trusted but whose normal is not is fused instead of replaced. Returns (action, P_new, N_new, sp_new, sg_new); see
-    ``apply_reeval`` for the actions.
+    position is trusted but whose normal is not is fused instead of replaced. Returns (action,
+    P_new, N_new, sp_new, sg_new); see ``apply_reeval`` for the actions.
     """
     k, d = p.shape
     action = np.zeros(k, np.int8)

@@ -29,11 +29,11 @@ _FLOOR_P = 1e-5     # m^2, floor of the samples' (fused) position variances ((3 
 _KAPPA = 0.5
 # noise.reevaluation="on_returns": a re-evaluation's line search must end within this many range
 # sigmas of the chords between the scan's own returns (``_scan2d.raw_support``), or the sample is
-# left as it is: where the
-# observation GP smooths across a corner or a range jump its zero level leaves the returns, and
-# fusing it moved corner samples 3-12 cm into free space. Chosen on dev (office2d and warehouse2d
-# seeds 0-1): re-measurements within 1 cm of the chords are 0.25-0.4 cm off the true surface on
-# average, those 2-3 cm away 2.4 cm, those beyond 3 cm 3.5-4.6 cm
+# left as it is: where the observation GP smooths across a corner or a range jump its zero level
+# leaves the returns, and fusing it moved corner samples 3-12 cm into free space. Chosen on dev
+# (office2d and warehouse2d seeds 0-1, and 2 sigma against 3 on seeds 0-4): re-measurements within
+# 1 cm of the chords are 0.25-0.4 cm off the true surface on average, 2-3 cm away 2.4 cm, beyond
+# 3 cm 3.5-4.6 cm
 _SUPPORT = 2.0
 # ... and the normal it fuses must lie within this angle (deg) of the normal of that chord
 _CHORD_DEG = 45.0
