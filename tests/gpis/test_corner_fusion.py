@@ -4,13 +4,11 @@
 A sample born at a corner has a normal fitted across both faces, which fails the gradient gate.
 The published re-evaluation replaces such a sample by whatever its line search finds along that
 normal; where the observation GP smooths across the corner, that is free space (5-12 cm off at the
-corners of the dev warehouse2d maps, with a trusted normal). The default fuses it instead (its
+corners of the dev warehouse2d maps, with a trusted normal). "on_returns" fuses it instead (its
 position is a return measured along its ray), accepts only line searches that end on the scan's
 own returns (``_scan2d.raw_support``) with a normal within 45 deg of theirs, and re-evaluates
 samples alone in their cluster.
 """
-
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -81,7 +79,7 @@ def test_a_sample_alone_in_its_cluster_is_a_candidate():
     tr = m.tree_
     n = int(tr.counts[2])
     single = np.nonzero((tr.node_internal[:n, 0] == 0) & (tr.node_sample[:n, 0] >= 0))[0]
-    assert len(single) and m._singletons(SimpleNamespace(on_returns=True))
+    assert len(single)
     args = (tr.geo, tr.cgrid, tr.gshape, tr.goff, tr.node_internal, tr.level_off, m._hc(), tr.slot_head,
             tr.link, tr.s_node, tr.node_sample)
     origin = np.array([4.0, 3.0])
