@@ -69,8 +69,12 @@ class GPISSource:
 
         if "sensor_offset" in params:
             raise ValueError("sdf_params: sensor_offset is set by the environment (it passes the sensor's own pose)")
-        # parameters or stage fields (local_gp__map_scale=1.0), checked by set_params
-        self.map = GPISMap2D(sensor_offset=(0.0, 0.0)).set_params(**params)
+        # The registered versions are frozen: they keep the re-evaluation they were recorded with
+        # ("gated"; tests/envs/test_trajectories.py replays them bit for bit), and sdf_params
+        # may still choose another. Then the caller's parameters or stage fields
+        # (local_gp__map_scale=1.0), checked by set_params.
+        self.map = GPISMap2D(sensor_offset=(0.0, 0.0)).set_params(noise__reevaluation="gated")
+        self.map.set_params(**params)
 
     def reset(self):
         self.map.reset()

@@ -46,8 +46,9 @@ SWITCHES = {"spacing_rule": ("strict", "chain"), "retrain": ("changed", "box"),
             "gp_noise": ("model", "published"), "fusion": ("fixed", "published"),
             "query_mode": ("faithful", "published"), "scan_model": ("range", "published")}
 
-#: NoiseConfig2D.reevaluation's choices: the default, then the re-evaluation on the scan's returns.
-REEVALUATIONS = ("gated", "on_returns")
+#: NoiseConfig2D.reevaluation's choices: the default (the re-evaluation on the scan's returns), then
+#: the gates alone (the behaviour before it, kept by the navigation environments' frozen versions).
+REEVALUATIONS = ("on_returns", "gated")
 
 #: Tree nodes a cluster cell may hold (2D default 341, 3D 585): a cluster owns a complete
 #: subtree down to leaves below min_half.
@@ -195,13 +196,14 @@ class NoiseConfig2D(NoiseConfig):
         The range-sigma noise model, the field of view applied to new samples and re-evaluation
         around the laser; or the published ones (the spec's noise model, the field of view for
         re-evaluation only, re-evaluation around the base).
-    reevaluation : {"gated", "on_returns"}, default="gated"
+    reevaluation : {"on_returns", "gated"}, default="on_returns"
         With the range model, "on_returns" adds to the gates above: a line search must end
         within 2 σ of the chords between the scan's own returns (``_scan2d.raw_support``) and
         the normal it fuses lie within 45° of that chord's, a sample whose position is trusted
         but whose normal is not is fused instead of replaced, and a sample alone in its cluster
-        is re-evaluated too (spec §6.1's [quirk] never does). Corner samples then stay on the
-        surface; not yet the default (it changes the navigation environments' episodes).
+        is re-evaluated too (spec §6.1's [quirk] never does), so corner samples stay on the
+        surface. "gated" applies the gates above alone (the default before issue 35); the
+        navigation environments' registered versions keep it, so their episodes replay.
     """
 
     min_position_noise: float = 0.01
@@ -210,7 +212,7 @@ class NoiseConfig2D(NoiseConfig):
     fusion: str = "fixed"
     range_noise: float = 0.01
     scan_model: str = "range"
-    reevaluation: str = "gated"
+    reevaluation: str = "on_returns"
 
     def __post_init__(self):
         super().__post_init__()

@@ -83,3 +83,16 @@ def test_kinematic_argument():
     assert _make("polar_sim/GPISNav-v1").unwrapped.base._kinematic is False
     assert _make("polar_sim/GPISNav-v2").unwrapped.base._kinematic is True
     assert _make("polar_sim/GPISNav-v1", kinematic=True).unwrapped.base._kinematic is True
+
+
+# The registered versions are frozen: their map keeps the re-evaluation their episodes were recorded
+# with (GPISMap2D's default became "on_returns" after them); sdf_params can still choose.
+@pytest.mark.parametrize("env_id", ["polar_sim/GPISNav-v0", "polar_sim/GPISNav-Room-v1", "polar_sim/GPISNav-Room-v2"])
+def test_registered_versions_keep_the_gated_reevaluation(env_id):
+    from polar_sim.gpis import GPISMap2D
+
+    assert GPISMap2D().get_params()["noise"].reevaluation == "on_returns"
+    noise = lambda env: env.unwrapped._source.map.get_params()["noise"]  # noqa: E731
+    assert noise(_make(env_id)).reevaluation == "gated"
+    chosen = noise(_make(env_id, sdf_params={"noise__reevaluation": "on_returns", "noise__range_noise": 0.02}))
+    assert (chosen.reevaluation, chosen.range_noise) == ("on_returns", 0.02)
