@@ -104,7 +104,7 @@ class GPISNavEnv(ModuleEnv):
     | ``localize_params`` | None | keyword arguments of :func:`polar_sim.gpis.localize.localize` (slam) |
     | ``obs_mode`` | ``"stencil"`` | ``"stencil"`` or ``"grid"`` |
     | ``sdf_source`` | ``"gpis"`` | ``"gpis"`` (online GPIS map, faithful distance), ``"truth"`` (exact SDF), ``"occupancy_edt"`` (signed EDT of a 5 cm log-odds grid), or any object with ``reset/update/query`` |
-    | ``sdf_params`` | None | keyword arguments of the map: parameters or stage fields (e.g. ``{"local_gp__map_scale": 1.0}``) |
+    | ``sdf_params`` | None | keyword arguments of the map: parameters or stage fields (e.g. ``{"local_gp__map_scale": 1.0}``); the registered versions keep ``noise__reevaluation="gated"``, the map's default before issue 35, unless it is given here |
     | ``stencil_rays``, ``stencil_radii`` | 16, (0.5, 1, 2, 3) | directions and distances (m) of the stencil |
     | ``grid_size``, ``grid_resolution``, ``grid_visited`` | 32, 0.25, False | the grid image: cells per side, m per cell, the visited channel |
 
