@@ -18,7 +18,8 @@ gazebo1, a zero offset on Intel Lab, where the laser is at the robot centre). Ti
 time (the total work: the published code runs parts of an update and of a query on several threads,
 so its CPU time exceeds its wall time) and wall time; the ratio is published / ours (> 1: ours
 faster), on CPU time, with the wall-time ratio beside it. Run it with both CPU slots.
-Goals (issue 14): >= 2x in 2D, >= 10x in 3D. Prints a markdown table.
+Goals (issue 14): >= 2x in 2D, >= 10x in 3D; issue 35 raises the gazebo1 2D update's to >= 3x.
+Prints a markdown table.
 """
 
 from __future__ import annotations
@@ -184,7 +185,9 @@ def run_2d(lib, name, angles, poses, ranges, base_poses, offset, rng):
     S = ours.samples()["points"]
     P = S[rng.integers(len(S), size=1000)] + rng.uniform(-0.3, 0.3, (1000, 2))
     qa, qb = paired_queries(ours, theirs, P)
-    return [(f"2D update, {name} ({len(poses)} scans)", ua, ub, 2.0), (f"2D query, {name}, 1,000 points within 0.3 m", qa, qb, 2.0)]
+    update_goal = 3.0 if name == "gazebo1" else 2.0        # issue 35 asks 3x on gazebo1
+    return [(f"2D update, {name} ({len(poses)} scans)", ua, ub, update_goal),
+            (f"2D query, {name}, 1,000 points within 0.3 m", qa, qb, 2.0)]
 
 
 def run_3d(lib, n_frames, rng):
