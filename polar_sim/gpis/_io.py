@@ -68,6 +68,10 @@ def _params(cls, path, text, version):
             params = _from_version1(cls, params)
         if not set(params) <= set(cls._param_names()):
             raise ValueError(f"{sorted(set(params) - set(cls._param_names()))[0]}: unknown parameter")
+        if cls.dim == 2 and isinstance(params.get("noise", {}), dict) and "reevaluation" not in params.get("noise", {}):
+            # written before NoiseConfig2D.reevaluation existed, so built with the gates alone: the
+            # map goes on as it was built, not with today's default ("on_returns")
+            params["noise"] = {**params.get("noise", {}), "reevaluation": "gated"}
         for stage, config in cls._STAGES.items():
             if stage in params:
                 if not isinstance(params[stage], dict):

@@ -156,3 +156,23 @@ def test_load_messages_name_file_and_array(tmp_path):
     np.savez(tmp_path / "g.npz", **{**data, "free/gshape": g})
     with pytest.raises(ValueError, match=r"'free/gshape'"):
         GPISMap2D.load(tmp_path / "g.npz")
+
+
+# A file written before NoiseConfig2D.reevaluation existed holds a map built with the gates alone:
+# it loads with "gated" and goes on as it was built, not with today's default
+def test_a_file_without_the_reevaluation_field_loads_gated(tmp_path):
+    import json
+
+    m = _map2d()
+    m.save(tmp_path / "new.npz")
+    assert GPISMap2D.load(tmp_path / "new.npz").get_params()["noise"].reevaluation == "on_returns"
+    with np.load(tmp_path / "new.npz") as z:
+        arrs = dict(z)
+    params = json.loads(str(arrs["params"]))
+    del params["noise"]["reevaluation"]
+    arrs["params"] = np.array(json.dumps(params))
+    np.savez(tmp_path / "old.npz", **arrs)
+    old = GPISMap2D.load(tmp_path / "old.npz")
+    assert old.get_params()["noise"].reevaluation == "gated"
+    assert old.get_params()["noise"].range_noise == m.get_params()["noise"].range_noise
+    np.testing.assert_array_equal(old.samples()["points"], m.samples()["points"])
