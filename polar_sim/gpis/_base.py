@@ -307,11 +307,16 @@ class GPISMapBase(Parameterised):
         else:
             cand = samp[:0]
         touched = []
+        seen = cand[:0]
         if len(cand):
             action, P, N, sp, sg = self._reeval(cand, scan)
             tr.reserve(P[action == 2])
             self._sync_slot_arrays()
+            run = tr.run[cand]
             new = K.apply_reeval(cand, action, P, N, sp, sg, *self._tree_args())
+            moved = (action == 2) & (new >= 0)
+            tr.run[new[moved]] = run[moved]         # a re-inserted sample keeps its runs
+            seen = np.concatenate([cand[action < 2], new[moved]])
             # which changes the trained GPs must see (all of them with the published retraining)
             ch, kept = K.reeval_changes(cand, action, new, tr.pos, tr.nrm, tr.sp, tr.sg, tr.pos_t,
                                       tr.nrm_t, tr.sp_t, tr.sg_t, self._retrain_tol(),
@@ -324,6 +329,8 @@ class GPISMapBase(Parameterised):
         self._sync_slot_arrays()
         new = K.apply_new(P, ok, bad, N, sp, sg, *self._tree_args())
         kept = new[new >= 0]
+        tr.run[kept] = 0.0
+        self._observe_runs(scan, np.concatenate([seen, kept]))
         self._snapshot(kept)
         changed.append(tr.pos[kept])
         touched.append(tr.pos[kept])
@@ -337,6 +344,9 @@ class GPISMapBase(Parameterised):
         self._index_samples()
         self.n_updates_ += 1
         self.version_ += 1
+
+    def _observe_runs(self, scan, idx):
+        """Record on samples ``idx`` how far this scan's returns ran on along their faces (2D)."""
 
     def _snapshot(self, idx):
         tr = self.tree_
@@ -577,7 +587,8 @@ class GPISMapBase(Parameterised):
         self._sample_index_ = K._slot_samples(tr.node_sample, int(tr.counts[2]))
 
     def surface(self, res=None, band=None, *, evidence=None, free_depth=None, support_radius=None,
-                min_support=None, gate_var=None, face_end=None, return_evidence=False):
+                min_support=None, gate_var=None, face_end=None, face_end_bare=None,
+                return_evidence=False):
         """Zero level set of :meth:`query` near the observed samples.
 
         Parameters
@@ -593,15 +604,17 @@ class GPISMapBase(Parameterised):
             in default mode, off in the published ``query_mode``). A vertex is left out when
             observed free space lies ``free_depth`` inside it; when fewer than ``min_support``
             samples of its face with a trusted normal lie within ``support_radius``, or it lies
-            past the end of its face (not between two of them along the face, and farther than
-            ``face_end`` from each); or when the map's variance there reaches ``gate_var``
-            (defaults ``_surface.FREE_DEPTH`` 0.05 m, ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1,
-            ``FACE_END`` 0.175 m, ``GATE_VAR`` 0.5; chosen on dev seeds). A sample left with no
+            past the end of its face (not between two of them along the face, and out of reach
+            of each: ``face_end`` past a sample whose scans saw their returns run on along the
+            face, else as far as they ran plus 3 cm, at least ``face_end_bare``); or when the
+            map's variance there reaches ``gate_var`` (defaults ``_surface.FREE_DEPTH`` 0.05 m,
+            ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1, ``FACE_END`` 0.175 m,
+            ``FACE_END_BARE`` 0.1 m, ``GATE_VAR`` 0.5; chosen on dev seeds). A sample left with no
             returned vertex within two grid steps (a post a few cm across, whose one or two
             samples have no trusted normal) is returned as a (1, 2) point at its measured
             position: the sensor's evidence for a surface there, without the level's guess at
             its extent.
-        free_depth, support_radius, min_support, gate_var, face_end : optional
+        free_depth, support_radius, min_support, gate_var, face_end, face_end_bare : optional
             The gates above (2D; finite, > 0; ``min_support`` an int >= 0). To turn them all off,
             pass ``evidence=False``.
         return_evidence : bool, default False
@@ -627,7 +640,7 @@ class GPISMapBase(Parameterised):
         from polar_sim.gpis import _surface
 
         gates = _surface.gate_args(self, evidence, free_depth, support_radius, min_support, gate_var,
-                                   return_evidence, face_end)
+                                   return_evidence, face_end, face_end_bare)
         check_updated(self, "tree_")
         res = self._SURF_RES if res is None else as_positive_float(res, "res")
         band = self._SURF_BAND if band is None else as_positive_float(band, "band", allow_zero=True)

@@ -17,9 +17,11 @@ __all__ = ["save", "load", "FORMAT", "VERSION", "READS"]
 
 FORMAT = "polar_sim.gpis"
 #: Version 2 stores the stage configs (:mod:`polar_sim.gpis.config`) as objects of their fields;
-#: version 1 (flat parameters and ``legacy``) is still read.
-VERSION = 2
-READS = (1, 2)
+#: version 3 adds ``tree/run`` (how far each sample's face was seen to run on, for the surface's
+#: face end; a file without it loads with every face running on, the gate it was built with);
+#: versions 1 (flat parameters and ``legacy``) and 2 are still read.
+VERSION = 3
+READS = (1, 2, 3)
 MAX_FILE_BYTES = 16 << 30     # declared array bytes a map file may hold (16 GiB)
 
 
@@ -154,7 +156,7 @@ def load(cls, path):
         raise ValueError(f"path: {path} has format version {ver}; this code reads {', '.join(map(str, READS))}")
     if name != cls.__name__:
         raise ValueError(f"path: {path} holds a {name}, not a {cls.__name__}")
-    _loadcheck.check_keys(path, data, fitted, cls.dim)
+    _loadcheck.check_keys(path, data, fitted, cls.dim, ver)
     params = _params(cls, path, params_text, ver)
     try:
         m = cls(**params)

@@ -31,11 +31,12 @@ class MapFileError(ValueError):
     """A map file failed validation (a ``ValueError``)."""
 
 
-def state_keys(dim):
-    """The array names of a fitted map file."""
+def state_keys(dim, version=None):
+    """The array names of a fitted map file (of format ``version``; default the current one:
+    version 3 added ``tree/run``)."""
     tree = ("geo", "root", "cgrid", "gshape", "goff", "counts", "node_sample", "node_internal",
             "slot_coord", "slot_free", "pos", "nrm", "sp", "sg", "s_slot", "s_node", "s_free",
-            "pos_t", "nrm_t", "sp_t", "sg_t")
+            "pos_t", "nrm_t", "sp_t", "sg_t") + (("run",) if version is None or version >= 3 else ())
     return (tuple("tree/" + k for k in tree)
             + tuple("gp/" + k for k in ("gp_obs", "gp_tri", "gp_m", "X", "kinds", "alpha", "Lbuf"))
             + ("free/grid", "free/gshape", "free/goff", "slot_gen", "gp_gen", "active", "n_updates"))
@@ -98,9 +99,9 @@ def check_meta(path, data):
     return int(v), str(data["cls"]), str(data["params"]), bool(data["fitted"])
 
 
-def check_keys(path, data, fitted, dim):
+def check_keys(path, data, fitted, dim, version=None):
     c = _Ctx(path, data)
-    want = set(META_KEYS) | (set(state_keys(dim)) if fitted else set())
+    want = set(META_KEYS) | (set(state_keys(dim, version)) if fitted else set())
     for k in sorted(want - set(data)):
         c.fail(k, "is missing")
     for k in sorted(set(data) - want):
@@ -168,6 +169,10 @@ def _tree_nodes(c, d, counts):
         c.finite("tree/" + k, a)
         if a.size and a.min() < 0:
             c.fail("tree/" + k, "has negative variances")
+    if "tree/run" in c.data:        # m along each sample's face, +inf: ran on (files before version 3)
+        run = c.get("tree/run", np.float64, 2, (N, 2))
+        if np.isnan(run).any() or (run < 0).any():
+            c.fail("tree/run", "has NaN or negative runs")
     s_slot = c.get("tree/s_slot", np.int32, 1, (N,))
     s_node = c.get("tree/s_node", np.int32, 1, (N,))
     s_free = c.get("tree/s_free", np.int32, 1, (N,))

@@ -16,20 +16,26 @@ from dataclasses import dataclass
 import numpy as np
 
 from polar_sim.gpis._localgp import GRAD_GATE as _TRUSTED_SG
+from polar_sim.gpis._scan2d import RUNS
 
 __all__ = ["surface_2d", "surface_3d", "grid_query", "gate_2d", "SurfaceEvidence",
-           "FREE_DEPTH", "SUPPORT_RADIUS", "MIN_SUPPORT", "GATE_VAR", "FACE_END"]
+           "FREE_DEPTH", "SUPPORT_RADIUS", "MIN_SUPPORT", "GATE_VAR", "FACE_END", "FACE_END_BARE",
+           "FACE_RUN_MARGIN"]
 
 #: Evidence gates of the 2D surface (default mode); each is also an argument of ``surface()``.
 #: ``FREE_DEPTH`` (m): a vertex whose inside at this depth (along minus the map's gradient) lies
 #: in observed free space is contradicted by the rays that crossed it. ``SUPPORT_RADIUS`` (m) and
 #: ``MIN_SUPPORT``: a vertex needs this many samples of its face with a trusted normal within the
-#: radius, and samples of its face on both sides along it or one within ``FACE_END`` (m) (the
+#: radius, and samples of its face on both sides along it or one within reach of its end (the
 #: zero level of objects below the grid's resolution, :func:`_refined`, passes the variance gate
-#: only: their normals are not resolved and a free-space cell is larger than they are).
-#: ``GATE_VAR``: a vertex where the map's variance reaches this is unsupported (the prior is
-#: ``1 + map_noise``). Chosen on the dev seeds of office2d and warehouse2d (benchmarks/RESULTS.md).
+#: only: their normals are not resolved and a free-space cell is larger than they are). The reach
+#: past a sample (:func:`_face_reach`) is ``FACE_END`` (m) where the scans' returns ran on along
+#: the face past it, else how far they ran plus ``FACE_RUN_MARGIN`` (m), at least
+#: ``FACE_END_BARE`` (m). ``GATE_VAR``: a vertex where the map's variance reaches this is
+#: unsupported (the prior is ``1 + map_noise``). Chosen on the dev seeds of office2d and
+#: warehouse2d (benchmarks/RESULTS.md).
 FREE_DEPTH, SUPPORT_RADIUS, MIN_SUPPORT, GATE_VAR, FACE_END = 0.05, 0.5, 1, 0.5, 0.175
+FACE_END_BARE, FACE_RUN_MARGIN = 0.1, 0.03
 
 
 def grid_query(m, axes, band, var_max, chunk=100_000):
@@ -272,18 +278,18 @@ def _fields(ev):
 
 _REASONS = ("free", "support", "variance")
 _OFF = {"free_depth": None, "support_radius": SUPPORT_RADIUS, "min_support": 0, "var_max": np.inf,
-        "face_end": FACE_END}
+        "face_end": FACE_END, "face_end_bare": FACE_END_BARE}
 
 
 def gate_args(m, evidence, free_depth, support_radius, min_support, gate_var, return_evidence,
-              face_end=None):
+              face_end=None, face_end_bare=None):
     """The checked gates of ``surface()``: a dict of :func:`gate_2d`'s keywords, or None for the
     plain zero level (3D, or the gates off and no evidence asked for)."""
     from polar_sim._validation import as_int, as_positive_float
 
     given = {k: v for k, v in (("free_depth", free_depth), ("support_radius", support_radius),
                                ("min_support", min_support), ("gate_var", gate_var),
-                               ("face_end", face_end)) if v is not None}
+                               ("face_end", face_end), ("face_end_bare", face_end_bare)) if v is not None}
     if m.dim == 3:
         bad = [k for k, v in (("evidence", evidence), ("return_evidence", return_evidence or None))
                if v is not None] + list(given)
@@ -295,7 +301,7 @@ def gate_args(m, evidence, free_depth, support_radius, min_support, gate_var, re
             raise TypeError(f"{k}: expected a bool, got {type(v).__name__}")
     on = (not m._pub("query_mode")) if evidence is None else bool(evidence)
     gates = {"free_depth": FREE_DEPTH, "support_radius": SUPPORT_RADIUS, "min_support": MIN_SUPPORT,
-             "var_max": GATE_VAR, "face_end": FACE_END}
+             "var_max": GATE_VAR, "face_end": FACE_END, "face_end_bare": FACE_END_BARE}
     if "free_depth" in given:
         gates["free_depth"] = as_positive_float(free_depth, "free_depth")
     if "support_radius" in given:
@@ -306,19 +312,22 @@ def gate_args(m, evidence, free_depth, support_radius, min_support, gate_var, re
         gates["var_max"] = as_positive_float(gate_var, "gate_var")
     if "face_end" in given:
         gates["face_end"] = as_positive_float(face_end, "face_end")
+    if "face_end_bare" in given:
+        gates["face_end_bare"] = as_positive_float(face_end_bare, "face_end_bare")
     if on:
         return {**gates, "lone": True}
     return dict(_OFF) if return_evidence else None
 
 
-def _face_support(m, pts, g, reach, end):
+def _face_support(m, pts, g, reach, end, bare):
     """Per point: the samples of its face within ``reach`` with a trusted normal (n,), and whether
     the point lies between two samples of its face (trusted or not: each is an observed point of
-    it) along the face or within ``end`` of one, i.e. not past the end of the observed face.
+    it) along the face or within reach of one's end, i.e. not past the end of the observed face.
 
     A sample is of the point's face when its normal is within 45 deg of the map's gradient ``g``
     at the point and it lies within ``end`` of the point's tangent line; its coordinate along
-    the face is its offset along that tangent."""
+    the face is its offset along that tangent. A point past a sample is within its reach when
+    closer than :func:`_face_reach` of the runs the scans saw on that side of it."""
     kd, idx = m._kd()
     t = m.tree_
     P, N = t.pos[idx], t.nrm[idx]
@@ -335,18 +344,38 @@ def _face_support(m, pts, g, reach, end):
         on = np.abs(v @ g[i]) <= end
         s = v[on] @ tan[i]
         count[i] = int(trusted[j[on]].sum())
-        ok[i] = len(s) > 0 and (np.abs(s).min() <= end or (s.min() < 0 < s.max()))
+        if not len(s):
+            continue
+        if s.min() < 0 < s.max():
+            ok[i] = True
+            continue
+        jo = j[on]
+        # which side of each sample (along its own tangent) the point lies on, and that side's run
+        side = (N[jo, 0] * v[on, 1] - N[jo, 1] * v[on, 0]) > 0.0      # the point on the sample's -t
+        run = t.run[idx[jo], side.astype(np.int64)]
+        ok[i] = bool((np.abs(s) <= _face_reach(run, end, bare)).any())
     return count, ok
 
 
+def _face_reach(run, end, bare):
+    """How far past a sample the zero level is its face's (m), given the run (m) its scans saw on
+    that side: ``end`` where the returns ran on to ``RUNS["cap"]`` (a face that goes on, such as a
+    pillar's silhouette, whose samples stop before its returns do), else the run plus
+    ``FACE_RUN_MARGIN`` (the level's grid step and the range noise), at least ``bare`` (a face
+    whose end no scan saw well: a corner's, where the returns leave the face)."""
+    return np.where(run >= RUNS["cap"], end, np.minimum(end, np.maximum(bare, run + FACE_RUN_MARGIN)))
+
+
 def gate_2d(m, pts, *, free_depth=FREE_DEPTH, support_radius=SUPPORT_RADIUS,
-            min_support=MIN_SUPPORT, var_max=GATE_VAR, face_end=FACE_END):
+            min_support=MIN_SUPPORT, var_max=GATE_VAR, face_end=FACE_END, face_end_bare=FACE_END_BARE):
     """Evidence for the zero level at points ``pts`` (n, 2) of a 2D map.
 
     A point fails ``"free"`` when observed free space lies ``free_depth`` inside it (along minus
     the map's gradient); ``"support"`` when fewer than ``min_support`` samples of its face with a
     trusted normal lie within ``support_radius``, or when it lies past the end of its face:
-    neither between two of its samples along the face nor within ``face_end`` of one;
+    neither between two of its samples along the face nor within reach of one (``face_end``
+    where the scans' returns ran on along the face past it, else their run plus
+    ``FACE_RUN_MARGIN``, at least ``face_end_bare``; :func:`_face_reach`);
     ``"variance"`` when the map's variance there reaches ``var_max``. ``free_depth`` None turns
     the free-space gate off, ``min_support`` 0 the support gate and ``var_max`` inf the variance
     gate. Returns (fail (n,) int: 0 = kept, else 1 + the index of the first failed gate in
@@ -358,7 +387,7 @@ def gate_2d(m, pts, *, free_depth=FREE_DEPTH, support_radius=SUPPORT_RADIUS,
         return fail, np.zeros(0, np.int64), np.zeros(0)
     _, g, var = m.query(pts)
     g = g / np.maximum(np.linalg.norm(g, axis=1), 1e-12)[:, None]    # blended: not always unit
-    support, inside = _face_support(m, pts, g, support_radius, face_end)
+    support, inside = _face_support(m, pts, g, support_radius, face_end, face_end_bare)
     kd, idx = m._kd()
     t = m.tree_
     trusted = t.sg[idx] <= _TRUSTED_SG

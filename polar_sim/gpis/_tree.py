@@ -429,7 +429,7 @@ class Tree:
         old = getattr(self, "pos", None)
         arrs = dict(pos=np.zeros((n, d)), nrm=np.zeros((n, d)), sp=np.zeros(n), sg=np.zeros(n),
                     pos_t=np.zeros((n, d)), nrm_t=np.zeros((n, d)), sp_t=np.zeros(n),
-                    sg_t=np.zeros(n),
+                    sg_t=np.zeros(n), run=np.zeros((n, 2)),
                     s_slot=np.full(n, -1, _I32), s_node=np.full(n, -1, _I32),
                     s_free=np.zeros(n, _I32), link=np.full((n, 2), -1, _I32))
         if old is not None:
@@ -524,12 +524,14 @@ class Tree:
     # -- persistence ---------------------------------------------------------------------------
     STATE = ("geo", "root", "cgrid", "gshape", "goff", "counts", "node_sample", "node_internal",
              "slot_coord", "slot_free", "pos", "nrm", "sp", "sg", "s_slot", "s_node", "s_free",
-             "pos_t", "nrm_t", "sp_t", "sg_t")
+             "pos_t", "nrm_t", "sp_t", "sg_t", "run")
 
     def state(self):
         return {k: getattr(self, k) for k in self.STATE}
 
     def set_state(self, st):
+        if "run" not in st:     # files before format version 3: no runs recorded, every face runs on
+            st = {**st, "run": np.full((len(st["pos"]), 2), np.inf)}
         for k in self.STATE:
             setattr(self, k, np.ascontiguousarray(st[k]).astype(getattr(self, k).dtype, copy=True))
         if self.geo.shape[0] == self.dim + 4:       # files written before face_cos existed

@@ -15,7 +15,7 @@ from polar_sim.gpis._fusion import RangeNoiseModel, fuse
 from polar_sim.gpis._linesearch import TOL
 from polar_sim.gpis._localgp import GRAD_GATE as _GRAD_GATE
 from polar_sim.gpis._obsgp import ObsGP1D
-from polar_sim.gpis._scan2d import line_search, new_samples, occupancy, raw_support
+from polar_sim.gpis._scan2d import RUNS, face_runs, line_search, new_samples, occupancy, raw_support
 from polar_sim.params import Tags
 
 __all__ = ["GPISMap2D"]
@@ -246,6 +246,18 @@ class GPISMap2D(GPISMapBase):
                                          self.noise.min_position_noise, self.noise.min_grad_noise,
                                          scan.model, _GRAD_GATE)
         return scan.hits, ok, bad, n, sp, sg
+
+    def _observe_runs(self, scan, idx):
+        # the surface gate's face end (``_surface.gate_2d``): how far past each sample its face
+        # was seen to go on; the published scan model has no gates to feed
+        if scan.model is None or not len(idx):
+            return
+        tr = self.tree_
+        N = tr.nrm[idx] @ scan.R
+        N /= np.maximum(np.linalg.norm(N, axis=1), 1e-12)[:, None]
+        run = face_runs((tr.pos[idx] - scan.t) @ scan.R - scan.o, N, scan.phi, scan.r,
+                        scan.model.dtheta, **RUNS)
+        tr.run[idx] = np.maximum(tr.run[idx], run)
 
     def _singletons(self, scan):
         # a sample alone in its cluster (a wall's sample just across a cluster border) kept the

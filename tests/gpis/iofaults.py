@@ -223,6 +223,9 @@ def tamper_cases(data, dim):
     setv("tree/root", dim, 1e300, "huge-root")
     setv("tree/pos", (i_live, 0), 1e6, "outside-cell")
     setv("tree/sp", i_live, -1.0, "negative-variance")
+    if "tree/run" in data:          # +inf is a run that went on (a file before version 3)
+        setv("tree/run", (i_live, 0), np.nan, "nan")
+        setv("tree/run", (i_live, 1), -0.1, "negative-run")
     # non-finite values
     for key, idx in (("tree/pos", (i_live, 0)), ("tree/nrm", (i_live, 1)), ("tree/sp", i_live), ("tree/sg", i_live),
                      ("tree/pos_t", (i_live, 0)), ("tree/sg_t", i_live), ("gp/X", (O // 2, 0)), ("gp/alpha", O // 2),

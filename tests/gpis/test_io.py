@@ -176,3 +176,33 @@ def test_a_file_without_the_reevaluation_field_loads_gated(tmp_path):
     assert old.get_params()["noise"].reevaluation == "gated"
     assert old.get_params()["noise"].range_noise == m.get_params()["noise"].range_noise
     np.testing.assert_array_equal(old.samples()["points"], m.samples()["points"])
+
+
+# Format version 3 stores how far each sample's face was seen to run on (tree/run); a version-2 file
+# has none, and loads with every face running on: the surface gate it was built with
+def test_a_version_2_file_loads_with_every_face_running_on(tmp_path):
+    from polar_sim.gpis import _io, _surface
+
+    m = _map2d()
+    m.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as z:
+        arrs = dict(z)
+    assert int(arrs["version"]) == _io.VERSION == 3
+    again = GPISMap2D.load(tmp_path / "new.npz")
+    np.testing.assert_array_equal(again.tree_.run, m.tree_.run)
+    assert (m.tree_.run[m.tree_.alive()] > 0).any()
+    old = {k: v for k, v in arrs.items() if k != "tree/run"}
+    np.savez(tmp_path / "v2.npz", **{**old, "version": np.array(2)})
+    v2 = GPISMap2D.load(tmp_path / "v2.npz")
+    assert np.isinf(v2.tree_.run).all()
+    a, b = v2.surface(), m.surface(face_end_bare=_surface.FACE_END)
+    assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    v2.save(tmp_path / "v2-resaved.npz")                 # inf runs are valid in a version-3 file
+    assert np.isinf(GPISMap2D.load(tmp_path / "v2-resaved.npz").tree_.run).all()
+    # a version-2 file with runs, or a version-3 file without, is refused naming the array
+    np.savez(tmp_path / "bad2.npz", **{**arrs, "version": np.array(2)})
+    with pytest.raises(ValueError, match=r"'tree/run' is not part of the format"):
+        GPISMap2D.load(tmp_path / "bad2.npz")
+    np.savez(tmp_path / "bad3.npz", **old)
+    with pytest.raises(ValueError, match=r"'tree/run' is missing"):
+        GPISMap2D.load(tmp_path / "bad3.npz")

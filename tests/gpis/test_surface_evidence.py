@@ -218,7 +218,8 @@ def test_gate_arguments_are_checked(wall_end):
     for kw, exc in [({"free_depth": -0.1}, ValueError), ({"free_depth": np.inf}, ValueError),
                     ({"support_radius": 0.0}, ValueError), ({"min_support": 1.5}, TypeError),
                     ({"min_support": -1}, ValueError), ({"gate_var": np.nan}, ValueError),
-                    ({"face_end": 0}, ValueError),
+                    ({"face_end": 0}, ValueError), ({"face_end_bare": -0.1}, ValueError),
+                    ({"face_end_bare": "0.1"}, TypeError),
                     ({"evidence": "yes"}, TypeError), ({"return_evidence": 1}, TypeError)]:
         with pytest.raises(exc, match=next(iter(kw))):
             wall_end.surface(**kw)
@@ -229,7 +230,7 @@ def test_gate_arguments_are_checked(wall_end):
 def test_gates_are_arguments(wall_end):
     # a looser support gate and no free-space gate let more of the level through
     n = sum(map(len, wall_end.surface()))
-    loose = wall_end.surface(free_depth=0.5, min_support=0, gate_var=2.0, face_end=1.0)
+    loose = wall_end.surface(free_depth=0.5, min_support=0, gate_var=2.0, face_end=1.0, face_end_bare=1.0)
     assert sum(map(len, loose)) > n
 
 
