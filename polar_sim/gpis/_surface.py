@@ -327,7 +327,8 @@ def _face_support(m, pts, g, reach, end, bare):
     A sample is of the point's face when its normal is within 45 deg of the map's gradient ``g``
     at the point and it lies within ``end`` of the point's tangent line; its coordinate along
     the face is its offset along that tangent. A point past a sample is within its reach when
-    closer than :func:`_face_reach` of the runs the scans saw on that side of it."""
+    closer than :func:`_face_reach` of the runs the scans saw on that side of it, and within
+    ``_LINE_OFF`` of the sample's tangent line."""
     kd, idx = m._kd()
     t = m.tree_
     P, N = t.pos[idx], t.nrm[idx]
@@ -353,8 +354,17 @@ def _face_support(m, pts, g, reach, end, bare):
         # which side of each sample (along its own tangent) the point lies on, and that side's run
         side = (N[jo, 0] * v[on, 1] - N[jo, 1] * v[on, 0]) > 0.0      # the point on the sample's -t
         run = t.run[idx[jo], side.astype(np.int64)]
-        ok[i] = bool((np.abs(s) <= _face_reach(run, end, bare)).any())
+        # a run vouches for the face along the sample's tangent line, where its returns lay (+inf:
+        # no runs recorded, a map file before version 3: the face end as it was built)
+        off = np.abs(np.einsum("ij,ij->i", v[on], N[jo])) / np.maximum(np.linalg.norm(N[jo], axis=1), 1e-12)
+        near = (off <= _LINE_OFF) | np.isinf(run)
+        ok[i] = bool(((np.abs(s) <= _face_reach(run, end, bare)) & near).any())
     return count, ok
+
+
+#: m: how far off a sample's tangent line a point past it may lie and still be of its face: the
+#: runs' own tolerance (their returns lay within RUNS["dev"] of the line) plus the margin
+_LINE_OFF = RUNS["dev"] + FACE_RUN_MARGIN
 
 
 def _face_reach(run, end, bare):

@@ -102,17 +102,36 @@ def test_the_map_records_runs_that_end_at_the_corner(wall_end):
     assert (run[face][mid] + _surface.FACE_RUN_MARGIN >= _surface.FACE_END).all()
 
 
-def test_the_bare_reach_is_an_argument(wall_end):
-    # a bare reach as long as the face end gives the gate before the runs (every face ran on)
-    a = wall_end.surface(face_end_bare=_surface.FACE_END)
+def test_without_runs_the_face_end_is_the_gate_before(wall_end):
+    # runs of +inf (a map file before format version 3) give the face end it was built with: a
+    # point is of its face's observed extent when between two of its samples or within face_end
+    # of one (checked against that rule written out, at points along and beside the level)
     t = wall_end.tree_
+    L = np.vstack(wall_end.surface(evidence=False))
+    rng = np.random.default_rng(0)
+    pts = L[rng.choice(len(L), 400, replace=False)] + rng.normal(0, 0.05, (400, 2))
+    g = wall_end.query(pts)[1]
+    g /= np.linalg.norm(g, axis=1)[:, None]
     saved = t.run.copy()
     try:
         t.run[:] = np.inf
-        b = wall_end.surface()
+        got = _surface._face_support(wall_end, pts, g, _surface.SUPPORT_RADIUS, _surface.FACE_END,
+                                     _surface.FACE_END_BARE)[1]
     finally:
         t.run[:] = saved
-    assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    kd, idx = wall_end._kd()
+    P, N = t.pos[idx], t.nrm[idx]
+    want = np.zeros(len(pts), bool)
+    for i, j in enumerate(kd.query_ball_point(pts, _surface.SUPPORT_RADIUS)):
+        j = np.asarray(j, int)
+        j = j[N[j] @ g[i] > np.cos(np.pi / 4)] if len(j) else j
+        v = P[j] - pts[i]
+        s = v[np.abs(v @ g[i]) <= _surface.FACE_END] @ np.array([-g[i, 1], g[i, 0]])
+        want[i] = len(s) > 0 and (np.abs(s).min() <= _surface.FACE_END or s.min() < 0 < s.max())
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.sum() < len(want)
+    assert (got >= _surface._face_support(wall_end, pts, g, _surface.SUPPORT_RADIUS, _surface.FACE_END,
+                                          _surface.FACE_END_BARE)[1]).all()    # the runs only cut
     assert _dist(np.vstack(wall_end.surface()), ROOM + WALL).max() <= 0.10
 
 
@@ -141,5 +160,25 @@ def test_past_a_face_seen_to_end_the_reach_is_the_run(wall_end):
     try:
         t.run[:] = np.inf
         assert _surface._face_support(wall_end, q, g, *args)[1][0]
+    finally:
+        t.run[:] = saved
+
+
+def test_a_run_vouches_only_near_the_samples_tangent_line(wall_end):
+    # 5 cm past the last sample of the lower face, 4 cm below its line: within reach; 10 cm below
+    # it (in free space, where the returns never lay): out of reach, however far the runs went
+    t = wall_end.tree_
+    i = t.alive()
+    P, N = t.pos[i], t.nrm[i]
+    face = (np.abs(P[:, 1] - 2.0) < 0.03) & (N[:, 1] < -0.9)
+    last = P[face][np.argmax(P[face, 0])]
+    g = np.array([[0.0, -1.0]])
+    args = (_surface.SUPPORT_RADIUS, _surface.FACE_END, _surface.FACE_END_BARE)
+    near, off = np.array([[last[0] + 0.05, last[1] - 0.04]]), np.array([[last[0] + 0.05, last[1] - 0.10]])
+    assert _surface._face_support(wall_end, near, g, *args)[1][0]
+    saved = t.run.copy()
+    try:
+        t.run[:] = RUNS["cap"]                      # every face seen to run on
+        assert not _surface._face_support(wall_end, off, g, *args)[1][0]
     finally:
         t.run[:] = saved
