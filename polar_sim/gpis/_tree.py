@@ -19,6 +19,11 @@ test); a max-depth cell never splits; removal collapses parents whose children a
 leaves. With ``spacing`` given (default mode) an insert is also rejected when closer than
 ``spacing`` to *any* sample in the 3^d neighbouring clusters (the spacing the spec intends).
 
+Each sample also carries ``run`` (2,): how far (m) the scans' returns were seen to run on along
+its face past it, on the side of its tangent (-n_y, n_x) and of the opposite one (2D default mode,
+:func:`polar_sim.gpis._scan2d.face_runs`; zeros elsewhere, +inf in a file written before them). A
+re-inserted sample keeps its runs (``GPISMapBase._run_update``).
+
 With ``face_cos`` given (2D default mode), spacing applies only between samples of the same
 surface side: a sample whose normal makes a dot product below ``face_cos`` with the new one's
 (the other face of a wall thinner than the spacing) neither blocks it nor shares its leaf, and
