@@ -606,7 +606,8 @@ class GPISMapBase(Parameterised):
             samples of its face with a trusted normal lie within ``support_radius``, or it lies
             past the end of its face (not between two of them along the face, and out of reach
             of each: ``face_end`` past a sample whose scans saw their returns run on along the
-            face, else as far as they ran plus 3 cm, at least ``face_end_bare``); or when the
+            face, else as far as they ran plus 3 cm, at least ``face_end_bare``, and within 8 cm
+            of the sample's tangent line); or when the
             map's variance there reaches ``gate_var`` (defaults ``_surface.FREE_DEPTH`` 0.05 m,
             ``SUPPORT_RADIUS`` 0.5 m, ``MIN_SUPPORT`` 1, ``FACE_END`` 0.175 m,
             ``FACE_END_BARE`` 0.1 m, ``GATE_VAR`` 0.5; chosen on dev seeds). A sample left with no

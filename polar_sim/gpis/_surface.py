@@ -31,7 +31,7 @@ __all__ = ["surface_2d", "surface_3d", "grid_query", "gate_2d", "SurfaceEvidence
 #: only: their normals are not resolved and a free-space cell is larger than they are). The reach
 #: past a sample (:func:`_face_reach`) is ``FACE_END`` (m) where the scans' returns ran on along
 #: the face past it, else how far they ran plus ``FACE_RUN_MARGIN`` (m), at least
-#: ``FACE_END_BARE`` (m). ``GATE_VAR``: a vertex where the map's variance reaches this is
+#: ``FACE_END_BARE`` (m), and only near the sample's tangent line (``_LINE_OFF``). ``GATE_VAR``: a vertex where the map's variance reaches this is
 #: unsupported (the prior is ``1 + map_noise``). Chosen on the dev seeds of office2d and
 #: warehouse2d (benchmarks/RESULTS.md).
 FREE_DEPTH, SUPPORT_RADIUS, MIN_SUPPORT, GATE_VAR, FACE_END = 0.05, 0.5, 1, 0.5, 0.175
@@ -385,7 +385,8 @@ def gate_2d(m, pts, *, free_depth=FREE_DEPTH, support_radius=SUPPORT_RADIUS,
     trusted normal lie within ``support_radius``, or when it lies past the end of its face:
     neither between two of its samples along the face nor within reach of one (``face_end``
     where the scans' returns ran on along the face past it, else their run plus
-    ``FACE_RUN_MARGIN``, at least ``face_end_bare``; :func:`_face_reach`);
+    ``FACE_RUN_MARGIN``, at least ``face_end_bare``; :func:`_face_reach`; and within
+    ``_LINE_OFF`` of the sample's tangent line);
     ``"variance"`` when the map's variance there reaches ``var_max``. ``free_depth`` None turns
     the free-space gate off, ``min_support`` 0 the support gate and ``var_max`` inf the variance
     gate. Returns (fail (n,) int: 0 = kept, else 1 + the index of the first failed gate in
