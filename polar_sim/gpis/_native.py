@@ -23,6 +23,8 @@ import platform
 import sys
 from pathlib import Path
 
+import numpy as np
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["K", "entry", "native_dir", "source_key", "SOURCES"]
@@ -98,7 +100,8 @@ def _load():
 
 
 class _Compiled:
-    """A compiled kernel; the JIT dispatcher answers calls whose argument types it lacks."""
+    """A compiled kernel; the JIT dispatcher answers calls whose argument types it lacks, and
+    calls with an array that is not C-contiguous."""
 
     __slots__ = ("fn", "jit")
 
@@ -106,6 +109,12 @@ class _Compiled:
         self.fn, self.jit = fn, jit
 
     def __call__(self, *args):
+        # a compiled signature takes C-contiguous arrays and does not check the layout it is
+        # given: a strided view would be read as if it were contiguous (wrong answers, no error);
+        # the JIT dispatcher compiles for whatever layout comes
+        for a in args:
+            if isinstance(a, np.ndarray) and not a.flags.c_contiguous:
+                return self.jit(*args)
         try:
             return self.fn(*args)
         except TypeError:

@@ -24,7 +24,6 @@ EXPERIMENTS = ["gpis_accuracy", "surface_vs_rate", "mapping_cost", "localisation
 KNOWN_MISSES = {
     ("gpis_accuracy", "warehouse2d: near-surface SDF RMSE"): "2.49 cm vs 2 cm",
     ("gpis_accuracy", "warehouse2d: Hausdorff on surfaces hit by >= 10 scans"): "above 10 cm: corners (small clutter kept since the surface() fix)",
-    ("gpis_accuracy", "warehouse2d: no point of surface() farther than 10 cm"): "corners: 0.18-0.25 m on the dev seeds at full size, gated",
     ("intel_lab", "Intel Lab: held-out end points' median |SDF|"): "1.56 cm vs 1.5 cm",
 }
 
