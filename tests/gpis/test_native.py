@@ -1,5 +1,6 @@
 """The kernels compiled ahead of time (``polar_sim.gpis._native``): how a process finds them and
-falls back to numba's JIT. (Building them takes minutes: ``benchmarks/bench_gpis_coldstart.py``.)"""
+falls back to numba's JIT. (A module is built, and compared with the JIT, in
+``test_native_build.py``; its cold start is timed in ``benchmarks/bench_gpis_coldstart.py``.)"""
 
 import numba as nb
 import numpy as np
