@@ -142,43 +142,43 @@ def test_published_mode_records_no_runs():
     assert (m.tree_.run[m.tree_.alive()] == 0.0).all()
 
 
+def _past_the_lower_face(m, points, runs=None):
+    """Whether points (k, 2) near the wall's lower face (outward normal (0, -1)) are within reach of
+    its samples, with the map's runs or, given ``runs``, with every run set to it."""
+    g = np.tile([0.0, -1.0], (len(points), 1))
+    args = (_surface.SUPPORT_RADIUS, _surface.FACE_END, _surface.FACE_END_BARE)
+    t = m.tree_
+    saved = t.run.copy()
+    try:
+        if runs is not None:
+            t.run[:] = runs
+        return _surface._face_support(m, np.asarray(points, float), g, *args)[1]
+    finally:
+        t.run[:] = saved
+
+
+def _last_lower_face_sample(m):
+    t = m.tree_
+    i = t.alive()
+    P, N = t.pos[i], t.nrm[i]
+    face = (np.abs(P[:, 1] - 2.0) < 0.03) & (N[:, 1] < -0.9)
+    return P[face][np.argmax(P[face, 0])]
+
+
 def test_past_a_face_seen_to_end_the_reach_is_the_run(wall_end):
     # a point on the lower face's line 0.13 m past its last sample, i.e. past the wall's true end
     # (4, 2): with the runs the map recorded it is out of reach (the returns ended at the corner);
     # were every face to run on (the gate before the runs) it would be within face_end
-    t = wall_end.tree_
-    i = t.alive()
-    P, N = t.pos[i], t.nrm[i]
-    face = (np.abs(P[:, 1] - 2.0) < 0.03) & (N[:, 1] < -0.9)
-    last = P[face][np.argmax(P[face, 0])]
-    q = np.array([[last[0] + 0.13, 2.0]])
-    assert q[0, 0] - END[0] >= 0.08                                   # off the true surface
-    g = np.array([[0.0, -1.0]])                                       # the face's outward normal
-    args = (_surface.SUPPORT_RADIUS, _surface.FACE_END, _surface.FACE_END_BARE)
-    assert not _surface._face_support(wall_end, q, g, *args)[1][0]
-    saved = t.run.copy()
-    try:
-        t.run[:] = np.inf
-        assert _surface._face_support(wall_end, q, g, *args)[1][0]
-    finally:
-        t.run[:] = saved
+    last = _last_lower_face_sample(wall_end)
+    q = [[last[0] + 0.13, 2.0]]
+    assert q[0][0] - END[0] >= 0.08                                   # off the true surface
+    assert not _past_the_lower_face(wall_end, q)[0]
+    assert _past_the_lower_face(wall_end, q, runs=np.inf)[0]
 
 
 def test_a_run_vouches_only_near_the_samples_tangent_line(wall_end):
     # 5 cm past the last sample of the lower face, 4 cm below its line: within reach; 10 cm below
     # it (in free space, where the returns never lay): out of reach, however far the runs went
-    t = wall_end.tree_
-    i = t.alive()
-    P, N = t.pos[i], t.nrm[i]
-    face = (np.abs(P[:, 1] - 2.0) < 0.03) & (N[:, 1] < -0.9)
-    last = P[face][np.argmax(P[face, 0])]
-    g = np.array([[0.0, -1.0]])
-    args = (_surface.SUPPORT_RADIUS, _surface.FACE_END, _surface.FACE_END_BARE)
-    near, off = np.array([[last[0] + 0.05, last[1] - 0.04]]), np.array([[last[0] + 0.05, last[1] - 0.10]])
-    assert _surface._face_support(wall_end, near, g, *args)[1][0]
-    saved = t.run.copy()
-    try:
-        t.run[:] = RUNS["cap"]                      # every face seen to run on
-        assert not _surface._face_support(wall_end, off, g, *args)[1][0]
-    finally:
-        t.run[:] = saved
+    last = _last_lower_face_sample(wall_end)
+    assert _past_the_lower_face(wall_end, [[last[0] + 0.05, last[1] - 0.04]])[0]
+    assert not _past_the_lower_face(wall_end, [[last[0] + 0.05, last[1] - 0.10]], runs=RUNS["cap"])[0]
