@@ -4,17 +4,25 @@ GroundVO's default runs the dense alignment (``DenseConfig``); these plug-ins ar
 compared with on ``dev`` routes, for ``polar-sim run ground_odometry`` / ``ground_appearance`` (run
 from the repository root)::
 
-    polar-sim run ground_odometry --split dev --set 'method=[w6,benchmarks.bench_ground_dense:w6_nodense]'
+    PYTHONPATH=. polar-sim run ground_odometry --split dev --set 'method=[w6,benchmarks.bench_ground_dense:w6_nodense]'
 
 - ``w6_nodense``: w6 without the dense stage (bit-identical to w6 before the dense stage existed).
 - ``w6_nolabels``: w6 with the dense speed but without the dense ground self-labels.
-- ``w6_plane``: w6 with the dense fit's plane model (no pitch change between images).
+- ``w6_plane``: w6 with the dense fit's plane model (no pitch change between images, no side slope).
+- ``w6_pitch``: w6 with the dense fit's pitch model (no side slope: the default before 2026-12-07).
+
+Each runs at the working size and with the 3-D integration that the experiments give the built-in
+``w6`` (``downsample=1``, ``integration="3d"``); a plug-in gets only the protocol from them. (Before
+2026-12-07 these plug-ins ran at GroundVO's own defaults, ``downsample=2`` and planar integration, so
+the ``w6_nodense`` rows in ``benchmarks/RESULTS.md`` from 2026-12-06 compare unequal settings.)
 """
 
 
 def _w6(K, camera_height, seed, params, **dense):
     from polar_sim.ground import DenseConfig, GroundVO
 
+    params.setdefault("downsample", 1)
+    params.setdefault("integration", "3d")
     return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, dense=DenseConfig(**dense),
                     **params)
 
@@ -32,3 +40,8 @@ def w6_nolabels(K, camera_height, *, seed=0, **params):
 def w6_plane(K, camera_height, *, seed=0, **params):
     """w6 with the dense fit's plane model (arc length and yaw change only)."""
     return _w6(K, camera_height, seed, params, model="plane")
+
+
+def w6_pitch(K, camera_height, *, seed=0, **params):
+    """w6 with the dense fit's pitch model (arc length, yaw change and pitch change; a level ground)."""
+    return _w6(K, camera_height, seed, params, model="pitch")

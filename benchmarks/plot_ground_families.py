@@ -38,11 +38,12 @@ def main(out):
     import matplotlib.pyplot as plt
 
     from polar_sim.sim.builders.rover_appearance import FAMILIES
-    from polar_sim.sim.recorders.rover_sequences import DEV_FAMILIES, TEST_ONLY_FAMILIES
+    from polar_sim.sim.recorders.rover_sequences import DEV_FAMILIES, DEV_ONLY_FAMILIES, TEST_ONLY_FAMILIES
 
     rows = [("default look (appearance=None)", "asphalt / gravel / grass / dirt zones; dev (issue-5 routes)", None, None)]
     for f, (desc, _, _) in FAMILIES.items():
-        split = "dev: tuned on" if f in DEV_FAMILIES else "test only: never tuned on" if f in TEST_ONLY_FAMILIES else "?"
+        split = ("dev only: the dev split's periodic ground" if f in DEV_ONLY_FAMILIES else "dev: tuned on"
+                 if f in DEV_FAMILIES else "test only: never tuned on" if f in TEST_ONLY_FAMILIES else "?")
         rows.append((f, f"{desc}; {split}", {"ground": {"family": f}, "sky": {"kind": "gradient"}}, f))
     fig, axes = plt.subplots(len(rows), 2, figsize=(12.4, 2.05 * len(rows)), squeeze=False)
     for (name, desc, spec, fam), (a, b) in zip(rows, axes):

@@ -15,7 +15,8 @@ import numpy as np
 #: The ten routes every pre-protocol figure was measured on (the dev split's default-appearance routes).
 DEV10 = ("terrain_00", "terrain_01", "terrain_02", "terrain_03", "terrain_04", "terrain_05",
          "flat_00", "flat_01", "flat_02", "flat_03")
-DEV_FAMILY_ROUTES = ("dev_speckle", "dev_gravel", "dev_grass", "dev_blotches", "dev_uniform")
+#: One dev route per dev appearance family (``dev_pavers``: the dev split's periodic ground).
+DEV_FAMILY_ROUTES = ("dev_speckle", "dev_gravel", "dev_grass", "dev_blotches", "dev_uniform", "dev_pavers")
 TEST_ROUTES = ("test_speckle", "test_gravel", "test_grass", "test_uniform", "test_stripes", "test_checker",
                "test_blotches", "test_random_0", "test_random_1", "test_random_2", "test_default_0", "test_default_1")
 

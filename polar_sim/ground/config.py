@@ -348,10 +348,12 @@ class DenseConfig(_Stage):
     ----------
     enabled : bool, default=True
         Run the dense alignment.
-    model : {"pitch", "plane", "pitch_roll"}, default="pitch"
+    model : {"side_slope", "pitch", "plane", "pitch_roll", "surface"}, default="side_slope"
         Motion fitted (:data:`polar_sim.ground.dense.WARP_MODELS`): the unicycle step (arc length, yaw
-        change) and the chassis' pitch change between the images (hills); "plane" without the pitch
-        change, "pitch_roll" also with the roll change.
+        change), the chassis' pitch change between the images (hills) and the ground's slope across the
+        image (a chassis leaning in a turn, or a cambered road: a level ground takes the lean for yaw);
+        "pitch" without the side slope, "plane" without the pitch change either, "pitch_roll" with the
+        roll change instead of the side slope; "surface" also the ground's slope and curvature ahead.
     max_depth : float, default=15.0
         Ground pixels up to this flat-ground depth (m) are aligned: the near ground, where the plane
         holds best and the parallax is largest.
@@ -412,7 +414,7 @@ class DenseConfig(_Stage):
     """
 
     enabled: bool = True
-    model: str = "pitch"
+    model: str = "side_slope"
     max_depth: float = 15.0
     levels: int = 2
     smoothing: float = 1.0
@@ -441,7 +443,7 @@ class DenseConfig(_Stage):
 
     def __post_init__(self):
         as_bool(self.enabled, "enabled")
-        check_choice(self.model, ("pitch", "plane", "pitch_roll"), "model")
+        check_choice(self.model, ("pitch", "plane", "pitch_roll", "side_slope", "surface"), "model")
         as_positive_float(self.max_depth, "max_depth")
         as_int(self.levels, "levels", minimum=1, maximum=4)
         as_float(self.smoothing, "smoothing", minimum=0.0, maximum=10.0)

@@ -55,10 +55,13 @@ class DenseFit:
     iterations : int
         Gauss–Newton iterations run (all levels).
     params : tuple
-        All fitted parameters: (s, a) and the pitch and roll changes of the models that have them.
+        All fitted parameters: (s, a), then the pitch and roll changes, or the pitch change and the
+        ground's shape coefficients, of the models that have them.
     band_spread : float
         Half the difference of s fitted on the nearer and on the farther half of the pixels, m: where
         the ground is not the plane the model assumes (a slope or a crest ahead), the two disagree.
+    model : str
+        The warp model fitted (a key of :data:`WARP_MODELS`).
     """
 
     ok: bool
@@ -71,6 +74,7 @@ class DenseFit:
     iterations: int
     params: tuple = ()
     band_spread: float = np.nan
+    model: str = "plane"
 
 
 def _failed(s0, a0, iterations=0):
@@ -148,11 +152,15 @@ def _rot_z(c):
 
 #: Parameters of each warp model: the unicycle step (s, a) over a level plane, plus the pitch change b
 #: of the chassis between the images (hills), plus its roll change c (side slopes); or (s, a, b) over a
-#: curved ground through the point h below the camera (``"surface"``: slope, curvature and side slope).
-WARP_MODELS = {"plane": 2, "pitch": 3, "pitch_roll": 4, "surface": 6}
+#: ground through the point h below the camera that slopes across the image (``"side_slope"``: the
+#: chassis leans in a turn, or the road is cambered) or is curved (``"surface"``: slope, curvature and
+#: side slope).
+WARP_MODELS = {"plane": 2, "pitch": 3, "pitch_roll": 4, "side_slope": 4, "surface": 6}
 #: Prior standard deviations of the surface model's shape (forward slope, forward curvature 1/m, side
 #: slope) around the level plane.
 SURFACE_PRIOR_SD = (0.05, 0.002, 0.03)
+#: The shape coefficients (c1, c2, c3) each ground-shape model fits; the others stay 0.
+_SHAPES = {"side_slope": (2,), "surface": (0, 1, 2)}
 
 
 class _Warp:
@@ -212,22 +220,28 @@ class _Warp:
 
 
 class _SurfaceWarp:
-    """The warp of ground pixels over a curved ground y = h + c1 z + c2 z² + c3 x (level frame of the
-    first image, through the point h below the camera) under the step (s, a) and pitch change b:
-    p = (s, a, b, c1, c2, c3). A pixel's depth is the ray's first intersection with the surface; the
-    shape carries a Gaussian prior (``prior_sd``) around the level plane, as the 6-parameter RANSAC
-    model carries a ridge."""
+    """The warp of ground pixels over a ground y = h + c1 z + c2 z² + c3 x (level frame of the first
+    image, through the point h below the camera) under the step (s, a) and pitch change b:
+    p = (s, a, b) then the fitted shape coefficients (``shape``: indices into (c1, c2, c3); the others
+    are 0). A pixel's depth is the ray's first intersection with the surface; the shape carries a
+    Gaussian prior (``prior_sd``, indexed as (c1, c2, c3)) around the level plane, as the 6-parameter
+    RANSAC model carries a ridge."""
 
-    n_params = 6
+    _STEPS = (1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-6)  # forward-difference steps of s, a, b, c1, c2, c3
 
-    def __init__(self, cam, h, prior_sd=SURFACE_PRIOR_SD):
+    def __init__(self, cam, h, shape=(0, 1, 2), prior_sd=SURFACE_PRIOR_SD):
         self.M = cam.K @ cam.R_lc.T
         self.Minv = np.linalg.inv(self.M)
         self.h = h
-        self.prior_sd = np.r_[np.inf, np.inf, np.inf, prior_sd]
+        self.shape = tuple(shape)
+        self.n_params = 3 + len(self.shape)
+        self.prior_sd = np.r_[np.inf, np.inf, np.inf, [prior_sd[i] for i in self.shape]]
 
     def _project(self, rays, p):
-        s, a, b, c1, c2, c3 = p
+        s, a, b = p[:3]
+        c = np.zeros(3)
+        c[list(self.shape)] = p[3:]
+        c1, c2, c3 = c
         ca, sa = np.cos(a), np.sin(a)
         f1, f2 = (a / 2 - a ** 3 / 24, 1 - a * a / 6) if abs(a) < 1e-4 else ((1 - ca) / a, sa / a)
         R = _rot_x(b).T @ np.array([[ca, 0.0, -sa], [0.0, 1.0, 0.0], [sa, 0.0, ca]])
@@ -248,8 +262,9 @@ class _SurfaceWarp:
         x = self._project(rays, p)
         if not jacobian:
             return x
-        J = np.empty((6, len(xh), 2))
-        for i, e in enumerate((1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-6)):
+        steps = self._STEPS[:3] + tuple(self._STEPS[3 + i] for i in self.shape)
+        J = np.empty((len(p), len(xh), 2))
+        for i, e in enumerate(steps):
             q = p.copy()
             q[i] += e
             J[i] = (self._project(rays, q) - x) / e
@@ -257,7 +272,7 @@ class _SurfaceWarp:
 
 
 def _make_warp(model, cam, h):
-    return _SurfaceWarp(cam, h) if model == "surface" else _Warp(cam, h, model)
+    return _SurfaceWarp(cam, h, _SHAPES[model]) if model in _SHAPES else _Warp(cam, h, model)
 
 
 def _sample(img, xy):
@@ -404,9 +419,9 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
         Lower bound of the robust residual scale, grey levels (8-bit quantisation).
     gradient_weight : float
         c of the gradient weight c² / (c² + |∇I|²) of each pixel, grey levels per px (0: none).
-    model : {"plane", "pitch", "pitch_roll", "surface"}
+    model : {"plane", "pitch", "pitch_roll", "side_slope", "surface"}
         The parameters (:data:`WARP_MODELS`): also the chassis' pitch change, and its roll change; or a
-        curved ground.
+        ground that slopes across the image; or a curved ground.
     alias_range, alias_margin : float
         Aliasing test along s (m; 0 = no test) and its relative cost margin (see the module docstring).
 
@@ -434,7 +449,7 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
     aliased = alias_range > 0 and _aliased(warp, tmpl, cur.img[0], xh, w, p, scale, alias_range=alias_range,
                                            alias_margin=alias_margin)
     return DenseFit(True, float(p[0]), float(p[1]), cov, n, float(scale), aliased, its, tuple(float(x) for x in p),
-                    spread)
+                    spread, model)
 
 
 def _residual_maps(prev, cur, cam, h, fit, mask, window):
@@ -442,7 +457,7 @@ def _residual_maps(prev, cur, cam, h, fit, mask, window):
     ground motion (g) and under its rotation alone (i, where points at infinity go), over the rows of
     ``mask``: (g, i, r0, r1) with the maps of rows r0:r1, or None if the mask is empty."""
     p = np.array(fit.params or (fit.s, fit.a))
-    warp = _make_warp({2: "plane", 3: "pitch", 4: "pitch_roll", 6: "surface"}[len(p)], cam, h)
+    warp = _make_warp(fit.model if fit.params else "plane", cam, h)
     rows = np.flatnonzero(mask.any(axis=1))
     if len(rows) == 0:
         return None

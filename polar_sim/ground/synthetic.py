@@ -287,17 +287,20 @@ class CorridorScene:
 
 
 def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, yaw_rate=0.1, dt=0.1,
-                  camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, seed=0, ground="noise", accel=None):
+                  camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, roll=0.0, seed=0, ground="noise",
+                  accel=None):
     """Render a synthetic sequence along an exact unicycle path.
 
     ``pitch`` (rad, > 0 down) tilts the camera about its x axis relative to the level vehicle frame
-    (the optical centre stays on the path, ``camera_height`` above the ground). ``ground`` is the
+    (the optical centre stays on the path, ``camera_height`` above the ground); ``roll`` (rad, > 0 turns
+    the image clockwise) then turns it about its optical axis, as a chassis leaning in a turn does, so
+    that the ground slopes across the image. ``ground`` is the
     ground texture (:data:`GROUND_KINDS`). With ``accel`` (m/s²) the camera starts from rest and speeds
     up to ``speed`` on the same circle; ``speeds`` (n,) holds the true speed at every image.
 
     Returns a dict: ``rgb`` (n, H, W, 3) uint8, ``ground_mask`` (n, H, W) bool, ``depth`` (n, H, W)
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
-    ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``.
+    ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``, ``roll``.
     """
     K = pinhole_intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
@@ -305,7 +308,9 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)
     M = np.eye(4)
     cp, sp = np.cos(pitch), np.sin(pitch)
-    M[:3, :3] = [[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]]  # camera -> level rotation
+    cr, sr = np.cos(roll), np.sin(roll)
+    M[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]]) @ [[cr, -sr, 0.0], [sr, cr, 0.0],
+                                                                              [0.0, 0.0, 1.0]]  # camera -> level
     world_cam = level @ M  # world = level frame of camera 0
     poses = np.linalg.inv(M) @ level @ M  # camera k in camera 0's frame
     rng = as_rng(seed + 1)
@@ -317,7 +322,7 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     times = np.arange(n_frames) * dt
     speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
-                speed=speed, yaw_rate=yaw_rate, pitch=pitch, speeds=speeds)
+                speed=speed, yaw_rate=yaw_rate, pitch=pitch, roll=roll, speeds=speeds)
 
 
 def check_data():

@@ -6,7 +6,7 @@ import pytest
 
 from polar_sim.sim import LABELS, World
 from polar_sim.sim.builders.appearance_textures import ground_family_texture
-from polar_sim.sim.builders.rover_appearance import FAMILIES, SKIES, resolve_appearance, sample_appearance
+from polar_sim.sim.builders.rover_appearance import FAMILIES, RANDOM_FAMILIES, SKIES, resolve_appearance, sample_appearance
 from polar_sim.sim.scenes import scene_options
 
 
@@ -75,6 +75,28 @@ def test_determinism_and_round_trip_of_the_resolved_spec():
     assert {z["family"] for z in s1["ground"]} == {"gravel"}
 
 
+# "random" draws from the families it always drew from, in their order, so the random looks of the
+# recorded routes (test_random_*) stay as they were when a family is added; pavers is never drawn.
+def test_random_draws_only_the_random_families():
+    assert list(RANDOM_FAMILIES) == [f for f in FAMILIES if f != "pavers"]
+    drawn = {z["family"] for seed in range(200) for z in sample_appearance(seed)["ground"]}
+    assert drawn == set(RANDOM_FAMILIES)
+
+
+# Pavers: dark joints one course apart across the courses, and the bricks of a course are offset by
+# half a brick from the next course's.
+def test_pavers_joints_follow_the_courses():
+    z = resolve_appearance({"ground": {"family": "pavers", "contrast": 0.0, "courses": 8, "ratio": 2}}, 0)["ground"][0]
+    opts = {k: v for k, v in z.items() if k not in ("family", "scale_m")}
+    img = ground_family_texture("pavers", np.random.default_rng(0), size=256, **opts).astype(float).mean(axis=2)
+    row_mean = img.mean(axis=1)  # 8 courses of 32 px: the joints at 0, 32, ... are the dark rows
+    dark = np.argsort(row_mean)[:8]
+    assert set(dark % 32) <= {0, 31}
+    # In course 0 the vertical joints are at x = 0, 64, ...; in course 1 at x = 32, 96, ...
+    c0, c1 = img[8:24].mean(axis=0), img[40:56].mean(axis=0)
+    assert c0[0] < c0[32] and c1[32] < c1[0]
+
+
 # A plain sky is an unlit skybox: every sky pixel has exactly the sky colour.
 @pytest.mark.parametrize("colour", [[0, 0, 0], [200, 30, 40]])
 def test_plain_sky_pixels_have_the_sky_colour(colour):
@@ -128,6 +150,8 @@ def test_bad_appearance_specs_raise():
         ({"light": {"colour": [2.0, 1.0, 1.0]}}, r"appearance\.light\.colour"),
         ({"lights": {}}, r"appearance.*unknown field.*'lights'"),
         ({"texture_seed": -3}, r"appearance\.texture_seed"),
+        ({"ground": [{"family": "pavers", "courses": 9, "ratio": 2}]}, r"appearance\.ground\[0\]\.courses.*multiple"),
+        ({"ground": [{"family": "pavers", "joint": 0.5}]}, r"appearance\.ground\[0\]\.joint"),
     ]
     for spec, match in cases:
         with pytest.raises(ValueError, match=match):

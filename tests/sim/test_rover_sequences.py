@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from polar_sim.sim.recorders.rover_sequences import (DEV_FAMILIES, ROUTES, SPLITS, TEST_ONLY_FAMILIES, TEST_ROUTES, load_route,
+from polar_sim.sim.recorders.rover_sequences import (DEV_FAMILIES, DEV_ONLY_FAMILIES, ROUTES, SPLITS, TEST_ONLY_FAMILIES, TEST_ROUTES, load_route,
                                            record_route, reduce2x)
 
 
@@ -26,7 +26,8 @@ def test_splits():
     assert all(r.seed >= 10_000 for r in TEST_ROUTES.values()) and all(r.seed < 10_000 for r in ROUTES.values())
     dev_looks = {r.appearance for r in ROUTES.values()} - {None}
     assert dev_looks == set(DEV_FAMILIES) and not dev_looks & set(TEST_ONLY_FAMILIES)
-    assert {r.appearance for r in TEST_ROUTES.values()} >= set(DEV_FAMILIES) | set(TEST_ONLY_FAMILIES)
+    assert {r.appearance for r in TEST_ROUTES.values()} >= (set(DEV_FAMILIES) - set(DEV_ONLY_FAMILIES)) | set(TEST_ONLY_FAMILIES)
+    assert not {r.appearance for r in TEST_ROUTES.values()} & set(DEV_ONLY_FAMILIES)
     assert len(TEST_ONLY_FAMILIES) >= 2
 
 

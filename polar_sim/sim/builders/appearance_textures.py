@@ -81,6 +81,28 @@ def _checker(rng, size, colour, colour2, contrast, tiles=8, grout=0.04):
     return (1 - gmask) * img + gmask * 0.55 * img
 
 
+def _pavers(rng, size, colour, colour2, contrast, courses=8, ratio=2, joint=0.06):
+    # Running bond: ``courses`` rows of bricks ``ratio`` times as long as wide, each row offset by
+    # half a brick; each brick of either colour (at random) with its own small tone, dark joints.
+    h = size / courses
+    y = (np.arange(size) + 0.5) / h
+    row = np.floor(y).astype(int) % courses
+    x = (np.arange(size)[None, :] + 0.5) / (h * ratio) + 0.5 * (row[:, None] % 2)
+    n_per_row = courses // ratio
+    brick = row[:, None] * n_per_row + (np.floor(x).astype(int) % n_per_row)
+    mix = (rng.random(courses * n_per_row) < 0.5).astype(np.float32)  # two-tone, laid at random
+    tone = rng.uniform(-1.0, 1.0, courses * n_per_row).astype(np.float32) * contrast * 30.0
+    m = mix[brick][..., None]
+    img = (1 - m) * _rgb(colour) + m * _rgb(colour2) + tone[brick][..., None]
+    img += (contrast * 60.0 * _noise(rng, size, 0.7))[..., None]
+    fy, fx = (y % 1.0)[:, None], x % 1.0
+    # Joint half-widths across a course and along a brick, at least half a texel so that no joint
+    # falls between texel centres.
+    jy, jx = max(joint / 2, 0.5 / h), max(joint / 2, 0.5 / h) / ratio
+    gmask = ((fy <= jy) | (fy >= 1 - jy) | (fx <= jx) | (fx >= 1 - jx)).astype(np.float32)[..., None]
+    return (1 - gmask) * img + gmask * 0.5 * img
+
+
 def _blotches(rng, size, colour, colour2, contrast, blotch=0.08):
     field = _noise(rng, size, blotch * size)
     m = 1.0 / (1.0 + np.exp(-3.0 * field))[..., None]  # soft-edged patches of either colour
@@ -90,7 +112,8 @@ def _blotches(rng, size, colour, colour2, contrast, blotch=0.08):
 
 #: Generators by family: ``f(rng, size, colour, colour2, contrast, **family_options)`` -> float image.
 GROUND_GENERATORS = {"speckle": _speckle, "gravel": _gravel, "grass": _grass, "uniform": _uniform,
-                     "stripes": _stripes, "checker": _checker, "blotches": _blotches}
+                     "stripes": _stripes, "checker": _checker, "blotches": _blotches,
+                     "pavers": _pavers}
 
 
 def ground_family_texture(family, rng, *, size=512, colour, colour2, contrast, **options):

@@ -26,7 +26,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["FAMILIES", "SKIES", "LIGHT_FIELDS", "resolve_appearance", "sample_appearance", "describe_families"]
+__all__ = ["FAMILIES", "RANDOM_FAMILIES", "SKIES", "LIGHT_FIELDS", "resolve_appearance", "sample_appearance", "describe_families"]
 
 #: Ground families: description, the texture repeat (m) and the options each accepts with defaults.
 #: ``colour``/``colour2`` are RGB 0..255; ``contrast`` scales the fine detail (0 = none).
@@ -45,7 +45,14 @@ FAMILIES = {
                 {"colour": [95, 95, 100], "colour2": [170, 165, 155], "contrast": 0.1, "tiles": 8, "grout": 0.04}),
     "blotches": ("large low-frequency blotches (metres across) of two colours, fine grain on top", 24.0,
                  {"colour": [120, 100, 70], "colour2": [85, 95, 60], "contrast": 0.15, "blotch": 0.08}),
+    "pavers": ("running-bond paving slabs (1 x 0.5 m), each of either colour at random, dark joints", 4.0,
+               {"colour": [95, 90, 85], "colour2": [165, 150, 135], "contrast": 0.1, "courses": 8, "ratio": 2,
+                "joint": 0.06}),
 }
+
+#: The families a ``"random"`` appearance draws from. ``pavers`` came later, as the dev split's
+#: periodic ground, and is left out so that the random looks drawn before it stay as they were.
+RANDOM_FAMILIES = ("speckle", "gravel", "grass", "uniform", "stripes", "checker", "blotches")
 
 #: Sky and horizon kinds with the fields each accepts and their defaults (RGB 0..255; degrees).
 SKIES = {
@@ -100,6 +107,10 @@ def _sample_zone(rng, family):
     elif family == "blotches":
         z.update(colour=_hsv(rng, (0.05, 0.35), (0.2, 0.5), (0.3, 0.55)),
                  colour2=_hsv(rng, (0.05, 0.35), (0.2, 0.5), (0.3, 0.55)))
+    elif family == "pavers":
+        hue = rng.uniform(0.0, 1.0)
+        z.update(colour=_hsv(rng, (hue, hue + 0.05), (0.0, 0.3), (0.25, 0.45)),
+                 colour2=_hsv(rng, (hue, hue + 0.05), (0.0, 0.3), (0.55, 0.8)), courses=int(rng.choice([4, 8])))
     z["family"] = family
     z["scale_m"] = FAMILIES[family][1]
     return z
@@ -134,7 +145,7 @@ def sample_appearance(seed, family=None):
     texture seed do not depend on ``family``."""
     # One stream per part: under one seed, every family gets the same sky, light and texture seed.
     rz, rs, rl, rt = (np.random.default_rng(np.random.SeedSequence([int(seed), 7002, k])) for k in range(4))
-    fams = list(FAMILIES)
+    fams = list(RANDOM_FAMILIES)
     zones = [_sample_zone(rz, family if family is not None else str(rz.choice(fams))) for _ in range(N_ZONES)]
     return {"ground": zones, "sky": _sample_sky(rs), "light": _sample_light(rl),
             "texture_seed": int(rt.integers(0, 2**31 - 1))}
@@ -172,7 +183,8 @@ def _check_fields(d, valid, where):
 
 _LIMITS = {"contrast": (0.0, 2.0, False), "density": (0.0, 1.0, False), "stripes": (1, 32, True),
            "width": (0.005, 0.5, False), "tiles": (1, 64, True), "grout": (0.0, 0.3, False),
-           "blotch": (0.01, 0.5, False), "scale_m": (0.25, 200.0, False)}
+           "blotch": (0.01, 0.5, False), "scale_m": (0.25, 200.0, False),
+           "courses": (2, 64, True), "ratio": (1, 8, True), "joint": (0.0, 0.3, False)}
 
 
 def _zone(z, where):
@@ -200,6 +212,9 @@ def _zone(z, where):
         else:
             lo, hi, integer = _LIMITS[k]
             out[k] = _number(v, f"{where}.{k}", lo, hi, integer)
+    if fam == "pavers" and out["courses"] % out["ratio"]:
+        raise ValueError(f"{where}.courses: expected a multiple of ratio ({out['ratio']}) so that the bricks "
+                         f"tile, got {out['courses']}")
     return out
 
 

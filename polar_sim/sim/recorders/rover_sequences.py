@@ -8,9 +8,9 @@ speed, the camera height above the terrain along the camera's down axis, and the
 the second-order ground surface seen by the camera.
 
 Routes come in two splits (the held-out protocol): :data:`ROUTES` (``dev``, the ten routes every
-parameter was chosen on, default appearance, plus four routes of the dev appearance families) and
-:data:`TEST_ROUTES` (``test``, seeds >= 10,000, every ground family including three never used while
-tuning). :func:`load_route` returns a lazy reader from the one recording cache
+parameter was chosen on, default appearance, plus one route of each dev appearance family) and
+:data:`TEST_ROUTES` (``test``, seeds >= 10,000, every ground family but the dev-only ``pavers``,
+including two never used while tuning). :func:`load_route` returns a lazy reader from the one recording cache
 (:mod:`polar_sim.sim.recorders.sequences`), recording the route first if it is absent; recordings are
 deterministic in the route's spec.
 """
@@ -30,7 +30,7 @@ from polar_sim.sim.recorders.recording import Recording
 from polar_sim.sim.truth import LABELS
 from polar_sim.sim.world import World
 
-__all__ = ["ROUTES", "TEST_ROUTES", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "RouteSpec", "route_spec",
+__all__ = ["ROUTES", "TEST_ROUTES", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "DEV_ONLY_FAMILIES", "RouteSpec", "route_spec",
            "record_route", "load_route", "route_truth", "route_layout", "route_zones",
            "settled_frames", "KITTI_FOVY_DEG", "reduce2x", "RECORDER_VERSION"]
 
@@ -72,15 +72,19 @@ ROUTES = {
     "dev_grass": RouteSpec("rover_flat", 22, 1.1, 5.0, 10.0, "grass"),
     "dev_blotches": RouteSpec("rover_terrain", 23, 1.1, 6.0, 11.0, "blotches"),
     "dev_uniform": RouteSpec("rover_flat", 24, 1.1, 5.0, 10.0, "uniform"),
+    "dev_pavers": RouteSpec("rover_flat", 25, 1.1, 5.0, 10.0, "pavers"),
 }
 
 #: Appearance families tuned on (dev) and those seen only in the test split. ``uniform`` was
 #: test-only until its test failure (issue 13) was diagnosed on its own dev route, ``dev_uniform``;
 #: ``stripes`` and ``checker`` have never been used while tuning.
-DEV_FAMILIES = ("speckle", "gravel", "grass", "blotches", "uniform")
+DEV_FAMILIES = ("speckle", "gravel", "grass", "blotches", "uniform", "pavers")
 TEST_ONLY_FAMILIES = ("stripes", "checker")
+#: Families only the dev split has: ``pavers`` is a periodic ground (running-bond bricks) to choose
+#: the aliasing guards on, so that ``checker``, the test split's periodic ground, stays never tuned on.
+DEV_ONLY_FAMILIES = ("pavers",)
 
-#: The ``test`` split: seeds >= 10,000; one route of every family (the three test-only families
+#: The ``test`` split: seeds >= 10,000; one route of every family but pavers (the two test-only families
 #: never used while tuning), three of "random" appearances (every zone its own family, random sky and
 #: light) and two of the default appearance, alternating hills and flat ground, 1.1 laps each.
 TEST_ROUTES = {
