@@ -10,6 +10,9 @@ from the repository root)::
 - ``w6_nolabels``: w6 with the dense speed but without the dense ground self-labels.
 - ``w6_plane``: w6 with the dense fit's plane model (no pitch change between images, no side slope).
 - ``w6_pitch``: w6 with the dense fit's pitch model (no side slope: the default before 2026-12-07).
+- ``w6_nosky``: w6 without the non-ground self-labels above the horizon (``ClassifierConfig(sky_labels=0)``:
+  the default before 2026-12-07's eleventh session); ``w6_sky30``, ``w6_sky50``, ``w6_sky300``: other
+  numbers of them, and ``w6_sky300m05`` 300 from 0.05 rad above the horizon (the default: 100 from 0.1 rad).
 
 Each runs at the working size and with the 3-D integration that the experiments give the built-in
 ``w6`` (``downsample=1``, ``integration="3d"``); a plug-in gets only the protocol from them. (Before
@@ -18,13 +21,13 @@ the ``w6_nodense`` rows in ``benchmarks/RESULTS.md`` from 2026-12-06 compare une
 """
 
 
-def _w6(K, camera_height, seed, params, **dense):
-    from polar_sim.ground import DenseConfig, GroundVO
+def _w6(K, camera_height, seed, params, classifier=None, **dense):
+    from polar_sim.ground import ClassifierConfig, DenseConfig, GroundVO
 
     params.setdefault("downsample", 1)
     params.setdefault("integration", "3d")
     return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, dense=DenseConfig(**dense),
-                    **params)
+                    classifier=ClassifierConfig(**(classifier or {})), **params)
 
 
 def w6_nodense(K, camera_height, *, seed=0, **params):
@@ -45,3 +48,19 @@ def w6_plane(K, camera_height, *, seed=0, **params):
 def w6_pitch(K, camera_height, *, seed=0, **params):
     """w6 with the dense fit's pitch model (arc length, yaw change and pitch change; a level ground)."""
     return _w6(K, camera_height, seed, params, model="pitch")
+
+
+def w6_nosky(K, camera_height, *, seed=0, **params):
+    """w6 without the sky labels (``ClassifierConfig(sky_labels=0)``)."""
+    return _w6(K, camera_height, seed, params, classifier={"sky_labels": 0})
+
+
+def _sky(n, margin=0.1):
+    def make(K, camera_height, *, seed=0, **params):
+        return _w6(K, camera_height, seed, params, classifier={"sky_labels": n, "sky_margin": margin})
+
+    make.__doc__ = f"w6 with {n} sky labels from {margin} rad above the horizon."
+    return make
+
+
+w6_sky30, w6_sky50, w6_sky300, w6_sky300m05 = _sky(30), _sky(50), _sky(300), _sky(300, 0.05)

@@ -47,7 +47,7 @@ def _route_frames(name, frames):
     """The candidate frames of one route's online w6 pass (seed 0), without the dense ground alignment
     (the dissertation's pipeline, whose RANSAC sampling Ch. 4 is about): every frame after the warm-up
     with >= 20 weighted candidates, with their u, v, d̄, P(ground), true label and middle frame index."""
-    from polar_sim.ground import DenseConfig, GroundVO
+    from polar_sim.ground import ClassifierConfig, DenseConfig, GroundVO
     from polar_sim.ground.replay import replay
     from polar_sim.metrics.ground import labels_at
     from polar_sim.sim.recorders.rover_sequences import load_route, route_truth
@@ -64,8 +64,10 @@ def _route_frames(name, frames):
                           dbar=e.candidate_dbar.copy(), prob=e.candidate_prob.copy(),
                           label=labels_at(prev["ground_mask"], e.candidates), middle=m))
 
+    # The dissertation's pipeline: no dense stage and no sky labels (neither is in the study), so the
+    # candidates' P(ground) is the one its sampling experiments were about.
     vo = GroundVO(tr["K"], tr["h"], model="6param", sampling="weighted", downsample=1, seed=0,
-                  dense=DenseConfig(enabled=False))
+                  dense=DenseConfig(enabled=False), classifier=ClassifierConfig(sky_labels=0))
     replay(vo, rec.frames(keys=("rgb", "t", "ground_mask")), on_frame=keep)
     return found, tr
 

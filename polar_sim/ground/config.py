@@ -266,6 +266,12 @@ class ClassifierConfig(_Stage):
         Only tracks never counted as ground inliers become non-ground outliers (with
         ``ng_outlier_sigma=6``: the method ``w6_ng6h``, better on weakly textured ground; not the
         default, see ``benchmarks/RESULTS.md``).
+    sky_labels : int, default=100
+        Non-ground self-labels per image spread over the image more than ``sky_margin`` above the
+        level horizon, where no ground can be on level ground (0: none; tracks there label it).
+    sky_margin : float, default=0.1
+        How far above the level horizon the sky labels start, rad (hills and the chassis' pitch
+        lift the ground above it).
     train_depth : float or None, default=30.0
         Ground inliers farther than this (m, flat-ground depth) do not train the ground colour; None:
         no limit (the spec).
@@ -284,13 +290,15 @@ class ClassifierConfig(_Stage):
     ng_from_outliers: bool = True
     ng_outlier_sigma: float = 3.0
     ng_outlier_history: bool = False
+    sky_labels: int = 100
+    sky_margin: float = 0.1
     train_depth: float | None = 30.0
     decay_samples: float | None = 450.0
     hue_wrap: str = "fixed"
     ground_labels: str = "fixed"
 
-    _PUBLISHED = dict(ng_from_outliers=False, train_depth=None, decay_samples=None, hue_wrap="published",
-                      ground_labels="published")
+    _PUBLISHED = dict(ng_from_outliers=False, sky_labels=0, train_depth=None, decay_samples=None,
+                      hue_wrap="published", ground_labels="published")
 
     def __post_init__(self):
         as_unit_interval(self.alpha, "alpha")
@@ -298,6 +306,8 @@ class ClassifierConfig(_Stage):
         as_bool(self.ng_from_outliers, "ng_from_outliers")
         as_positive_float(self.ng_outlier_sigma, "ng_outlier_sigma")
         as_bool(self.ng_outlier_history, "ng_outlier_history")
+        as_int(self.sky_labels, "sky_labels", minimum=0, maximum=MAX_FEATURES)
+        as_positive_float(self.sky_margin, "sky_margin", allow_zero=True)
         _optional(self.train_depth, as_positive_float, "train_depth")
         _optional(self.decay_samples, as_positive_float, "decay_samples")
         check_choice(self.hue_wrap, SWITCH, "hue_wrap")

@@ -288,7 +288,7 @@ class CorridorScene:
 
 def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, yaw_rate=0.1, dt=0.1,
                   camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, roll=0.0, seed=0, ground="noise",
-                  accel=None):
+                  accel=None, sky_rgb=None):
     """Render a synthetic sequence along an exact unicycle path.
 
     ``pitch`` (rad, > 0 down) tilts the camera about its x axis relative to the level vehicle frame
@@ -296,7 +296,8 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     the image clockwise) then turns it about its optical axis, as a chassis leaning in a turn does, so
     that the ground slopes across the image. ``ground`` is the
     ground texture (:data:`GROUND_KINDS`). With ``accel`` (m/s²) the camera starts from rest and speeds
-    up to ``speed`` on the same circle; ``speeds`` (n,) holds the true speed at every image.
+    up to ``speed`` on the same circle; ``speeds`` (n,) holds the true speed at every image. ``sky_rgb``
+    (3,) paints the plain sky (None: :class:`CorridorScene`'s light blue).
 
     Returns a dict: ``rgb`` (n, H, W, 3) uint8, ``ground_mask`` (n, H, W) bool, ``depth`` (n, H, W)
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
@@ -304,7 +305,9 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     """
     K = pinhole_intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
-    scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground)
+    sky = {} if sky_rgb is None else {"sky_rgb": tuple(sky_rgb)}
+    scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground,
+                          **sky)
     level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)
     M = np.eye(4)
     cp, sp = np.cos(pitch), np.sin(pitch)

@@ -286,6 +286,7 @@ class GroundVO(Parameterised):
         self.prev_grey_ = self.prev_labels_ = self.prev_prob_ = self.prev_score_ = self.prev_pyr_ = None
         self.rates_ = np.zeros(3)
         self.dense_mask_ = self._dense_region((hp, wp))
+        self.sky_labels_ = self._sky_points((hp, wp))
         self.dense_fits_ = (None, None)  # (fit, dt) of the image pairs (k-2, k-1) and (k-1, k)
         self.dense_labels_ = np.zeros((0, 2))  # ground self-labels of the previous image from the dense fit
 
@@ -622,6 +623,8 @@ class GroundVO(Parameterised):
             # Ground where the dense fit's parallax says so: these pixels learn ground, never non-ground.
             ng_xy = ng_xy[~self._dense_ground_at(ng_xy)]
             g_xy = np.concatenate([g_xy, self.dense_labels_])
+        if len(self.sky_labels_):
+            ng_xy = np.concatenate([ng_xy, self.sky_labels_])
         if c.calibration.method == "platt" and self.prev_score_ is not None:
             # Out-of-sample self-labels: the map of image k-1 was made before learning from them.
             sh = self.prev_score_.shape
@@ -629,6 +632,21 @@ class GroundVO(Parameterised):
             sc = self.prev_score_.ravel()
             self.calibrator_.update(np.r_[sc[gi], sc[ni]], np.r_[np.ones(len(gi), bool), np.zeros(len(ni), bool)])
         self.classifier_.update(lab, g_xy, ng_xy)
+
+    def _sky_points(self, shape):
+        """Non-ground self-labels (m, 2) of a processed image of ``shape`` (H, W): up to
+        ``classifier.sky_labels`` pixels spread over the part of the image more than ``sky_margin`` above
+        the level horizon. A plain sky has no tracks, so without them it never gets a label and its
+        colour is decided by whichever ground tone shares it."""
+        cl = self.cfg_.classifier
+        if cl.sky_labels == 0:
+            return np.zeros((0, 2))
+        H, W = shape
+        yy, xx = np.mgrid[0:H, 0:W]
+        xy = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
+        up = (self.camera_.level(xy)[1] < -np.tan(cl.sky_margin)).reshape(H, W)
+        up &= (xx >= 4) & (xx < W - 4) & (yy >= 4)
+        return label_points(up.view(np.uint8), 0, cl.sky_labels)
 
     # -- dense ground alignment ----------------------------------------------------------------------
 
