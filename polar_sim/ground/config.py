@@ -268,7 +268,8 @@ class ClassifierConfig(_Stage):
         default, see ``benchmarks/RESULTS.md``).
     sky_labels : int, default=100
         Non-ground self-labels per image spread over the image more than ``sky_margin`` above the
-        level horizon, where no ground can be on level ground (0: none; tracks there label it).
+        level horizon (and above ``GroundModelConfig.horizon_row``, if given), where no level ground
+        can be (0: none; only tracks there label it).
     sky_margin : float, default=0.1
         How far above the level horizon the sky labels start, rad (hills and the chassis' pitch
         lift the ground above it).

@@ -636,15 +636,17 @@ class GroundVO(Parameterised):
     def _sky_points(self, shape):
         """Non-ground self-labels (m, 2) of a processed image of ``shape`` (H, W): up to
         ``classifier.sky_labels`` pixels spread over the part of the image more than ``sky_margin`` above
-        the level horizon. A plain sky has no tracks, so without them it never gets a label and its
-        colour is decided by whichever ground tone shares it."""
-        cl = self.cfg_.classifier
+        the level horizon (and above a given ``horizon_row`` by as much). A plain sky has no tracks, so
+        without them it never gets a label and its colour is decided by whichever ground tone shares it."""
+        cl, cam = self.cfg_.classifier, self.camera_
         if cl.sky_labels == 0:
             return np.zeros((0, 2))
         H, W = shape
         yy, xx = np.mgrid[0:H, 0:W]
         xy = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float64)
-        up = (self.camera_.level(xy)[1] < -np.tan(cl.sky_margin)).reshape(H, W)
+        up = (cam.level(xy)[1] < -np.tan(cl.sky_margin)).reshape(H, W)
+        if cam.horizon is not None:
+            up &= yy < cam.horizon - cam.fy * np.tan(cl.sky_margin)
         up &= (xx >= 4) & (xx < W - 4) & (yy >= 4)
         return label_points(up.view(np.uint8), 0, cl.sky_labels)
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from polar_sim.ground import ClassifierConfig, GroundVO
+from polar_sim.ground import ClassifierConfig, GroundModelConfig, GroundVO
 from polar_sim.ground.synthetic import make_sequence
 
 DARK_TILE = (95, 95, 100)   # the checker ground's dark tiles (``synthetic._ground_texture``)
@@ -39,12 +39,14 @@ def test_sky_labels_teach_a_plain_sky_of_the_grounds_colour(dark_sky):
 
 # The labels lie where no level ground can be: each pixel's ray, from the intrinsics and the camera's
 # pitch (exact geometry, not the camera model GroundVO uses), rises more than sky_margin above the
-# level; there are at most sky_labels of them, and they span the image's width.
-@pytest.mark.parametrize("pitch", [0.0, 0.08])
-def test_sky_labels_lie_above_the_horizon_by_the_margin(pitch):
+# level; there are at most sky_labels of them, and they span the image's width. A given horizon row
+# (here 40 px above the level horizon) holds them above it by the margin too.
+@pytest.mark.parametrize("pitch, horizon_row", [(0.0, None), (0.08, None), (0.0, 80.0)])
+def test_sky_labels_lie_above_the_horizon_by_the_margin(pitch, horizon_row):
     seq = make_sequence(2, width=320, height=240, pitch=pitch, seed=2)
     cl = ClassifierConfig()
-    vo = GroundVO(seq["K"], seq["camera_height"], seed=0, downsample=1, camera_pitch=pitch)
+    vo = GroundVO(seq["K"], seq["camera_height"], seed=0, downsample=1, camera_pitch=pitch,
+                  ground=GroundModelConfig(horizon_row=horizon_row))
     vo.process(seq["rgb"][0], 0.0)
     xy = vo.sky_labels_
     assert 0 < len(xy) <= cl.sky_labels
@@ -53,6 +55,8 @@ def test_sky_labels_lie_above_the_horizon_by_the_margin(pitch):
     up = -(c * rays[1] + s * rays[2])                                        # level frame, up
     fwd = -s * rays[1] + c * rays[2]
     assert np.all(np.arctan2(up, fwd) > cl.sky_margin)
+    if horizon_row is not None:
+        assert np.all(np.arctan((horizon_row - xy[:, 1]) / seq["K"][1, 1]) > cl.sky_margin - 1e-9)
     assert np.ptp(xy[:, 0]) > 0.9 * 320 - 8
 
 
