@@ -13,6 +13,10 @@ from the repository root)::
 - ``w6_nosky``: w6 without the non-ground self-labels above the horizon (``ClassifierConfig(sky_labels=0)``:
   the default before 2026-12-07's eleventh session); ``w6_sky30``, ``w6_sky50``, ``w6_sky300``: other
   numbers of them, and ``w6_sky300m05`` 300 from 0.05 rad above the horizon (the default: 100 from 0.1 rad).
+- ``w6_slip0``, ``w6_slip05``, ``w6_slip10``, ``w6_slip15``: w6 with the camera's sideways slip
+  ``MotionConfig(slip=...)`` of 0, 0.005, 0.01 and 0.015 s (the experiments give the built-in w6 the
+  rover's, ``ROVER_SLIP`` = 0.01). In the dev sweep of 2026-12-07 (twelfth session) only the tracks' flow
+  model took the slip; the dense fit took it afterwards, and the sweep was not re-run.
 
 Each runs at the working size and with the 3-D integration that the experiments give the built-in
 ``w6`` (``downsample=1``, ``integration="3d"``); a plug-in gets only the protocol from them. (Before
@@ -21,13 +25,14 @@ the ``w6_nodense`` rows in ``benchmarks/RESULTS.md`` from 2026-12-06 compare une
 """
 
 
-def _w6(K, camera_height, seed, params, classifier=None, **dense):
-    from polar_sim.ground import ClassifierConfig, DenseConfig, GroundVO
+def _w6(K, camera_height, seed, params, classifier=None, motion=None, **dense):
+    from polar_sim.ground import ClassifierConfig, DenseConfig, GroundVO, MotionConfig
 
     params.setdefault("downsample", 1)
     params.setdefault("integration", "3d")
     return GroundVO(K, camera_height, model="6param", sampling="weighted", seed=seed, dense=DenseConfig(**dense),
-                    classifier=ClassifierConfig(**(classifier or {})), **params)
+                    classifier=ClassifierConfig(**(classifier or {})), motion=MotionConfig(**(motion or {})),
+                    **params)
 
 
 def w6_nodense(K, camera_height, *, seed=0, **params):
@@ -64,3 +69,14 @@ def _sky(n, margin=0.1):
 
 
 w6_sky30, w6_sky50, w6_sky300, w6_sky300m05 = _sky(30), _sky(50), _sky(300), _sky(300, 0.05)
+
+
+def _slip(k):
+    def make(K, camera_height, *, seed=0, **params):
+        return _w6(K, camera_height, seed, params, motion={"slip": k})
+
+    make.__doc__ = f"w6 with the camera's sideways slip {k} s (``MotionConfig(slip=...)``)."
+    return make
+
+
+w6_slip0, w6_slip05, w6_slip10, w6_slip15 = _slip(0.0), _slip(0.005), _slip(0.010), _slip(0.015)

@@ -72,6 +72,14 @@ def load(params, ctx):
     return rec, route_truth(rec)
 
 
+def rover_vo_params(tr):
+    """GroundVO's settings for the rover's recordings (the built-in methods'): the working size (the
+    routes are recorded at it) and the rover's calibrated sideways slip (``tr["slip"]``)."""
+    from polar_sim.ground import MotionConfig
+
+    return {"downsample": 1, "motion": MotionConfig(slip=tr["slip"])}
+
+
 def table(rows, cols, why=None):
     """A markdown table without the columns that are empty (None, "" or NaN) in every row, followed by
     one line naming the columns left out and why (``why``: {column: reason}; a column without one is

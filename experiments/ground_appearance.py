@@ -56,7 +56,7 @@ def trial(params, seed, ctx):
             probs[i] = e.ground_prob.copy()
 
     m = params["method"]
-    replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **({"downsample": 1} if m in OURS else {})),
+    replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **(G.rover_vo_params(tr) if m in OURS else {})),
            rec.frames(keys=("rgb", "t", "ground_mask")), on_frame=score)
     ctx.save_arrays("series", t=t, iou=iou, settled=settled, zone=z["zone"], progress=z["progress"],
                     boundaries=z["boundaries"], bins=bins, psums=psums, families=np.array(G.family_names(rec)))

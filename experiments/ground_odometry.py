@@ -36,7 +36,7 @@ def trial(params, seed, ctx):
 
     rec, tr = G.load(params, ctx)
     m = params["method"]
-    kw = dict(downsample=1, integration="3d") if m in OURS else {}  # a user's VO gets the protocol only
+    kw = dict(G.rover_vo_params(tr), integration="3d") if m in OURS else {}  # a user's VO gets the protocol only
     if m == "mono":
         kw["speed_truth"] = tr["speed_cd"]
     run = replay(get_method("vo", m)(tr["K"], tr["h"], seed=seed, **kw), rec.frames(keys=("rgb", "t")))

@@ -231,11 +231,13 @@ YAW_RATE_BOUND = 5.0  # rad/s
 
 
 def _make_groundvo(K, camera_height, *, seed, **params):
-    from polar_sim.ground import GroundVO
+    from polar_sim.ground import GroundVO, MotionConfig
+    from polar_sim.sim.recorders.rover_sequences import ROVER_SLIP
 
     # The route images are already at the VO's working size (about 620 px wide, as KITTI's
-    # reduced images), so no pyramid level; the 3D integration follows the hills.
-    params = {"downsample": 1, "integration": "3d", **params}
+    # reduced images), so no pyramid level; the 3D integration follows the hills; the rover's
+    # tyres creep sideways in turns.
+    params = {"downsample": 1, "integration": "3d", "motion": MotionConfig(slip=ROVER_SLIP), **params}
     return GroundVO(K, camera_height, seed=seed, **params)
 
 
@@ -251,7 +253,8 @@ class VOOdometry:
     ----------
     vo : "groundvo" or callable
         ``"groundvo"``: :class:`polar_sim.ground.GroundVO` (``downsample=1``,
-        ``integration="3d"``, seeded from the task). Or a factory ``vo(K, camera_height, seed=...,
+        ``integration="3d"``, the rover's sideways slip ``motion=MotionConfig(slip=ROVER_SLIP)``,
+        seeded from the task). Or a factory ``vo(K, camera_height, seed=...,
         **vo_params)`` returning an object whose ``process(rgb, t)`` gives a result with ``pose``
         (4, 4) (camera k in camera 0's frame, OpenCV axes), ``speed`` (m/s), ``yaw_rate`` (rad/s
         about camera +y, > 0 turning right) and optionally ``ground_prob`` (H, W) in [0, 1] and

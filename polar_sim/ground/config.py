@@ -109,6 +109,14 @@ class MotionConfig(_Stage):
     exact_flow : bool, default=True
         Correct the centred flow for the exact motion between the three frames (not in the spec):
         removes the O((V dt/Z)²) bias of the differential model on near points.
+    slip : float, default=0.0
+        The camera's sideways velocity per unit forward speed and yaw rate, s (not in the spec): the
+        focus of expansion sits at t1 = -slip x ω in the flow model and the dense fit's step turns by
+        arctan(-slip x yaw change / dt) (:func:`~polar_sim.ground.motion.estimate_motion`). A constant of
+        the robot, like the camera height: 0 is a camera that moves along its optical axis (the spec's
+        model); a camera L m ahead of a car's rear axle has -L / V; the simulated rover's tyres creep
+        outward in turns (:data:`polar_sim.sim.recorders.rover_sequences.ROVER_SLIP`, 0.01 s, which the
+        rover experiments and environment pass).
     depth_q, depth_r, depth_p_reset : float or None, default=None
         Inverse-depth propagation noise, measurement noise and reset variance ((1/m)²); None: the
         spec's 0.02, 0.6, 0.95 scaled by (1.68 / h)².
@@ -123,12 +131,13 @@ class MotionConfig(_Stage):
     ridge: float = 1.0
     estimate_foe: bool = False
     exact_flow: bool = True
+    slip: float = 0.0
     depth_q: float | None = None
     depth_r: float | None = None
     depth_p_reset: float | None = None
     depth_fusion: str = "fixed"
 
-    _PUBLISHED = dict(irls_iter=0, n_global=3, estimate_foe=False, exact_flow=False, depth_fusion="published")
+    _PUBLISHED = dict(irls_iter=0, n_global=3, estimate_foe=False, exact_flow=False, slip=0.0, depth_fusion="published")
 
     def __post_init__(self):
         as_int(self.min_triplets, "min_triplets", minimum=10, maximum=MAX_FEATURES)
@@ -137,6 +146,7 @@ class MotionConfig(_Stage):
         as_positive_float(self.ridge, "ridge", allow_zero=True)
         as_bool(self.estimate_foe, "estimate_foe")
         as_bool(self.exact_flow, "exact_flow")
+        as_float(self.slip, "slip", minimum=-1.0, maximum=1.0)
         for name in ("depth_q", "depth_r", "depth_p_reset"):
             _optional(getattr(self, name), as_positive_float, name)
         check_choice(self.depth_fusion, SWITCH, "depth_fusion")

@@ -62,6 +62,8 @@ class DenseFit:
         the ground is not the plane the model assumes (a slope or a crest ahead), the two disagree.
     model : str
         The warp model fitted (a key of :data:`WARP_MODELS`).
+    slip : float
+        The sideways slip per radian of yaw change it was fitted with, 1/rad.
     """
 
     ok: bool
@@ -75,6 +77,7 @@ class DenseFit:
     params: tuple = ()
     band_spread: float = np.nan
     model: str = "plane"
+    slip: float = 0.0
 
 
 def _failed(s0, a0, iterations=0):
@@ -163,6 +166,17 @@ SURFACE_PRIOR_SD = (0.05, 0.002, 0.03)
 _SHAPES = {"side_slope": (2,), "surface": (0, 1, 2)}
 
 
+def _step(s, a, f1, f2, slip):
+    """The camera's displacement (3,) in the level frame of the first image over a unicycle step of arc
+    length s and yaw change a (f1, f2 = (1 - cos a)/a, sin a/a): along the chord, turned sideways by
+    arctan(-slip a) (the camera's sideways slip, ``MotionConfig.slip`` over the step's duration)."""
+    if not slip:
+        return s * np.array([f1, 0.0, f2])
+    b = np.arctan(-slip * a)
+    cb, sb = np.cos(b), np.sin(b)
+    return s * np.array([f1 * cb + f2 * sb, 0.0, f2 * cb - f1 * sb])
+
+
 class _Warp:
     """The ground homography of one pyramid level as a function of the motion parameters p, and its
     derivatives: p = (s, a) arc length (m) and yaw change (rad) of a unicycle step over the plane y = h
@@ -170,11 +184,12 @@ class _Warp:
     the images, ``"pitch_roll"`` also the roll change c (about z): a chassis that pitches and rolls
     over uneven ground, the ground still the plane h below the camera."""
 
-    def __init__(self, cam, h, model="plane"):
+    def __init__(self, cam, h, model="plane", slip=0.0):
         self.M = cam.K @ cam.R_lc.T  # level-frame normalised coordinates -> pixels
         self.Minv = np.linalg.inv(self.M)
         self.h = h
         self.n_params = WARP_MODELS[model]
+        self.slip = float(slip)
 
     def level(self, p):
         """The homography (3, 3) in level-frame normalised coordinates."""
@@ -189,8 +204,7 @@ class _Warp:
             R = _rot_x(p[2]).T @ R
         if len(p) > 3:
             R = _rot_z(p[3]).T @ R
-        pos = s * np.array([f1, 0.0, f2])
-        return R @ (np.eye(3) - np.outer(pos, _N) / self.h)
+        return R @ (np.eye(3) - np.outer(_step(s, a, f1, f2, self.slip), _N) / self.h)
 
     def matrices(self, p):
         """The pixel homography H(p) (3, 3) and its derivatives (n_params, 3, 3) (central differences)."""
@@ -229,10 +243,11 @@ class _SurfaceWarp:
 
     _STEPS = (1e-5, 1e-6, 1e-6, 1e-6, 1e-7, 1e-6)  # forward-difference steps of s, a, b, c1, c2, c3
 
-    def __init__(self, cam, h, shape=(0, 1, 2), prior_sd=SURFACE_PRIOR_SD):
+    def __init__(self, cam, h, shape=(0, 1, 2), prior_sd=SURFACE_PRIOR_SD, slip=0.0):
         self.M = cam.K @ cam.R_lc.T
         self.Minv = np.linalg.inv(self.M)
         self.h = h
+        self.slip = float(slip)
         self.shape = tuple(shape)
         self.n_params = 3 + len(self.shape)
         self.prior_sd = np.r_[np.inf, np.inf, np.inf, [prior_sd[i] for i in self.shape]]
@@ -250,7 +265,7 @@ class _SurfaceWarp:
         with np.errstate(invalid="ignore", divide="ignore"):
             Z = 2.0 * self.h / (B + np.sqrt(B * B - 4.0 * c2 * self.h))  # the near root, stable for c2 -> 0
             Z = np.where(np.isfinite(Z) & (Z > 0), Z, np.nan)
-            X = rays * Z[:, None] - s * np.array([f1, 0.0, f2])
+            X = rays * Z[:, None] - _step(s, a, f1, f2, self.slip)
             P = X @ (self.M @ R).T
             return P[:, :2] / P[:, 2:3]
 
@@ -271,8 +286,8 @@ class _SurfaceWarp:
         return x, J
 
 
-def _make_warp(model, cam, h):
-    return _SurfaceWarp(cam, h, _SHAPES[model]) if model in _SHAPES else _Warp(cam, h, model)
+def _make_warp(model, cam, h, slip=0.0):
+    return _SurfaceWarp(cam, h, _SHAPES[model], slip=slip) if model in _SHAPES else _Warp(cam, h, model, slip)
 
 
 def _sample(img, xy):
@@ -396,7 +411,7 @@ def _level_pixels(prev, lv, mask, weights, *, block, max_pixels, min_gradient, g
 
 def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_pixels=1500, min_gradient=0.05,
                  min_pixels=200, max_iter=10, residual_floor=0.3, tol=0.05, gradient_weight=0.0, model="plane",
-                 alias_range=0.0, alias_margin=0.2):
+                 alias_range=0.0, alias_margin=0.2, slip=0.0):
     """Align the ground of ``prev`` to ``cur`` (two :class:`Pyramid`) through the ground homography.
 
     Parameters
@@ -424,6 +439,9 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
         ground that slopes across the image; or a curved ground.
     alias_range, alias_margin : float
         Aliasing test along s (m; 0 = no test) and its relative cost margin (see the module docstring).
+    slip : float
+        The camera's sideways slip per radian of yaw change, 1/rad (``MotionConfig.slip`` / the time
+        between the images): the step's direction is turned by arctan(-slip a) from its chord.
 
     Returns
     -------
@@ -431,7 +449,7 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
     """
     p, its = np.r_[s0, a0, np.zeros(WARP_MODELS[model] - 2)].astype(np.float64), 0
     for lv in range(prev.levels - 1, -1, -1):
-        warp = _make_warp(model, cam.scaled(2.0 ** -lv) if lv else cam, h)
+        warp = _make_warp(model, cam.scaled(2.0 ** -lv) if lv else cam, h, slip)
         xh, tmpl, w = _level_pixels(prev, lv, mask, weights, block=block, max_pixels=max_pixels,
                                     min_gradient=min_gradient, gradient_weight=gradient_weight)
         if len(xh) < min_pixels:
@@ -449,7 +467,7 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
     aliased = alias_range > 0 and _aliased(warp, tmpl, cur.img[0], xh, w, p, scale, alias_range=alias_range,
                                            alias_margin=alias_margin)
     return DenseFit(True, float(p[0]), float(p[1]), cov, n, float(scale), aliased, its, tuple(float(x) for x in p),
-                    spread, model)
+                    spread, model, float(slip))
 
 
 def _residual_maps(prev, cur, cam, h, fit, mask, window):
@@ -457,7 +475,7 @@ def _residual_maps(prev, cur, cam, h, fit, mask, window):
     ground motion (g) and under its rotation alone (i, where points at infinity go), over the rows of
     ``mask``: (g, i, r0, r1) with the maps of rows r0:r1, or None if the mask is empty."""
     p = np.array(fit.params or (fit.s, fit.a))
-    warp = _make_warp(fit.model if fit.params else "plane", cam, h)
+    warp = _make_warp(fit.model if fit.params else "plane", cam, h, fit.slip)
     rows = np.flatnonzero(mask.any(axis=1))
     if len(rows) == 0:
         return None

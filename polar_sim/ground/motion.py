@@ -60,7 +60,7 @@ class MotionResult:
     """Output of :func:`estimate_motion`.
 
     rates : (3,) (Ωx, Ωy = yaw rate ω, Ωz) in rad/s (n_global = 1: only Ωy is estimated).
-    foe : (2,) focus of expansion (t1, t2), normalised; zeros unless estimated.
+    foe : (2,) focus of expansion (t1, t2), normalised; zeros unless estimated or given by ``slip``.
     dbar : (N,) scaled inverse depth V/Z in 1/s, absolute value; NaN where not valid.
     valid : (N,) bool, d̄ has the sign of the median d̄ (points behind or reversing are dropped).
     iterations : IRLS iterations run (0 = plain least squares).
@@ -153,7 +153,7 @@ def _discretisation_bias(u, v, rates, t, dbar, span):
 
 
 def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, irls_tol=1e-3,
-                    irls_floor=1e-5, estimate_foe=False, span=None, compat="fixed"):
+                    irls_floor=1e-5, estimate_foe=False, span=None, slip=0.0, compat="fixed"):
     """Rotation rates and scaled inverse depths from centred image flow (spec §3).
 
     Parameters
@@ -176,6 +176,14 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
         (:func:`central_difference_flow`); this removes the O((V dt / Z)²) bias of near points that the
         differential model of the spec has (≈1 % in ω for a camera 1 m above the ground). None: the
         spec's plain differential model.
+    slip : float, default=0.0
+        The camera's sideways velocity per unit forward speed and yaw rate, s: the focus of expansion
+        sits at t1 = -slip x ω (ω the current yaw-rate estimate, at every IRLS iteration; t2 = 0). A
+        wheeled robot's camera is not at the point of its chassis that moves straight ahead in a turn
+        (tyres creep outward, a camera sits ahead of the rear axle); with the focus of expansion at the
+        centre, the ground's sideways flow (-t1 d̄) is read partly as yaw. The flow cannot tell it
+        from a roll rate within one frame, so it is a constant of the robot, given. Ignored with
+        ``estimate_foe`` or ``irls_iter=0``.
     compat : {"fixed", "code"}
         "code" returns exactly the initial ridge LS with n_g = 3 (B1: the published IRLS is inert).
     """
@@ -186,6 +194,7 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
     n = len(u)
     if compat == "code":
         n_global, irls_iter, estimate_foe, span = 3, 0, False, None
+    slip = 0.0 if estimate_foe else float(slip)
     ng_rates = 1 if (n_global == 1 and not estimate_foe) else 3  # the FOE model carries all three rates
     lam_rates = np.zeros(ng_rates) if ng_rates == 1 else np.array([ridge, 0.0, ridge])
 
@@ -216,6 +225,8 @@ def estimate_motion(u, v, udot, vdot, *, n_global=3, ridge=1.0, irls_iter=10, ir
     ng = 5 if estimate_foe else ng_rates
     lam = np.concatenate([np.zeros(2), lam_rates]) if estimate_foe else lam_rates
     for it in range(1, irls_iter + 1):
+        if slip:
+            t = np.array([-slip * rates[1], 0.0])
         if span is not None:
             bias_u, bias_v = _discretisation_bias(u, v, rates, t, dbar, span)
         fu, fv = _predict(u, v, rates, t, dbar)

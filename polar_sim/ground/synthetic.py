@@ -288,7 +288,7 @@ class CorridorScene:
 
 def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, yaw_rate=0.1, dt=0.1,
                   camera_height=1.0, half_width=4.0, noise_std=1.0, pitch=0.0, roll=0.0, seed=0, ground="noise",
-                  accel=None, sky_rgb=None):
+                  accel=None, sky_rgb=None, slip=0.0):
     """Render a synthetic sequence along an exact unicycle path.
 
     ``pitch`` (rad, > 0 down) tilts the camera about its x axis relative to the level vehicle frame
@@ -297,11 +297,14 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     that the ground slopes across the image. ``ground`` is the
     ground texture (:data:`GROUND_KINDS`). With ``accel`` (m/s²) the camera starts from rest and speeds
     up to ``speed`` on the same circle; ``speeds`` (n,) holds the true speed at every image. ``sky_rgb``
-    (3,) paints the plain sky (None: :class:`CorridorScene`'s light blue).
+    (3,) paints the plain sky (None: :class:`CorridorScene`'s light blue). ``slip`` (s) turns the
+    camera about its vertical by arctan(slip ω) from the path's tangent, so that its velocity points
+    t1 = -slip ω to the side of its optical axis (tyres creeping outward in a turn: slip > 0; a camera
+    ahead of a car's rear axle: slip < 0; ``MotionConfig.slip``).
 
     Returns a dict: ``rgb`` (n, H, W, 3) uint8, ``ground_mask`` (n, H, W) bool, ``depth`` (n, H, W)
     float32, ``poses`` (n, 4, 4) (KITTI: camera k in camera 0's frame), ``times`` (n,), ``K`` (3, 3),
-    ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``, ``roll``.
+    ``camera_height``, ``speed``, ``yaw_rate``, ``pitch``, ``roll``, ``slip``.
     """
     K = pinhole_intrinsics(width, height, fovy_deg)
     curv = yaw_rate / speed if speed > 0 else 0.0
@@ -309,6 +312,13 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground,
                           **sky)
     level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)
+    if slip:
+        times = np.arange(n_frames) * dt
+        v = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
+        d = np.arctan(slip * curv * v)  # the yaw rate at each image is curv x speed
+        turn = np.tile(np.eye(4), (n_frames, 1, 1))
+        turn[:, 0, 0], turn[:, 0, 2], turn[:, 2, 0], turn[:, 2, 2] = np.cos(d), np.sin(d), -np.sin(d), np.cos(d)
+        level = level @ turn
     M = np.eye(4)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cr, sr = np.cos(roll), np.sin(roll)
@@ -325,7 +335,7 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     times = np.arange(n_frames) * dt
     speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
-                speed=speed, yaw_rate=yaw_rate, pitch=pitch, roll=roll, speeds=speeds)
+                speed=speed, yaw_rate=yaw_rate, pitch=pitch, roll=roll, speeds=speeds, slip=slip)
 
 
 def check_data():

@@ -514,7 +514,7 @@ class GroundVO(Parameterised):
         halves = (self.times_[-1] - self.times_[-2], t - self.times_[-1])
         mc = c.motion
         m = estimate_motion(u, v, (u2 - u0) / span, (v2 - v0) / span, n_global=mc.n_global, ridge=mc.ridge,
-                            irls_iter=mc.irls_iter, estimate_foe=mc.estimate_foe,
+                            irls_iter=mc.irls_iter, estimate_foe=mc.estimate_foe, slip=mc.slip,
                             span=halves if mc.exact_flow else None, compat="fixed")
         diag["irls_iterations"] = int(m.iterations)
         return m, idx, x1, u, v
@@ -677,7 +677,7 @@ class GroundVO(Parameterised):
                            min_gradient=d.min_gradient, min_pixels=d.min_pixels, max_iter=d.max_iter,
                            residual_floor=d.residual_floor, gradient_weight=d.gradient_weight, model=d.model,
                            alias_range=d.alias_sigmas * np.sqrt(self.speed_filter_.P + self.speed_filter_.q) * dt,
-                           alias_margin=d.alias_margin)
+                           alias_margin=d.alias_margin, slip=c.motion.slip / dt)
         self.dense_fits_ = (self.dense_fits_[1], (fit, dt))
         diag.update(dense_ok=fit.ok, dense_aliased=fit.aliased, dense_pixels=fit.n_pixels,
                     dense_iterations=fit.iterations)

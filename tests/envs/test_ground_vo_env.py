@@ -184,3 +184,15 @@ def test_a_vo_of_ones_own_plugs_in():
     np.testing.assert_allclose(info["est_pose2d"][:2], start[:2, 3], atol=1e-9)
     assert info["vo_status"] == "mine" and not obs["ground_prob"].any() and obs in env.observation_space
     env.close()
+
+
+def test_the_default_vo_is_set_for_the_rover():
+    # The environment's GroundVO knows the rover's sideways slip (a constant of the robot, as its camera
+    # height is); a vo_params entry still wins.
+    from polar_sim.envs.observers import _make_groundvo
+    from polar_sim.ground import MotionConfig
+    from polar_sim.sim.recorders.rover_sequences import ROVER_SLIP
+
+    K = np.array([[300.0, 0.0, 310.0], [0.0, 300.0, 94.0], [0.0, 0.0, 1.0]])
+    assert ROVER_SLIP > 0 and _make_groundvo(K, 1.65, seed=0).motion.slip == ROVER_SLIP
+    assert _make_groundvo(K, 1.65, seed=0, motion=MotionConfig(slip=0.0)).motion.slip == 0.0

@@ -21,6 +21,7 @@ BAD = [
     (MotionConfig, "min_triplets", 2**40), (MotionConfig, "irls_iter", 10**9), (MotionConfig, "irls_iter", -1),
     (MotionConfig, "n_global", 2), (MotionConfig, "n_global", True), (MotionConfig, "ridge", float("inf")),
     (MotionConfig, "estimate_foe", 1), (MotionConfig, "exact_flow", None), (MotionConfig, "depth_q", 0.0),
+    (MotionConfig, "slip", float("nan")), (MotionConfig, "slip", 2.0), (MotionConfig, "slip", "car"),
     (MotionConfig, "depth_r", "0.6"), (MotionConfig, "depth_p_reset", -1.0), (MotionConfig, "depth_fusion", None),
     (GroundModelConfig, "n_iter", 0), (GroundModelConfig, "n_iter", 2**63), (GroundModelConfig, "n_iter", 55.0),
     (GroundModelConfig, "lam", -0.1), (GroundModelConfig, "sigma", 0.0), (GroundModelConfig, "weight_exponent", 1e400),

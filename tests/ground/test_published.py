@@ -29,6 +29,7 @@ def test_published_preset_is_the_stage_configs(corridor):
     assert all(p[f"{s}__{f}"] == "published" for s, f in SWITCHES)
     assert p["ground__n_iter"] == 99 and p["ground__weight_exponent"] == 2.0  # B18, B11
     assert p["motion__irls_iter"] == 0 and not p["motion__exact_flow"] and p["motion__n_global"] == 3  # B1, B4
+    assert p["motion__slip"] == 0.0  # the camera moves along its optical axis (spec §3.1)
     assert p["filters__speed_prior_var"] == pytest.approx(2 * p["filters__speed_q"])
     assert p["classifier__ng_from_outliers"] is False and p["classifier__sky_labels"] == 0  # B9; no sky labels
     assert p["classifier__train_depth"] is None and p["classifier__decay_samples"] is None

@@ -30,7 +30,7 @@ from polar_sim.sim.recorders.recording import Recording
 from polar_sim.sim.truth import LABELS
 from polar_sim.sim.world import World
 
-__all__ = ["ROUTES", "TEST_ROUTES", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "DEV_ONLY_FAMILIES", "RouteSpec", "route_spec",
+__all__ = ["ROUTES", "TEST_ROUTES", "ROVER_SLIP", "SPLITS", "DEV_FAMILIES", "TEST_ONLY_FAMILIES", "DEV_ONLY_FAMILIES", "RouteSpec", "route_spec",
            "record_route", "load_route", "route_truth", "route_layout", "route_zones",
            "settled_frames", "KITTI_FOVY_DEG", "reduce2x", "RECORDER_VERSION"]
 
@@ -105,6 +105,12 @@ TEST_ROUTES = {
 #: Route names per split; the first ten dev routes are the ones every result before the held-out
 #: protocol was measured on.
 SPLITS = {"dev": tuple(ROUTES), "test": tuple(TEST_ROUTES)}
+
+#: The car rover's sideways slip (s) for the VO's flow model (``polar_sim.ground.MotionConfig.slip``): in
+#: turns its tyres creep outward, the camera's lateral velocity about 0.0104 s x forward speed x yaw rate
+#: (the truth of the dev route ``flat_00``); 0.01 was chosen on the dev routes' odometry (0, 0.005, 0.01,
+#: 0.015; ``benchmarks/RESULTS.md``). A calibration constant of the robot, not read from any recording.
+ROVER_SLIP = 0.01
 
 #: Bumped whenever the recorder's output changes (the cache key holds it, so a stale recording is
 #: never replayed).
@@ -262,7 +268,7 @@ def route_truth(rec):
     (n,) instantaneous camera speed, ``speed_cd`` (n,) central-difference speed
     |p_{k+1} - p_{k-1}| / (t_{k+1} - t_{k-1}) (one-sided at the ends), ``step`` (n,) length of the step
     k-1 -> k (0 for k = 0), ``yaw_rate`` (n,) ``w_cam[1]``, ``K``, ``h`` (m), ``dt`` (s), ``length_m``
-    (path length) and ``meta``.
+    (path length), ``meta``, and the rover's calibrated sideways slip ``slip`` (s, :data:`ROVER_SLIP`).
     """
     T = rec.stack("T_world_cam")
     gt = np.linalg.inv(T[0]) @ T
@@ -275,7 +281,7 @@ def route_truth(rec):
     return dict(gt=gt, t=t, speed=rec.stack("speed").astype(np.float64), speed_cd=speed_cd, step=step,
                 yaw_rate=rec.stack("w_cam")[:, 1].astype(np.float64), K=np.array(rec.meta["K"]),
                 h=float(rec.meta["camera_height"]), dt=float(rec.meta["dt"]), length_m=float(step.sum()),
-                meta=dict(rec.meta))
+                meta=dict(rec.meta), slip=ROVER_SLIP)
 
 
 def route_layout(name):
