@@ -7,7 +7,7 @@ Flow model of a camera moving along its optical axis at speed V and rotating at
     v̇ = (v - t2) d̄ + (1 + v²) Ωx - u v Ωy - u Ωz
 
 with d̄ = V/Z the scaled inverse depth of each point and (t1, t2) the focus of expansion (0 unless
-``estimate_foe``). Each point has its own d̄, so the normal equations are arrow-shaped and are solved
+``estimate_foe``, or (-slip·Ωy, 0) for a camera that slips sideways in turns). Each point has its own d̄, so the normal equations are arrow-shaped and are solved
 in O(N) through the Schur complement of the diagonal block (:func:`arrow_solve`).
 """
 
