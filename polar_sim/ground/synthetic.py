@@ -312,10 +312,10 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     scene = CorridorScene(camera_height=camera_height, half_width=half_width, curvature=curv, seed=seed, ground=ground,
                           **sky)
     level = unicycle_poses(n_frames, dt, speed, yaw_rate, accel)
+    times = np.arange(n_frames) * dt
+    speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     if slip:
-        times = np.arange(n_frames) * dt
-        v = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
-        d = np.arctan(slip * curv * v)  # the yaw rate at each image is curv x speed
+        d = np.arctan(slip * curv * speeds)  # the yaw rate at each image is curv x speed
         turn = np.tile(np.eye(4), (n_frames, 1, 1))
         turn[:, 0, 0], turn[:, 0, 2], turn[:, 2, 0], turn[:, 2, 2] = np.cos(d), np.sin(d), -np.sin(d), np.cos(d)
         level = level @ turn
@@ -332,8 +332,6 @@ def make_sequence(n_frames, *, width=640, height=480, fovy_deg=60.0, speed=5.0, 
     depth = np.empty((n_frames, height, width), np.float32)
     for i, T in enumerate(world_cam):
         rgb[i], mask[i], depth[i] = scene.render(T, K, width, height, noise_std=noise_std, rng=rng)
-    times = np.arange(n_frames) * dt
-    speeds = np.full(n_frames, float(speed)) if accel is None else np.minimum(accel * times, speed)
     return dict(rgb=rgb, ground_mask=mask, depth=depth, poses=poses, times=times, K=K, camera_height=camera_height,
                 speed=speed, yaw_rate=yaw_rate, pitch=pitch, roll=roll, speeds=speeds, slip=slip)
 
