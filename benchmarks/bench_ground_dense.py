@@ -17,6 +17,8 @@ from the repository root)::
   ``MotionConfig(slip=...)`` of 0, 0.005, 0.01 and 0.015 s (the experiments give the built-in w6 the
   rover's, ``ROVER_SLIP`` = 0.01). In the dev sweep of 2026-12-07 (twelfth session) only the tracks' flow
   model took the slip; the dense fit took it afterwards, and the sweep was not re-run.
+- ``w6_smooth20``: w6 (with the rover's slip, as the built-in one) whose dense fit smooths its pyramid by
+  2 px instead of 1 (``DenseConfig(smoothing=2.0)``; 2026-12-07, thirteenth session).
 
 Each runs at the working size and with the 3-D integration that the experiments give the built-in
 ``w6`` (``downsample=1``, ``integration="3d"``); a plug-in gets only the protocol from them. (Before
@@ -80,3 +82,17 @@ def _slip(k):
 
 
 w6_slip0, w6_slip05, w6_slip10, w6_slip15 = _slip(0.0), _slip(0.005), _slip(0.010), _slip(0.015)
+
+
+def _smooth(s):
+    def make(K, camera_height, *, seed=0, **params):
+        from polar_sim.sim.recorders.rover_sequences import ROVER_SLIP
+
+        return _w6(K, camera_height, seed, params, motion={"slip": ROVER_SLIP}, smoothing=s)
+
+    make.__doc__ = (f"w6 with the dense fit's pyramid smoothed by {s} px (``DenseConfig(smoothing=...)``) and the "
+                    "rover's slip, as the built-in w6 has it.")
+    return make
+
+
+w6_smooth20 = _smooth(2.0)
