@@ -98,7 +98,7 @@ def bases(tmp_path_factory):
 
 # every tampered file (valid zip checksums) raises ValueError naming the file; none crashes,
 # hangs or is accepted; the cases run in worker subprocesses with a time limit, every one of them
-# (a worker takes 60 at a time: about 30 s in all; benchmarks/bench_gpis_io.py runs the larger bases)
+# (1,085 from the same bases as benchmarks/bench_gpis_io.py; a worker takes 60 at a time: about 30 s)
 def test_tampered_files(bases):
     d, names = bases
     cases = iofaults.all_cases(d, names)
