@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 __all__ = ["DenseFit", "Pyramid", "WARP_MODELS", "align_ground", "ground_evidence", "label_points", "fuse_measurements",
@@ -32,6 +33,7 @@ __all__ = ["DenseFit", "Pyramid", "WARP_MODELS", "align_ground", "ground_evidenc
 
 _TUKEY_C = 4.685  # Tukey biweight constant (95 % efficiency at the normal law)
 _N = np.array([0.0, 1.0, 0.0])  # ground normal in the level frame (y down)
+_BIG = float(np.finfo(np.float64).max)  # what np.nan_to_num makes of inf
 
 
 @dataclass(frozen=True)
@@ -107,6 +109,8 @@ class Pyramid:
                 img = cv2.resize(img, (grey.shape[1] // f, grey.shape[0] // f), interpolation=cv2.INTER_AREA)
             self.img.append(img)
             self.grad.append(_gradients(img))
+        # (H, W, 3): the image and its gradients, sampled together by one remap per Gauss–Newton iteration
+        self.stack = [cv2.merge([i, *g]) for i, g in zip(self.img, self.grad)]
 
     @property
     def levels(self):
@@ -124,23 +128,34 @@ def select_pixels(grad, mask, *, block, max_pixels, min_gradient):
         return np.zeros((0, 2))
     r0 = rows_any[0] - rows_any[0] % block  # only the rows of the mask, on the block grid
     r1 = rows_any[-1] + 1
-    m, gx, gy = mask[r0:r1], grad[0][r0:r1], grad[1][r0:r1]
-    H, W = m.shape
-    hb, wb = H // block, W // block
-    if hb == 0 or wb == 0:
-        return np.zeros((0, 2))
-    mag = np.where(m, gx * gx + gy * gy, 0.0).astype(np.float32)  # squared: the same order, no root
-    cells = mag[:hb * block, :wb * block].reshape(hb, block, wb, block).transpose(0, 2, 1, 3).reshape(hb, wb, -1)
-    arg = cells.argmax(axis=2)
-    best = np.take_along_axis(cells, arg[..., None], axis=2)[..., 0]
-    rows = r0 + np.arange(hb)[:, None] * block + arg // block
-    cols = np.arange(wb)[None, :] * block + arg % block
-    keep = best > min_gradient * min_gradient
-    xy = np.stack([cols[keep], rows[keep]], axis=1).astype(np.float64)
+    xy = _block_maxima(mask[r0:r1], grad[0][r0:r1], grad[1][r0:r1], block, np.float32(min_gradient * min_gradient))
+    xy[:, 1] += r0
     if len(xy) > max_pixels:
         # An even subset, not the strongest: on a faint ground the strongest are all off the ground.
         xy = xy[np.linspace(0, len(xy) - 1, max_pixels).astype(np.intp)]
     return xy
+
+
+@numba.njit(cache=True, nogil=True)
+def _block_maxima(mask, gx, gy, block, min_sq):  # pragma: no cover - compiled
+    """(column, row) (m, 2) float of the largest squared gradient (float32) of each ``block`` x ``block``
+    cell of the masked images (H, W), the first in row order if tied, where it is above ``min_sq``;
+    cells in row order."""
+    hb, wb = mask.shape[0] // block, mask.shape[1] // block
+    out = np.empty((hb * wb, 2))
+    n = 0
+    for bi in range(hb):
+        for bj in range(wb):
+            best, arg = np.float32(-1.0), 0
+            for k in range(block * block):
+                y, x = bi * block + k // block, bj * block + k % block
+                val = gx[y, x] * gx[y, x] + gy[y, x] * gy[y, x] if mask[y, x] else np.float32(0.0)
+                if val > best:
+                    best, arg = val, k
+            if best > min_sq:
+                out[n, 0], out[n, 1] = bj * block + arg % block, bi * block + arg // block
+                n += 1
+    return out[:n]
 
 
 def _rot_x(b):
@@ -251,39 +266,79 @@ class _SurfaceWarp:
         self.shape = tuple(shape)
         self.n_params = 3 + len(self.shape)
         self.prior_sd = np.r_[np.inf, np.inf, np.inf, [prior_sd[i] for i in self.shape]]
-
-    def _project(self, rays, p):
-        s, a, b = p[:3]
-        c = np.zeros(3)
-        c[list(self.shape)] = p[3:]
-        c1, c2, c3 = c
-        ca, sa = np.cos(a), np.sin(a)
-        f1, f2 = (a / 2 - a ** 3 / 24, 1 - a * a / 6) if abs(a) < 1e-4 else ((1 - ca) / a, sa / a)
-        R = _rot_x(b).T @ np.array([[ca, 0.0, -sa], [0.0, 1.0, 0.0], [sa, 0.0, ca]])
-        u, v = rays[:, 0], rays[:, 1]
-        B = v - c1 - c3 * u
-        with np.errstate(invalid="ignore", divide="ignore"):
-            Z = 2.0 * self.h / (B + np.sqrt(B * B - 4.0 * c2 * self.h))  # the near root, stable for c2 -> 0
-            Z = np.where(np.isfinite(Z) & (Z > 0), Z, np.nan)
-            X = rays * Z[:, None] - _step(s, a, f1, f2, self.slip)
-            P = X @ (self.M @ R).T
-            return P[:, :2] / P[:, 2:3]
+        self._shape = np.array(self.shape, np.int64)
+        self._steps = np.array(self._STEPS[:3] + tuple(self._STEPS[3 + i] for i in self.shape))
 
     def points(self, xh, p, jacobian=False):
         """As :meth:`_Warp.points` (forward differences for the Jacobian)."""
-        r = xh @ self.Minv.T
-        rays = r / r[:, 2:3]
-        p = np.asarray(p, dtype=np.float64)
-        x = self._project(rays, p)
-        if not jacobian:
-            return x
-        steps = self._STEPS[:3] + tuple(self._STEPS[3 + i] for i in self.shape)
-        J = np.empty((len(p), len(xh), 2))
-        for i, e in enumerate(steps):
-            q = p.copy()
-            q[i] += e
-            J[i] = (self._project(rays, q) - x) / e
-        return x, J
+        x, J = _surface_points(xh, np.asarray(p, dtype=np.float64), self._shape, self.M, self.Minv, self.h,
+                               self.slip, self._steps, jacobian)
+        return (x, J) if jacobian else x
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _surface_points(xh, p, shape, M, Minv, h, slip, steps, jacobian):  # pragma: no cover - compiled
+    """Pixel positions (m, 2) of the pixels ``xh`` (m, 3) (homogeneous) of :class:`_SurfaceWarp` under p
+    (k,) (NaN where a ray misses the ground ahead) and, with ``jacobian``, their forward differences
+    (k, m, 2) over ``steps`` (k,). One compiled pass: the warp is evaluated 1 + k times per Gauss–Newton
+    iteration, and as numpy array operations each pass cost ~0.1 ms in call overhead on 1,500 pixels."""
+    k, m = p.shape[0], xh.shape[0]
+    rays = np.empty((m, 2))  # (x, y) of the rays at z = 1
+    for i in range(m):
+        r0 = Minv[0, 0] * xh[i, 0] + Minv[0, 1] * xh[i, 1] + Minv[0, 2] * xh[i, 2]
+        r1 = Minv[1, 0] * xh[i, 0] + Minv[1, 1] * xh[i, 1] + Minv[1, 2] * xh[i, 2]
+        r2 = Minv[2, 0] * xh[i, 0] + Minv[2, 1] * xh[i, 1] + Minv[2, 2] * xh[i, 2]
+        rays[i, 0], rays[i, 1] = r0 / r2, r1 / r2
+    n = k + 1 if jacobian else 1
+    out = np.empty((n, m, 2))
+    A = np.empty((3, 3))
+    Z = np.empty(m)
+    for j in range(n):
+        q = p.copy()
+        if j > 0:
+            q[j - 1] += steps[j - 1]
+        s, a, b = q[0], q[1], q[2]
+        c = np.zeros(3)
+        for i in range(shape.shape[0]):
+            c[shape[i]] = q[3 + i]
+        ca, sa = np.cos(a), np.sin(a)
+        if abs(a) < 1e-4:  # (1 - cos a)/a and sin a/a by their series
+            f1, f2 = a / 2 - a ** 3 / 24, 1 - a * a / 6
+        else:
+            f1, f2 = (1 - ca) / a, sa / a
+        dx, dz = s * f1, s * f2  # the step (see _step), turned sideways by arctan(-slip a)
+        if slip != 0.0:
+            t = np.arctan(-slip * a)
+            ct, st = np.cos(t), np.sin(t)
+            dx, dz = s * (f1 * ct + f2 * st), s * (f2 * ct - f1 * st)
+        cb, sb = np.cos(b), np.sin(b)
+        # A = M R with R = R_x(b)ᵀ R_y(a)ᵀ = [[ca, 0, -sa], [sb sa, cb, sb ca], [cb sa, -sb, cb ca]]
+        for r in range(3):
+            A[r, 0] = M[r, 0] * ca + M[r, 1] * (sb * sa) + M[r, 2] * (cb * sa)
+            A[r, 1] = M[r, 1] * cb - M[r, 2] * sb
+            A[r, 2] = -M[r, 0] * sa + M[r, 1] * (sb * ca) + M[r, 2] * (cb * ca)
+        if j == 0 or j > 3:  # the ray's depth: the step and the rotation (s, a, b) do not move it
+            for i in range(m):
+                B = rays[i, 1] - c[0] - c[2] * rays[i, 0]
+                Z[i] = 2.0 * h / (B + np.sqrt(B * B - 4.0 * c[1] * h))  # the near root, stable for c2 -> 0
+        for i in range(m):
+            u, v, z = rays[i, 0], rays[i, 1], Z[i]
+            if not (np.isfinite(z) and z > 0):
+                out[j, i, 0] = np.nan
+                out[j, i, 1] = np.nan
+                continue
+            X0, X1, X2 = u * z - dx, v * z, z - dz
+            P0 = A[0, 0] * X0 + A[0, 1] * X1 + A[0, 2] * X2
+            P1 = A[1, 0] * X0 + A[1, 1] * X1 + A[1, 2] * X2
+            P2 = A[2, 0] * X0 + A[2, 1] * X1 + A[2, 2] * X2
+            out[j, i, 0] = P0 / P2
+            out[j, i, 1] = P1 / P2
+    J = np.empty((n - 1, m, 2))
+    for j in range(n - 1):
+        for i in range(m):  # loops, not an array expression: numba compiles those 4 s slower
+            J[j, i, 0] = (out[j + 1, i, 0] - out[0, i, 0]) / steps[j]
+            J[j, i, 1] = (out[j + 1, i, 1] - out[0, i, 1]) / steps[j]
+    return out[0], J
 
 
 def _make_warp(model, cam, h, slip=0.0):
@@ -291,13 +346,14 @@ def _make_warp(model, cam, h, slip=0.0):
 
 
 def _sample(img, xy):
-    """Bilinear samples of ``img`` at ``xy`` (m, 2) float (NaN outside the image)."""
+    """Bilinear samples (m,) of ``img`` (H, W), or (m, c) of ``img`` (H, W, c), at ``xy`` (m, 2) float
+    (NaN outside the image)."""
     if len(xy) == 0:
-        return np.zeros(0)
+        return np.zeros((0,) + img.shape[2:])
     mx = np.ascontiguousarray(xy[:, 0], dtype=np.float32).reshape(1, -1)
     my = np.ascontiguousarray(xy[:, 1], dtype=np.float32).reshape(1, -1)
-    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-    return out.ravel().astype(np.float64)
+    out = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)
+    return out[0].astype(np.float64)
 
 
 def _tukey(r, scale):
@@ -305,60 +361,147 @@ def _tukey(r, scale):
     return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
 
 
-def _cost(warp, tmpl, img, xh, prior_w, p, scale):
-    """Mean Tukey cost of the template pixels at p (pixels leaving the image count as outliers)."""
-    v = _sample(img, warp.points(xh, p)) - tmpl
+def _costs(warp, tmpl, img, xh, prior_w, ps, scale):
+    """Mean Tukey cost (n,) of the template pixels under each parameter vector of ``ps`` (n, k) (pixels
+    leaving the image count as outliers), sampled by one remap."""
+    x = np.concatenate([warp.points(xh, p) for p in ps])
+    v = _sample(img, x).reshape(len(ps), len(xh)) - tmpl
     u = np.where(np.isfinite(v), v / (_TUKEY_C * scale), np.inf)
     rho = np.where(np.abs(u) < 1.0, 1.0 - (1.0 - u * u) ** 3, 1.0)
-    return float(np.sum(prior_w * rho) / np.sum(prior_w))
+    return np.sum(prior_w * rho, axis=1) / np.sum(prior_w)
 
 
-def _gauss_newton(warp, tmpl, img, grad, xh, prior_w, p, *, max_iter, floor, min_pixels, tol):
+def _gauss_newton(warp, tmpl, img, stack, xh, prior_w, p, *, max_iter, floor, min_pixels, tol, scale=True):
     """Gauss–Newton on the motion parameters p at one level; returns (p, H (k, k), sigma, n, iterations)
-    or None. Stops when a step moves the template's pixels by less than ``tol`` px (median)."""
+    or None. ``stack`` (H, W, 3) is the image ``img`` and its x and y gradients. Stops when a step moves
+    the template's pixels by less than ``tol`` px (median). Without ``scale`` the returned sigma is the
+    robust scale of the first iteration, not the residuals' spread at the solution."""
     p = np.array(p, dtype=np.float64)
     H = np.zeros((len(p), len(p)))
-    sigma, n, it = np.nan, 0, 0
+    # MAP: the photometric cost in units of its variance, plus the shape prior (none: infinite variance)
+    prior_var = np.asarray(getattr(warp, "prior_sd", np.full(len(p), np.inf)), dtype=np.float64) ** 2
+    sigma, n, it = np.nan, 0, 0  # the first iteration sets the residual scale, kept for the level
     for it in range(1, max_iter + 1):
         x0, Jp = warp.points(xh, p, jacobian=True)
-        r = _sample(img, x0) - tmpl
-        Jp = np.nan_to_num(Jp)
-        gx, gy = _sample(grad[0], x0), _sample(grad[1], x0)
-        ok = np.isfinite(r) & np.isfinite(gx) & np.isfinite(gy)
-        if ok.sum() < min_pixels:
+        rgg = _sample(stack, x0)
+        ok, H, step, sigma, n, moved = _gn_iteration(rgg[:, 0] - tmpl, rgg[:, 1], rgg[:, 2], Jp, prior_w, sigma,
+                                                     floor, min_pixels, prior_var, p)
+        if not ok:
             return None
-        r, gx, gy, w0 = r[ok], gx[ok], gy[ok], prior_w[ok]
-        if it == 1:  # the residual scale of the prediction's basin, kept for the level
-            sigma = max(1.4826 * float(np.median(np.abs(r))), floor)
-        w = w0 * _tukey(r, sigma)
-        n = int(np.count_nonzero(w))
-        if n < min_pixels:
-            return None
-        Jp = Jp[:, ok]
-        J = (gx[None, :] * Jp[..., 0] + gy[None, :] * Jp[..., 1]).T  # (m, k)
-        Jw = J * w[:, None]
-        H = Jw.T @ J
-        g = Jw.T @ r
-        prior = getattr(warp, "prior_sd", None)
-        if prior is not None:  # MAP: photometric cost in units of its variance, plus the shape prior
-            P = sigma * sigma / prior ** 2
-            H = H + np.diag(P)
-            g = g + P * p
-        if not np.all(np.isfinite(H)) or np.linalg.cond(H) > 1e12:
-            return None
-        step = -np.linalg.solve(H, g)
         p = p + step
-        if np.median(np.abs(np.tensordot(step, Jp, axes=1)).sum(axis=1)) < tol:
+        if moved < tol:
             break
-    # The noise scale at the solution (for the covariance and the self-labels): the weighted RMS of the
-    # final residuals under the Tukey weights of a robust scale, i.e. the spread of the inliers.
-    r = _sample(img, warp.points(xh, p)) - tmpl
-    ok = np.isfinite(r)
-    r, w0 = r[ok], prior_w[ok]
-    if len(r):
-        w = w0 * _tukey(r, max(1.4826 * float(np.median(np.abs(r))), floor))
-        sigma = max(float(np.sqrt(np.sum(w * r * r) / max(np.sum(w), 1e-300))), floor)
+    if scale:
+        # The noise scale at the solution (for the covariance and the self-labels): the weighted RMS of the
+        # final residuals under the Tukey weights of a robust scale, i.e. the spread of the inliers.
+        r = _sample(img, warp.points(xh, p)) - tmpl
+        ok = np.isfinite(r)
+        r, w0 = r[ok], prior_w[ok]
+        if len(r):
+            w = w0 * _tukey(r, max(1.4826 * float(np.median(np.abs(r))), floor))
+            sigma = max(float(np.sqrt(np.sum(w * r * r) / max(np.sum(w), 1e-300))), floor)
     return p, H, sigma, n, it
+
+
+def _gn_iteration(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels, prior_var, p):
+    """One Gauss–Newton step from the residuals r (m,), the image gradients (m,) at the warped pixels
+    (NaN outside the image) and the warp's Jacobian Jp (k, m, 2) at p (k,): (ok, H (k, k), step (k,),
+    sigma, n, moved), with H the normal matrix (prior included), n the pixels of non-zero weight and
+    ``moved`` the median motion (px) of the pixels under the step. A NaN ``sigma`` is set from these
+    residuals (robust, floored at ``floor``). Not ok with fewer than ``min_pixels`` pixels inside or
+    weighted, or a singular H."""
+    k = len(p)
+    res = _normal_equations(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels)
+    ok, H, g, sigma, n = res
+    if not ok:
+        return False, H, np.zeros(k), sigma, n, 0.0
+    P = sigma * sigma / prior_var
+    H[np.diag_indices(k)] += P
+    g += P * p
+    if not np.all(np.isfinite(H)) or np.linalg.cond(H) > 1e12:
+        return False, H, np.zeros(k), sigma, n, 0.0
+    step = -np.linalg.solve(H, g)
+    return True, H, step, sigma, n, _median_motion(step, Jp, r, gx, gy)
+
+
+@numba.njit(cache=True, nogil=True)
+def _inside(r, gx, gy):  # pragma: no cover - compiled
+    """The pixels (m,) bool whose residual and gradients are finite (inside the image)."""
+    ok = np.empty(r.shape[0], np.bool_)
+    for i in range(r.shape[0]):
+        ok[i] = np.isfinite(r[i]) and np.isfinite(gx[i]) and np.isfinite(gy[i])
+    return ok
+
+
+@numba.njit(cache=True, nogil=True)
+def _normal_equations(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels):  # pragma: no cover - compiled
+    """(ok, Σ w J Jᵀ (k, k), Σ w J r (k,), sigma, n) over the pixels inside (:func:`_inside`): J the
+    photometric Jacobian (gx, gy)·Jp (NaN entries of Jp as 0, as ``np.nan_to_num``), w the prior
+    weight times Tukey's biweight of r at scale sigma, n the count of non-zero weights. A NaN sigma is
+    set from the residuals (1.4826 x their median absolute value, floored at ``floor``). Not ok with
+    fewer than ``min_pixels`` pixels inside or weighted."""
+    k, m = Jp.shape[0], r.shape[0]
+    H, g, J = np.zeros((k, k)), np.zeros(k), np.empty(k)
+    ok = _inside(r, gx, gy)
+    n_in = np.count_nonzero(ok)
+    if n_in < min_pixels:
+        return False, H, g, sigma, 0
+    if np.isnan(sigma):
+        a = np.empty(n_in)
+        j = 0
+        for i in range(m):
+            if ok[i]:
+                a[j] = abs(r[i])
+                j += 1
+        sigma = max(1.4826 * np.median(a), floor)
+    c = _TUKEY_C * sigma
+    big = _BIG
+    n = 0
+    for i in range(m):
+        if not ok[i]:
+            continue
+        u = r[i] / c
+        if abs(u) >= 1.0:
+            continue
+        w = prior_w[i] * (1.0 - u * u) ** 2
+        if w == 0.0:
+            continue
+        n += 1
+        for a in range(k):
+            jx, jy = Jp[a, i, 0], Jp[a, i, 1]
+            jx = 0.0 if np.isnan(jx) else min(max(jx, -big), big)
+            jy = 0.0 if np.isnan(jy) else min(max(jy, -big), big)
+            J[a] = gx[i] * jx + gy[i] * jy
+        for a in range(k):
+            wa = w * J[a]
+            g[a] += wa * r[i]
+            for b in range(a + 1):
+                H[a, b] += wa * J[b]
+    for a in range(k):
+        for b in range(a):
+            H[b, a] = H[a, b]
+    return n >= min_pixels, H, g, sigma, n
+
+
+@numba.njit(cache=True, nogil=True)
+def _median_motion(step, Jp, r, gx, gy):  # pragma: no cover - compiled
+    """Median over the pixels inside (:func:`_inside`) of |dx| + |dy|, the motion (px) of a pixel under
+    the parameter step (k,) (NaN entries of Jp as 0)."""
+    k = Jp.shape[0]
+    ok = _inside(r, gx, gy)
+    d = np.empty(np.count_nonzero(ok))
+    j = 0
+    for i in range(Jp.shape[1]):
+        if not ok[i]:
+            continue
+        dx = dy = 0.0
+        for a in range(k):
+            jx, jy = Jp[a, i, 0], Jp[a, i, 1]
+            dx += step[a] * (0.0 if np.isnan(jx) else jx)
+            dy += step[a] * (0.0 if np.isnan(jy) else jy)
+        d[j] = abs(dx) + abs(dy)
+        j += 1
+    return np.median(d)
 
 
 def _aliased(warp, tmpl, img, xh, prior_w, p, scale, *, alias_range, alias_margin, steps=6, max_pixels=400):
@@ -370,7 +513,7 @@ def _aliased(warp, tmpl, img, xh, prior_w, p, scale, *, alias_range, alias_margi
     offs = np.linspace(-alias_range, alias_range, 2 * steps + 1)
     shifted = np.tile(p, (len(offs), 1))
     shifted[:, 0] += offs
-    c = np.array([_cost(warp, tmpl, img, xh, prior_w, q, scale) for q in shifted])
+    c = _costs(warp, tmpl, img, xh, prior_w, shifted, scale)
     best = c[steps]
     far = np.abs(offs) > 1.5 * alias_range / steps  # beyond the solution's own basin
     local = np.r_[False, (c[1:-1] <= c[:-2]) & (c[1:-1] <= c[2:]), False]
@@ -383,8 +526,8 @@ def _band_spread(warp, tmpl, cur, xh, w, p, floor, min_pixels, iterations=3):
     near = xh[:, 1] >= np.median(xh[:, 1])
     s = []
     for band in (near, ~near):
-        res = _gauss_newton(warp, tmpl[band], cur.img[0], cur.grad[0], xh[band], w[band], p, max_iter=iterations,
-                            floor=floor, min_pixels=min_pixels, tol=0.0)
+        res = _gauss_newton(warp, tmpl[band], cur.img[0], cur.stack[0], xh[band], w[band], p, max_iter=iterations,
+                            floor=floor, min_pixels=min_pixels, tol=0.0, scale=False)
         if res is None:
             return float("nan")
         s.append(res[0][0])
@@ -454,7 +597,7 @@ def align_ground(prev, cur, cam, h, s0, a0, *, mask, weights=None, block=2, max_
                                     min_gradient=min_gradient, gradient_weight=gradient_weight)
         if len(xh) < min_pixels:
             return _failed(s0, a0, its)
-        res = _gauss_newton(warp, tmpl, cur.img[lv], cur.grad[lv], xh, w, p, max_iter=max_iter,
+        res = _gauss_newton(warp, tmpl, cur.img[lv], cur.stack[lv], xh, w, p, max_iter=max_iter,
                             floor=residual_floor, min_pixels=min_pixels, tol=tol)
         if res is None:
             return _failed(s0, a0, its)

@@ -10,6 +10,7 @@ published uniqueness test as the outlier filter.
 from __future__ import annotations
 
 import cv2
+import numba
 import numpy as np
 
 #: Lucas–Kanade stopping rule (iterations, step in px).
@@ -142,30 +143,52 @@ def periodic(grey, pts, *, half=5, radius=8, min_shift=3, threshold=0.8, rise=0.
     ok = (c[:, 0] >= m) & (c[:, 0] < W - m) & (c[:, 1] >= m) & (c[:, 1] < H - m)
     if not ok.any():
         return out
-    g = grey.astype(np.float32)
-    off = np.arange(-m, m + 1)
-    oy, ox = np.meshgrid(off, off, indexing="ij")
-    cc = c[ok]
-    # Every patch tested is a slice of one window per point: one gather instead of one per shift.
-    win = g[cc[:, 1, None] + oy.ravel()[None, :], cc[:, 0, None] + ox.ravel()[None, :]].reshape(len(cc), 2 * m + 1,
-                                                                                                  2 * m + 1)
-    side = 2 * half + 1
+    out[ok] = _periodic_kernel(grey, c[ok], half, radius, min_shift, threshold, rise)
+    return out
 
-    def patches(dx, dy):
-        p = win[:, m - half + dy:m - half + dy + side, m - half + dx:m - half + dx + side].reshape(len(cc), -1)
-        p = p - p.mean(axis=1, keepdims=True)
-        return p / np.maximum(np.sqrt((p * p).sum(axis=1, keepdims=True)), 1e-6)
 
-    base = patches(0, 0)
-    found = np.zeros(len(cc), dtype=bool)
-    for dx, dy in _DIRECTIONS:
-        low = np.ones(len(cc))
-        for r in range(1, radius + 1):
-            ncc = np.maximum((base * patches(r * dx, r * dy)).sum(axis=1), (base * patches(-r * dx, -r * dy)).sum(axis=1))
-            if r >= min_shift:
-                found |= (ncc > threshold) & (ncc - low > rise)
-            low = np.minimum(low, ncc)
-    out[ok] = found
+@numba.njit(cache=True, nogil=True)
+def _periodic_kernel(grey, c, half, radius, min_shift, threshold, rise):  # pragma: no cover - compiled
+    """:func:`periodic` at the integer points c (n, 2), all at least half + radius px inside the image."""
+    n, size = c.shape[0], (2 * half + 1) ** 2
+    out = np.zeros(n, np.bool_)
+    base = np.empty(size)
+    for j in range(n):
+        x, y = c[j, 0], c[j, 1]
+        k, mean = 0, 0.0
+        for dy in range(-half, half + 1):
+            for dx in range(-half, half + 1):
+                base[k] = grey[y + dy, x + dx]
+                mean += base[k]
+                k += 1
+        mean /= size
+        norm = 0.0
+        for i in range(size):
+            base[i] -= mean
+            norm += base[i] * base[i]
+        base /= max(np.sqrt(norm), 1e-6)
+        for d in range(4):
+            ux, uy = _DIRECTIONS[d]
+            low = 1.0
+            for r in range(1, radius + 1):
+                ncc = -np.inf
+                for sense in (1, -1):
+                    # base has zero mean, so its product with the other patch needs only that patch's norm
+                    x1, y1 = x + sense * r * ux, y + sense * r * uy
+                    k, s1, s2, sb = 0, 0.0, 0.0, 0.0
+                    for dy in range(-half, half + 1):
+                        for dx in range(-half, half + 1):
+                            v = float(grey[y1 + dy, x1 + dx])
+                            s1 += v
+                            s2 += v * v
+                            sb += base[k] * v
+                            k += 1
+                    ncc = max(ncc, sb / max(np.sqrt(max(s2 - s1 * s1 / size, 0.0)), 1e-6))
+                if r >= min_shift and ncc > threshold and ncc - low > rise:
+                    out[j] = True
+                low = min(low, ncc)
+            if out[j]:
+                break
     return out
 
 

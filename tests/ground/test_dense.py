@@ -293,3 +293,129 @@ def test_published_never_runs_the_dense_fit(monkeypatch, corridor):
     vo2.process(corridor["rgb"][0], 0.0)
     with pytest.raises(AssertionError, match="align_ground"):
         vo2.process(corridor["rgb"][1], corridor["times"][1])
+
+
+def _surface_reference(cam, h, shape_c, p, slip, xy):
+    """Where pixels ``xy`` (m, 2) of the first image of a ground y = h + c1 z + c2 z² + c3 x (level frame,
+    y down) appear in the second, built from the geometry alone: each ray's nearest positive root of the
+    surface (numpy.roots), the camera's unicycle step integrated numerically (scipy.integrate.quad) and
+    turned by arctan(-slip a), and the second camera's orientation R_y(a) R_x(b) (scipy Rotation)."""
+    from scipy.integrate import quad
+    from scipy.spatial.transform import Rotation
+
+    s, a, b = p[:3]
+    c1, c2, c3 = shape_c
+    fx = quad(lambda t: np.sin(a * t), 0, 1, epsabs=1e-14)[0] * s  # heading θ(t) = a t along the arc
+    fz = quad(lambda t: np.cos(a * t), 0, 1, epsabs=1e-14)[0] * s
+    d = Rotation.from_euler("y", np.arctan(-slip * a)).apply([fx, 0.0, fz])
+    C = Rotation.from_euler("y", a).as_matrix() @ Rotation.from_euler("x", b).as_matrix()
+    out = np.full((len(xy), 2), np.nan)
+    for i, (x, y) in enumerate(xy):
+        ray = cam.R_lc @ np.linalg.solve(cam.K, [x, y, 1.0])
+        u, v = ray[0] / ray[2], ray[1] / ray[2]
+        # Z v = h + c1 Z + c2 Z² + c3 u Z
+        roots = np.roots([c2, c1 + c3 * u - v, h]) if c2 else np.array([h / (v - c1 - c3 * u)])
+        roots = np.real(roots[np.isreal(roots) & (np.real(roots) > 0)])
+        if len(roots) == 0:
+            continue
+        Z = roots.min()
+        X2 = C.T @ (np.array([u, v, 1.0]) * Z - d)
+        q = cam.K @ cam.R_lc.T @ X2
+        out[i] = q[:2] / q[2]
+    return out
+
+
+# The surface warp (side slope, or slope, curvature and side slope) against the geometry built
+# independently (above), with and without the camera's sideways slip, to round-off; rays that miss a
+# ground falling away ahead are NaN in both. Its Jacobian against central differences of that reference.
+@pytest.mark.parametrize("shape, coef", [((2,), (0.0, 0.0, -0.03)), ((0, 1, 2), (0.04, 0.003, 0.02)),
+                                         ((0, 1, 2), (0.02, 0.02, 0.0))])
+@pytest.mark.parametrize("slip", [0.0, -1.0])
+def test_surface_warp_is_the_exact_ground_motion(shape, coef, slip):
+    cam = LevelCamera(np.array([[320.0, 0.0, 320.0], [0.0, 320.0, 240.0], [0.0, 0.0, 1.0]]), 2, 0.05, None)
+    warp = dense._SurfaceWarp(cam, 1.2, shape, slip=slip)
+    rng = np.random.default_rng(3)
+    xy = np.c_[rng.uniform(0, 320, 60), rng.uniform(125, 240, 60)]
+    p = np.r_[0.6, 0.04, -0.01, [coef[i] for i in shape]]
+    got, J = warp.points(np.c_[xy, np.ones(len(xy))], p, jacobian=True)
+    want = _surface_reference(cam, 1.2, coef, p, slip, xy)
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    if coef[1] > 0.01:
+        assert np.isnan(want).any()  # a ground falling away ahead: the rays near the horizon miss it
+    assert np.nanmax(np.abs(got - want)) < 1e-8  # px
+    full = np.array(coef, dtype=float)
+    for i in range(len(p)):
+        e = (1e-5, 1e-6, 1e-6)[i] if i < 3 else 1e-6
+        hi, lo = p.copy(), p.copy()
+        hi[i] += e
+        lo[i] -= e
+        ch, cl = full.copy(), full.copy()
+        if i >= 3:
+            ch[shape[i - 3]], cl[shape[i - 3]] = hi[i], lo[i]
+        ref = (_surface_reference(cam, 1.2, ch, hi, slip, xy) - _surface_reference(cam, 1.2, cl, lo, slip, xy)) / (2 * e)
+        ok = np.isfinite(ref).all(axis=1) & np.isfinite(J[i]).all(axis=1)
+        assert ok.sum() >= 30
+        assert np.abs(J[i][ok] - ref[ok]).max() < 1e-3 * max(1.0, np.abs(ref[ok]).max()), i
+
+
+# The template pixels: the strongest gradient of each block x block cell of the mask (the first in
+# row order on a tie), above the threshold, then an even subset: against a loop over the cells.
+@pytest.mark.parametrize("block", [1, 2, 3])
+def test_select_pixels_picks_each_cells_strongest(block):
+    rng = np.random.default_rng(block)
+    img = np.round(rng.normal(0, 3, (37, 53))).astype(np.float32)  # rounded: many ties
+    grad = dense._gradients(img)
+    mask = rng.random(img.shape) < 0.7
+    mask[:9] = False
+    want = []
+    r0 = 9 - 9 % block
+    for top in range(r0, 37 - (37 - r0) % block, block):
+        for left in range(0, 53 - 53 % block, block):
+            best, at = -1.0, None
+            for y in range(top, top + block):
+                for x in range(left, left + block):
+                    g2 = float(grad[0][y, x]) ** 2 + float(grad[1][y, x]) ** 2 if mask[y, x] else 0.0
+                    if g2 > best + 1e-9 * best:
+                        best, at = g2, (x, y)
+            if best > 0.5 ** 2:
+                want.append(at)
+    got = dense.select_pixels(grad, mask, block=block, max_pixels=10_000, min_gradient=0.5)
+    assert np.array_equal(got, np.array(want, dtype=float))
+    few = dense.select_pixels(grad, mask, block=block, max_pixels=7, min_gradient=0.5)
+    assert np.array_equal(few, got[np.linspace(0, len(got) - 1, 7).astype(int)])
+    assert dense.select_pixels(grad, np.zeros_like(mask), block=block, max_pixels=10, min_gradient=0.5).shape == (0, 2)
+
+
+# One Gauss–Newton step against the normal equations written out: Tukey weights of the robust scale,
+# the Jacobian's NaN entries as 0, the prior's diagonal, the solve, and the median pixel motion.
+def test_gauss_newton_step_is_the_normal_equations():
+    rng = np.random.default_rng(4)
+    k, m = 4, 500
+    r = rng.standard_t(3, m) * 2.0
+    gx, gy = rng.normal(0, 5, m), rng.normal(0, 5, m)
+    r[:7] = np.nan
+    gx[7:9] = np.nan
+    Jp = rng.normal(0, 30, (k, m, 2))
+    Jp[2, 20:25, 1] = np.nan
+    w0 = rng.uniform(0.2, 1.0, m)
+    p = rng.normal(0, 0.1, k)
+    prior_var = np.array([np.inf, np.inf, np.inf, 0.03 ** 2])
+    ok, H, step, sigma, n, moved = dense._gn_iteration(r, gx, gy, Jp, w0, np.nan, 0.3, 100, prior_var, p)
+    good = np.isfinite(r) & np.isfinite(gx) & np.isfinite(gy)
+    s = max(1.4826 * np.median(np.abs(r[good])), 0.3)
+    assert sigma == pytest.approx(s, rel=1e-12)
+    u = r[good] / (4.685 * s)
+    w = w0[good] * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+    Jg = np.nan_to_num(Jp[:, good])
+    J = (gx[good] * Jg[..., 0] + gy[good] * Jg[..., 1]).T
+    P = s * s / prior_var
+    H_want = (J * w[:, None]).T @ J + np.diag(P)
+    g_want = (J * w[:, None]).T @ r[good] + P * p
+    step_want = -np.linalg.solve(H_want, g_want)
+    assert ok and n == np.count_nonzero(w)
+    np.testing.assert_allclose(H, H_want, rtol=1e-10)
+    np.testing.assert_allclose(step, step_want, rtol=1e-8, atol=1e-14)
+    assert moved == pytest.approx(np.median(np.abs(np.tensordot(step, Jg, axes=1)).sum(axis=1)), rel=1e-10)
+    # too few pixels inside, or weighted: no step
+    assert not dense._gn_iteration(r, gx, gy, Jp, w0, np.nan, 0.3, 600, prior_var, p)[0]
+    assert not dense._gn_iteration(r, gx, gy, Jp, np.zeros(m), 1.0, 0.3, 100, prior_var, p)[0]
