@@ -411,8 +411,7 @@ def _gn_iteration(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels, prior_var, p
     residuals (robust, floored at ``floor``). Not ok with fewer than ``min_pixels`` pixels inside or
     weighted, or a singular H."""
     k = len(p)
-    res = _normal_equations(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels)
-    ok, H, g, sigma, n = res
+    ok, H, g, sigma, n = _normal_equations(r, gx, gy, Jp, prior_w, sigma, floor, min_pixels)
     if not ok:
         return False, H, np.zeros(k), sigma, n, 0.0
     P = sigma * sigma / prior_var
